@@ -1,0 +1,25 @@
+// The public C++ API of the edgepath core: describe a scene with views over your own memory
+// (scene/desc.h), build it once, render into your own buffer.
+#pragma once
+#include <memory>
+#include "scene/desc.h"
+
+namespace edgepath {
+
+class Scene;
+
+// Validates `desc` (throws std::invalid_argument whose message names the offending field and
+// value) and builds the acceleration structure and sampling distributions. The returned scene
+// keeps pointers into the memory `desc` views: keep that memory alive and unchanged while the
+// scene is used.
+std::shared_ptr<const Scene> build_scene(const SceneDesc& desc);
+
+// Size of the rendered image (the crop window if one is set).
+int image_width(const Scene& scene);
+int image_height(const Scene& scene);
+
+// Renders into `image`, (image_height, image_width, 3) float32, row 0 at the top, linear.
+// Deterministic for a given seed whatever the thread count.
+RenderStats render(const Scene& scene, const RenderOptions& options, float* image);
+
+}  // namespace edgepath

@@ -1,0 +1,71 @@
+#include "render/path.h"
+
+namespace edgepath {
+
+Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters) {
+    const bool use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
+    const bool use_hits = opt.sampling != LightSampling::LightOnly;
+    const bool mis = opt.sampling == LightSampling::MIS;
+
+    Vec3f L(0.f), beta(1.f);
+    ++counters.camera;
+    Hit hit;
+    if (!scene.intersect(ray, hit)) {
+        if (scene.has_envmap) L += scene.envmap.eval(ray.dir);
+        return L;
+    }
+    SurfacePoint sp = scene.surface_point(hit);
+    L += scene.emitted(sp, -ray.dir);
+
+    for (int bounce = 0; bounce < opt.max_bounces; ++bounce) {
+        BsdfParams bp = scene.bsdf_params(sp);
+        Frame frame(sp.ns);
+        Vec3f wo = frame.to_local(-ray.dir);
+
+        // Next-event estimation.
+        float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
+        LightSample ls;
+        if (use_nee && scene.sample_light(sp.p, ul0, ul1, ul2, ls)) {
+            Vec3f wi = frame.to_local(ls.dir);
+            Vec3f f = bsdf_eval(bp, wo, wi);
+            if (!is_black(f)) {
+                Ray shadow = spawn_ray(sp.p, sp.ng, ls.dir);
+                shadow.tmax = ls.dist * (1.f - kShadowEpsilon);
+                ++counters.shadow;
+                if (!scene.occluded(shadow)) {
+                    float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
+                    L += beta * f * ls.radiance * (w / ls.pdf);
+                }
+            }
+        }
+
+        // BSDF sampling.
+        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
+        BsdfSample bs;
+        if (!bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) break;
+        beta *= bsdf_eval(bp, wo, bs.wi) / bs.pdf;
+        if (is_black(beta)) break;
+        Vec3f dir = frame.to_world(bs.wi);
+        Vec3f prev_p = sp.p;
+        ray = spawn_ray(sp.p, sp.ng, dir);
+        ++counters.bounce;
+        if (!scene.intersect(ray, hit)) {
+            if (scene.has_envmap && use_hits) {
+                float w = (mis && use_nee) ? mis_power(bs.pdf, scene.env_pdf(dir)) : 1.f;
+                L += beta * scene.envmap.eval(dir) * w;
+            }
+            break;
+        }
+        sp = scene.surface_point(hit);
+        if (use_hits) {
+            Vec3f Le = scene.emitted(sp, -dir);
+            if (!is_black(Le)) {
+                float w = (mis && use_nee) ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
+                L += beta * Le * w;
+            }
+        }
+    }
+    return L;
+}
+
+}  // namespace edgepath

@@ -1,0 +1,134 @@
+// The material model: a Lambertian lobe plus a GGX microfacet lobe (Smith shadowing, separable,
+// Schlick Fresnel with `specular` as the reflectance at normal incidence). Directions are in the
+// local shading frame (z = shading normal), `wo` towards the viewer, `wi` towards the light.
+// One-sided unless `two_sided`: black when either direction is below the shading surface.
+#pragma once
+#include <cmath>
+#include "math/vec.h"
+#include "sampling/warp.h"
+
+namespace edgepath {
+
+// Smallest GGX alpha; below it the lobe is numerically a mirror in float.
+constexpr float kMinRoughness = 1e-3f;
+
+struct BsdfParams {
+    Vec3f diffuse;
+    Vec3f specular;
+    float alpha = 0.5f;
+    bool two_sided = false;
+};
+
+struct BsdfSample {
+    Vec3f wi;
+    float pdf = 0.f;  // solid angle, of the whole mixture
+};
+
+inline float ggx_D(const Vec3f& h, float a) {
+    if (h.z <= 0.f) return 0.f;
+    float a2 = a * a;
+    float c2 = h.z * h.z;
+    float d = c2 * (a2 - 1.f) + 1.f;
+    return a2 / (kPi * d * d);
+}
+
+inline float ggx_G1(const Vec3f& w, const Vec3f& h, float a) {
+    if (dot(w, h) * w.z <= 0.f) return 0.f;
+    float c2 = w.z * w.z;
+    if (c2 >= 1.f) return 1.f;
+    float tan2 = (1.f - c2) / c2;
+    return 2.f / (1.f + std::sqrt(1.f + a * a * tan2));
+}
+
+inline Vec3f fresnel_schlick(const Vec3f& f0, float cos_theta) {
+    float m = std::clamp(1.f - cos_theta, 0.f, 1.f);
+    float m5 = (m * m) * (m * m) * m;
+    return f0 + (Vec3f(1.f) - f0) * m5;
+}
+
+// Probability of choosing the specular lobe when sampling.
+inline float specular_lobe_probability(const BsdfParams& p) {
+    float d = luminance(p.diffuse), s = luminance(p.specular);
+    if (d + s <= 0.f) return 0.f;
+    return s / (d + s);
+}
+
+// Mirrors both directions to the front side of a two-sided material. False if the pair is
+// not in the upper hemisphere (the BSDF is zero).
+inline bool orient(const BsdfParams& p, Vec3f& wo, Vec3f& wi) {
+    if (p.two_sided && wo.z < 0.f) {
+        wo.z = -wo.z;
+        wi.z = -wi.z;
+    }
+    return wo.z > 0.f && wi.z > 0.f;
+}
+
+// f(wo, wi) * cos(theta_i).
+inline Vec3f bsdf_eval(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (!orient(p, wo, wi)) return Vec3f(0.f);
+    Vec3f result = p.diffuse * (wi.z * kInvPi);
+    if (!is_black(p.specular)) {
+        Vec3f h = normalize(wo + wi);
+        float D = ggx_D(h, p.alpha);
+        float G = ggx_G1(wo, h, p.alpha) * ggx_G1(wi, h, p.alpha);
+        Vec3f F = fresnel_schlick(p.specular, dot(wi, h));
+        result += F * (D * G / (4.f * wo.z));
+    }
+    return result;
+}
+
+// Density of the GGX visible-normal sampling of wi (solid angle).
+inline float ggx_pdf(const Vec3f& wo, const Vec3f& wi, float a) {
+    Vec3f h = normalize(wo + wi);
+    float woh = dot(wo, h);
+    if (woh <= 0.f) return 0.f;
+    return ggx_G1(wo, h, a) * ggx_D(h, a) / (4.f * wo.z);
+}
+
+inline float bsdf_pdf(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (!orient(p, wo, wi)) return 0.f;
+    float ps = specular_lobe_probability(p);
+    float pdf = (1.f - ps) * wi.z * kInvPi;
+    if (ps > 0.f) pdf += ps * ggx_pdf(wo, wi, p.alpha);
+    return pdf;
+}
+
+// Visible normal of the GGX distribution (Heitz 2018), for wo in the upper hemisphere.
+inline Vec3f ggx_sample_visible_normal(const Vec3f& wo, float a, float u1, float u2) {
+    Vec3f vh = normalize(Vec3f(a * wo.x, a * wo.y, wo.z));
+    float lensq = vh.x * vh.x + vh.y * vh.y;
+    Vec3f t1 = lensq > 0.f ? Vec3f(-vh.y, vh.x, 0.f) / std::sqrt(lensq) : Vec3f(1.f, 0.f, 0.f);
+    Vec3f t2 = cross(vh, t1);
+    float r = std::sqrt(u1), phi = 2.f * kPi * u2;
+    float p1 = r * std::cos(phi), p2 = r * std::sin(phi);
+    float s = 0.5f * (1.f + vh.z);
+    p2 = (1.f - s) * std::sqrt(std::max(0.f, 1.f - p1 * p1)) + s * p2;
+    Vec3f nh = t1 * p1 + t2 * p2 + vh * std::sqrt(std::max(0.f, 1.f - p1 * p1 - p2 * p2));
+    return normalize(Vec3f(a * nh.x, a * nh.y, std::max(1e-7f, nh.z)));
+}
+
+// Samples wi. Returns false when no direction could be produced (zero BSDF).
+inline bool bsdf_sample(const BsdfParams& p, Vec3f wo, float u_lobe, float u1, float u2, BsdfSample& out) {
+    bool flipped = p.two_sided && wo.z < 0.f;
+    if (flipped) wo.z = -wo.z;
+    if (wo.z <= 0.f) return false;
+    float ps = specular_lobe_probability(p);
+    if (luminance(p.diffuse) + luminance(p.specular) <= 0.f) return false;
+    Vec3f wi;
+    if (u_lobe < ps) {
+        Vec3f h = ggx_sample_visible_normal(wo, p.alpha, u1, u2);
+        wi = h * (2.f * dot(wo, h)) - wo;
+    } else {
+        wi = square_to_cosine_hemisphere(u1, u2);
+    }
+    if (wi.z <= 0.f) return false;
+    float pdf = (1.f - ps) * wi.z * kInvPi;
+    if (ps > 0.f) pdf += ps * ggx_pdf(wo, wi, p.alpha);
+    if (!(pdf > 0.f)) return false;
+    if (flipped) wi.z = -wi.z;
+    out.wi = wi;
+    out.pdf = pdf;
+    return true;
+}
+
+}  // namespace edgepath

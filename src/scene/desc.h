@@ -1,0 +1,97 @@
+// Scene description: plain views over caller-owned memory. This is the border of the core:
+// the Python bindings (or a C++ program) fill these structs, `Scene::build` validates them
+// once and builds everything the kernels need. Nothing here owns or modifies memory.
+#pragma once
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace edgepath {
+
+// A float array of shape (height, width, channels), row-major, contiguous. A constant is a
+// 1x1 texture. Lookups are bilinear with texel centres at ((i + 0.5) / width, (j + 0.5) / height),
+// wrapping; v = 0 is row 0 (the top row of an image file).
+struct TextureDesc {
+    const float* data = nullptr;
+    int height = 0, width = 0, channels = 0;
+    bool empty() const { return data == nullptr; }
+};
+
+struct MaterialDesc {
+    TextureDesc diffuse;    // 3 channels, Lambertian albedo
+    TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
+    TextureDesc roughness;  // 1 channel, GGX alpha
+    bool two_sided = false; // false: black seen from the back (as Mitsuba's BSDFs)
+};
+
+struct MeshDesc {
+    const float* vertices = nullptr;     // (num_vertices, 3)
+    int64_t num_vertices = 0;
+    const int32_t* indices = nullptr;    // (num_triangles, 3)
+    int64_t num_triangles = 0;
+    const float* uvs = nullptr;          // (num_uvs, 2) or null
+    int64_t num_uvs = 0;
+    const int32_t* uv_indices = nullptr; // (num_triangles, 3), or null: use `indices`
+    const float* normals = nullptr;      // (num_normals, 3) shading normals, or null
+    int64_t num_normals = 0;
+    const int32_t* normal_indices = nullptr;  // (num_triangles, 3), or null: use `indices`
+    int material = 0;                    // index into SceneDesc::materials
+    TextureDesc emission;                // 3 channels; empty: not an emitter
+    bool two_sided_emission = false;     // false: emits on the side of the face normal only
+};
+
+enum class CameraType { Perspective = 0, Orthographic = 1 };
+enum class FilterType { Box = 0, Gaussian = 1 };
+
+// Camera frame: forward = normalize(look_at - position), right = normalize(cross(forward, up)),
+// image up = cross(right, forward). Film point (px, py) in pixels of the full film (py downward)
+// maps to the direction forward + (2 px / W - 1) tx right + (1 - 2 py / H) tx (H / W) up,
+// tx = tan(fov / 2) (horizontal fov). Orthographic: origin shifted by the same offsets with
+// tx replaced by `ortho_scale` (half the width of the view), direction = forward.
+struct CameraDesc {
+    float position[3] = {0, 0, 0};
+    float look_at[3] = {0, 0, 1};
+    float up[3] = {0, 1, 0};
+    float fov = 45.f;          // degrees, horizontal
+    float ortho_scale = 1.f;
+    CameraType type = CameraType::Perspective;
+    int width = 0, height = 0; // full film, pixels
+    // Crop window in pixels of the full film; width/height 0 means the whole film.
+    int crop_x = 0, crop_y = 0, crop_width = 0, crop_height = 0;
+    FilterType filter = FilterType::Box;  // box: one pixel wide
+    float filter_stddev = 0.5f;           // Gaussian: stddev (pixels); cut at 4 stddev
+};
+
+// Lat-long environment map, Mitsuba's convention: local direction d maps to
+// u = atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi; texel column i sits at u = i / W,
+// row j at v = j / (H - 1); bilinear. world = to_world * local.
+struct EnvmapDesc {
+    TextureDesc values;                     // (H, W, 3) radiance
+    float to_world[9] = {1, 0, 0, 0, 1, 0, 0, 0, 1};  // row-major rotation
+    float scale = 1.f;
+};
+
+struct SceneDesc {
+    CameraDesc camera;
+    std::vector<MaterialDesc> materials;
+    std::vector<MeshDesc> meshes;
+    bool has_envmap = false;
+    EnvmapDesc envmap;
+};
+
+enum class LightSampling { MIS = 0, LightOnly = 1, BSDFOnly = 2 };
+
+struct RenderOptions {
+    int spp = 16;
+    int max_bounces = 1;    // scattering events: 0 = emitters seen directly, 1 = direct light
+    uint64_t seed = 0;
+    int num_threads = 0;    // 0: all cores
+    LightSampling sampling = LightSampling::MIS;
+};
+
+// Counters a render reports (for benchmarks).
+struct RenderStats {
+    uint64_t camera_rays = 0, shadow_rays = 0, bounce_rays = 0;
+};
+
+}  // namespace edgepath

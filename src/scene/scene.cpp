@@ -1,0 +1,367 @@
+#include "scene/scene.h"
+
+#include <cmath>
+#include <mutex>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+
+#include "edgepath.h"
+
+namespace edgepath {
+
+namespace {
+
+RTCDevice shared_device() {
+    static RTCDevice device = [] {
+        RTCDevice d = rtcNewDevice(nullptr);
+        if (!d) throw std::runtime_error("Embree: could not create a device");
+        return d;
+    }();
+    return device;
+}
+
+[[noreturn]] void fail(const std::string& field, const std::string& what) {
+    throw std::invalid_argument(field + ": " + what);
+}
+
+template <class T>
+std::string str(const T& v) {
+    std::ostringstream s;
+    s << v;
+    return s.str();
+}
+
+void check_finite(const float* data, int64_t n, const std::string& field) {
+    for (int64_t i = 0; i < n; ++i)
+        if (!std::isfinite(data[i])) fail(field, "value " + str(data[i]) + " at flat index " + str(i) + " is not finite");
+}
+
+void check_non_negative(const float* data, int64_t n, const std::string& field) {
+    for (int64_t i = 0; i < n; ++i)
+        if (data[i] < 0.f) fail(field, "value " + str(data[i]) + " at flat index " + str(i) + " is negative");
+}
+
+void check_texture(const TextureDesc& t, int channels, const std::string& field, bool non_negative) {
+    if (t.data == nullptr) fail(field, "missing");
+    if (t.height < 1 || t.width < 1) fail(field, "empty texture of size " + str(t.height) + "x" + str(t.width));
+    if (t.channels != channels)
+        fail(field, "expected " + str(channels) + " channels, got " + str(t.channels));
+    int64_t n = int64_t(t.height) * t.width * t.channels;
+    check_finite(t.data, n, field);
+    if (non_negative) check_non_negative(t.data, n, field);
+}
+
+void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, const std::string& field,
+                   const std::string& what) {
+    for (int64_t i = 0; i < num_triangles * 3; ++i)
+        if (idx[i] < 0 || idx[i] >= bound)
+            fail(field, "index " + str(idx[i]) + " out of range for " + str(bound) + " " + what + " (triangle " +
+                            str(i / 3) + ")");
+}
+
+void check_vec3(const float* v, const std::string& field) {
+    for (int i = 0; i < 3; ++i)
+        if (!std::isfinite(v[i])) fail(field, "value " + str(v[i]) + " is not finite");
+}
+
+void validate_camera(const CameraDesc& c) {
+    check_vec3(c.position, "camera.position");
+    check_vec3(c.look_at, "camera.look_at");
+    check_vec3(c.up, "camera.up");
+    if (c.width < 1 || c.height < 1)
+        fail("camera.resolution", "must be positive, got (" + str(c.height) + ", " + str(c.width) + ")");
+    Vec3f f = Vec3f::load(c.look_at) - Vec3f::load(c.position);
+    if (!(length(f) > 0.f)) fail("camera.look_at", "equals camera.position");
+    Vec3f r = cross(normalize(f), Vec3f::load(c.up));
+    if (!(length(r) > 1e-6f)) fail("camera.up", "is zero or parallel to the viewing direction");
+    if (c.type == CameraType::Perspective && !(c.fov > 0.f && c.fov < 180.f))
+        fail("camera.fov", "must be in (0, 180) degrees, got " + str(c.fov));
+    if (c.type == CameraType::Orthographic && !(c.ortho_scale > 0.f && std::isfinite(c.ortho_scale)))
+        fail("camera.ortho_scale", "must be positive, got " + str(c.ortho_scale));
+    if (c.filter == FilterType::Gaussian && !(c.filter_stddev > 0.f && c.filter_stddev < 100.f))
+        fail("camera.filter_stddev", "must be positive, got " + str(c.filter_stddev));
+    int cw = c.crop_width ? c.crop_width : c.width, ch = c.crop_height ? c.crop_height : c.height;
+    if (c.crop_x < 0 || c.crop_y < 0 || cw < 1 || ch < 1 || c.crop_x + cw > c.width || c.crop_y + ch > c.height)
+        fail("camera.crop_window", "(" + str(c.crop_x) + ", " + str(c.crop_y) + ", " + str(cw) + ", " + str(ch) +
+                                       ") does not fit in the film of " + str(c.width) + "x" + str(c.height));
+}
+
+void validate_mesh(const MeshDesc& m, int i, int num_materials) {
+    std::string f = "meshes[" + str(i) + "]";
+    if (m.num_vertices < 1 || m.vertices == nullptr) fail(f + ".vertices", "mesh has no vertices");
+    if (m.num_triangles < 1 || m.indices == nullptr) fail(f + ".indices", "mesh has no triangles");
+    check_finite(m.vertices, m.num_vertices * 3, f + ".vertices");
+    check_indices(m.indices, m.num_triangles, m.num_vertices, f + ".indices", "vertices");
+    for (int64_t t = 0; t < m.num_triangles; ++t) {
+        Vec3f a = Vec3f::load(m.vertices + 3 * m.indices[3 * t]), b = Vec3f::load(m.vertices + 3 * m.indices[3 * t + 1]),
+              c = Vec3f::load(m.vertices + 3 * m.indices[3 * t + 2]);
+        Vec3d n = cross(Vec3d(b - a), Vec3d(c - a));
+        if (!(length(n) > 0.0)) fail(f + ".indices", "triangle " + str(t) + " is degenerate (zero area)");
+    }
+    if (m.uvs) {
+        check_finite(m.uvs, m.num_uvs * 2, f + ".uvs");
+        if (m.uv_indices)
+            check_indices(m.uv_indices, m.num_triangles, m.num_uvs, f + ".uv_indices", "uvs");
+        else if (m.num_uvs != m.num_vertices)
+            fail(f + ".uvs", "has " + str(m.num_uvs) + " rows but there are " + str(m.num_vertices) +
+                                 " vertices and no uv_indices");
+    } else if (m.uv_indices) {
+        fail(f + ".uv_indices", "given without uvs");
+    }
+    if (m.normals) {
+        check_finite(m.normals, m.num_normals * 3, f + ".normals");
+        for (int64_t k = 0; k < m.num_normals; ++k)
+            if (!(length(Vec3f::load(m.normals + 3 * k)) > 0.f)) fail(f + ".normals", "normal " + str(k) + " is zero");
+        if (m.normal_indices)
+            check_indices(m.normal_indices, m.num_triangles, m.num_normals, f + ".normal_indices", "normals");
+        else if (m.num_normals != m.num_vertices)
+            fail(f + ".normals", "has " + str(m.num_normals) + " rows but there are " + str(m.num_vertices) +
+                                     " vertices and no normal_indices");
+    } else if (m.normal_indices) {
+        fail(f + ".normal_indices", "given without normals");
+    }
+    if (m.material < 0 || m.material >= num_materials)
+        fail(f + ".material", "index " + str(m.material) + " out of range for " + str(num_materials) + " materials");
+    if (!m.emission.empty()) check_texture(m.emission, 3, f + ".emission", true);
+}
+
+}  // namespace
+
+Scene::~Scene() {
+    if (rtc_) rtcReleaseScene(rtc_);
+}
+
+std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
+    validate_camera(desc.camera);
+    if (desc.meshes.empty()) fail("meshes", "the scene has no meshes");
+    for (size_t i = 0; i < desc.materials.size(); ++i) {
+        std::string f = "materials[" + str(i) + "]";
+        check_texture(desc.materials[i].diffuse, 3, f + ".diffuse", true);
+        check_texture(desc.materials[i].specular, 3, f + ".specular", true);
+        check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
+    }
+    for (size_t i = 0; i < desc.meshes.size(); ++i) validate_mesh(desc.meshes[i], int(i), int(desc.materials.size()));
+    if (desc.has_envmap) {
+        check_texture(desc.envmap.values, 3, "envmap.values", true);
+        check_finite(desc.envmap.to_world, 9, "envmap.to_world");
+        if (!(desc.envmap.scale >= 0.f && std::isfinite(desc.envmap.scale)))
+            fail("envmap.scale", "must be finite and non-negative, got " + str(desc.envmap.scale));
+    }
+
+    std::shared_ptr<Scene> s(new Scene());
+    const CameraDesc& cd = desc.camera;
+    s->camera = Camera::from_desc(cd);
+    s->filter.build(cd.filter, cd.filter_stddev);
+    s->crop_x = cd.crop_x;
+    s->crop_y = cd.crop_y;
+    s->out_width = cd.crop_width ? cd.crop_width : cd.width;
+    s->out_height = cd.crop_height ? cd.crop_height : cd.height;
+
+    for (const MaterialDesc& md : desc.materials) {
+        Material m;
+        m.diffuse = Texture(md.diffuse);
+        m.specular = Texture(md.specular);
+        m.roughness = Texture(md.roughness);
+        m.two_sided = md.two_sided;
+        s->materials.push_back(m);
+    }
+
+    RTCDevice device = shared_device();
+    s->rtc_ = rtcNewScene(device);
+    rtcSetSceneFlags(s->rtc_, RTC_SCENE_FLAG_ROBUST);
+    std::vector<double> light_weights;
+    for (size_t i = 0; i < desc.meshes.size(); ++i) {
+        const MeshDesc& md = desc.meshes[i];
+        Mesh m;
+        m.vertices = md.vertices;
+        m.num_vertices = md.num_vertices;
+        m.indices = md.indices;
+        m.num_triangles = md.num_triangles;
+        m.uvs = md.uvs;
+        m.uv_indices = md.uvs ? (md.uv_indices ? md.uv_indices : md.indices) : nullptr;
+        m.normals = md.normals;
+        m.normal_indices = md.normals ? (md.normal_indices ? md.normal_indices : md.indices) : nullptr;
+        m.material = md.material;
+        m.emission = Texture(md.emission);
+        m.two_sided_emission = md.two_sided_emission;
+
+        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+        float* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                                3 * sizeof(float), size_t(md.num_vertices)));
+        std::copy(md.vertices, md.vertices + 3 * md.num_vertices, vb);
+        uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                      3 * sizeof(uint32_t), size_t(md.num_triangles)));
+        for (int64_t k = 0; k < 3 * md.num_triangles; ++k) ib[k] = uint32_t(md.indices[k]);
+        rtcCommitGeometry(g);
+        rtcAttachGeometryByID(s->rtc_, g, unsigned(i));
+        rtcReleaseGeometry(g);
+
+        if (m.is_emitter()) {
+            m.light_offset = int64_t(s->lights.size());
+            double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
+            for (int64_t t = 0; t < m.num_triangles; ++t) {
+                Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
+                float area = 0.5f * length(cross(b - a, c - a));
+                s->lights.push_back({int(i), t, area});
+                light_weights.push_back(area * power);
+            }
+        }
+        s->meshes.push_back(m);
+    }
+    rtcCommitScene(s->rtc_);
+    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
+
+    s->light_distribution.build(light_weights);
+    if (desc.has_envmap) {
+        s->has_envmap = true;
+        s->envmap.build(desc.envmap);
+        if (s->envmap.dist.valid() && s->envmap.scale > 0.f)
+            s->env_selection_probability = s->light_distribution.valid() ? 0.5f : 1.f;
+    }
+    return s;
+}
+
+bool Scene::intersect(const Ray& ray, Hit& hit) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh;
+    rh.ray.org_x = ray.origin.x;
+    rh.ray.org_y = ray.origin.y;
+    rh.ray.org_z = ray.origin.z;
+    rh.ray.dir_x = ray.dir.x;
+    rh.ray.dir_y = ray.dir.y;
+    rh.ray.dir_z = ray.dir.z;
+    rh.ray.tnear = ray.tmin;
+    rh.ray.tfar = ray.tmax;
+    rh.ray.mask = 0xFFFFFFFFu;
+    rh.ray.flags = 0;
+    rh.ray.time = 0.f;
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    rtcIntersect1(rtc_, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+    hit.mesh = int(rh.hit.geomID);
+    hit.prim = int64_t(rh.hit.primID);
+    hit.b1 = rh.hit.u;
+    hit.b2 = rh.hit.v;
+    hit.t = rh.ray.tfar;
+    return true;
+}
+
+bool Scene::occluded(const Ray& ray) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRay r;
+    r.org_x = ray.origin.x;
+    r.org_y = ray.origin.y;
+    r.org_z = ray.origin.z;
+    r.dir_x = ray.dir.x;
+    r.dir_y = ray.dir.y;
+    r.dir_z = ray.dir.z;
+    r.tnear = ray.tmin;
+    r.tfar = ray.tmax;
+    r.mask = 0xFFFFFFFFu;
+    r.flags = 0;
+    r.time = 0.f;
+    rtcOccluded1(rtc_, &ctx, &r);
+    return r.tfar < 0.f;
+}
+
+SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) const {
+    const Mesh& m = meshes[mesh];
+    SurfacePoint sp;
+    sp.mesh = mesh;
+    sp.prim = prim;
+    sp.b1 = b1;
+    sp.b2 = b2;
+    float b0 = 1.f - b1 - b2;
+    const int32_t* tri = m.indices + 3 * prim;
+    Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
+    sp.p = v0 * b0 + v1 * b1 + v2 * b2;
+    sp.ng = normalize(cross(v1 - v0, v2 - v0));
+    if (m.normals) {
+        const int32_t* ni = m.normal_indices + 3 * prim;
+        Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * b0 + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
+                  Vec3f::load(m.normals + 3 * ni[2]) * b2;
+        float l = length(n);
+        sp.ns = l > 0.f ? n / l : sp.ng;
+    } else {
+        sp.ns = sp.ng;
+    }
+    if (m.uvs) {
+        const int32_t* ti = m.uv_indices + 3 * prim;
+        const float *t0 = m.uvs + 2 * ti[0], *t1 = m.uvs + 2 * ti[1], *t2 = m.uvs + 2 * ti[2];
+        sp.uv = Vec2f(t0[0] * b0 + t1[0] * b1 + t2[0] * b2, t0[1] * b0 + t1[1] * b1 + t2[1] * b2);
+    } else {
+        sp.uv = Vec2f(b1, b2);
+    }
+    return sp;
+}
+
+BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
+    const Material& m = materials[meshes[sp.mesh].material];
+    BsdfParams p;
+    p.diffuse = eval_texture3(m.diffuse, sp.uv);
+    p.specular = eval_texture3(m.specular, sp.uv);
+    p.alpha = std::max(eval_texture1(m.roughness, sp.uv), kMinRoughness);
+    p.two_sided = m.two_sided;
+    return p;
+}
+
+Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
+    const Mesh& m = meshes[sp.mesh];
+    if (!m.is_emitter()) return Vec3f(0.f);
+    if (!m.two_sided_emission && dot(sp.ns, w) <= 0.f) return Vec3f(0.f);
+    return eval_texture3(m.emission, sp.uv);
+}
+
+bool Scene::sample_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const {
+    if (u0 < env_selection_probability) {
+        Vec3f dir;
+        float pdf;
+        if (!envmap.sample(u1, u2, dir, pdf)) return false;
+        ls.dir = dir;
+        ls.dist = std::numeric_limits<float>::infinity();
+        ls.radiance = envmap.eval(dir);
+        ls.pdf = pdf * env_selection_probability;
+        return ls.pdf > 0.f;
+    }
+    if (!light_distribution.valid()) return false;
+    float u = env_selection_probability < 1.f ? (u0 - env_selection_probability) / (1.f - env_selection_probability) : 0.f;
+    u = std::min(u, 0.99999994f);
+    int li = light_distribution.sample(u);
+    const EmissiveTriangle& lt = lights[li];
+    Vec2f b = square_to_triangle(u1, u2);
+    SurfacePoint q = surface_point(lt.mesh, lt.prim, b.x, b.y);
+    Vec3f d = q.p - p;
+    float dist2 = length_squared(d);
+    if (!(dist2 > 0.f)) return false;
+    float dist = std::sqrt(dist2);
+    d = d / dist;
+    float cos_l = std::abs(dot(q.ng, d));
+    if (!(cos_l > 0.f)) return false;
+    ls.radiance = emitted(q, -d);
+    if (is_black(ls.radiance)) return false;
+    ls.dir = d;
+    ls.dist = dist;
+    ls.pdf = (1.f - env_selection_probability) * light_distribution.pmf(li) / lt.area * dist2 / cos_l;
+    return ls.pdf > 0.f && std::isfinite(ls.pdf);
+}
+
+float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
+    const Mesh& m = meshes[q.mesh];
+    if (m.light_offset < 0 || !light_distribution.valid()) return 0.f;
+    int64_t li = m.light_offset + q.prim;
+    Vec3f d = q.p - p;
+    float dist2 = length_squared(d);
+    float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);
+    if (!(cos_l > 0.f)) return 0.f;
+    return (1.f - env_selection_probability) * light_distribution.pmf(int(li)) / lights[li].area * dist2 / cos_l;
+}
+
+std::shared_ptr<const Scene> build_scene(const SceneDesc& desc) { return Scene::build(desc); }
+int image_width(const Scene& s) { return s.out_width; }
+int image_height(const Scene& s) { return s.out_height; }
+
+}  // namespace edgepath

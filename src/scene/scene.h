@@ -1,0 +1,117 @@
+// The scene as the kernels see it: validated views over the caller's arrays, an Embree BVH, and
+// the light-sampling distributions. Built once per render call by build_scene().
+#pragma once
+#include <cstdint>
+#include <memory>
+#include <vector>
+#include <embree3/rtcore.h>
+#include "math/frame.h"
+#include "math/ray.h"
+#include "render/filter.h"
+#include "sampling/distribution.h"
+#include "scene/bsdf.h"
+#include "scene/camera.h"
+#include "scene/desc.h"
+#include "scene/envmap.h"
+#include "scene/texture.h"
+
+namespace edgepath {
+
+struct Mesh {
+    const float* vertices = nullptr;
+    int64_t num_vertices = 0;
+    const int32_t* indices = nullptr;
+    int64_t num_triangles = 0;
+    const float* uvs = nullptr;
+    const int32_t* uv_indices = nullptr;
+    const float* normals = nullptr;
+    const int32_t* normal_indices = nullptr;
+    int material = 0;
+    Texture emission;
+    bool two_sided_emission = false;
+    int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
+
+    Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
+    bool is_emitter() const { return !emission.empty(); }
+};
+
+struct Material {
+    Texture diffuse, specular, roughness;
+    bool two_sided = false;
+};
+
+struct Hit {
+    int mesh = -1;
+    int64_t prim = -1;
+    float b1 = 0.f, b2 = 0.f;  // barycentrics of vertices 1 and 2
+    float t = 0.f;
+};
+
+struct SurfacePoint {
+    Vec3f p;
+    Vec3f ng;  // geometric normal, cross(v1 - v0, v2 - v0) normalised
+    Vec3f ns;  // shading normal (interpolated normals, or ng)
+    Vec2f uv;  // interpolated uvs, or the barycentrics (b1, b2) when the mesh has none
+    int mesh = -1;
+    int64_t prim = -1;
+    float b1 = 0.f, b2 = 0.f;
+};
+
+struct LightSample {
+    Vec3f dir;           // from the shading point towards the light, normalised
+    float dist = 0.f;    // infinity for the environment
+    Vec3f radiance;      // emitted radiance towards the shading point
+    float pdf = 0.f;     // solid angle, including the choice of light
+};
+
+class Scene {
+public:
+    ~Scene();
+    Scene(const Scene&) = delete;
+    Scene& operator=(const Scene&) = delete;
+
+    // Validates (std::invalid_argument naming the field) and builds.
+    static std::shared_ptr<Scene> build(const SceneDesc& desc);
+
+    Camera camera;
+    PixelFilter filter;
+    int crop_x = 0, crop_y = 0, out_width = 0, out_height = 0;
+    std::vector<Mesh> meshes;
+    std::vector<Material> materials;
+    bool has_envmap = false;
+    Envmap envmap;
+
+    struct EmissiveTriangle {
+        int mesh;
+        int64_t prim;
+        float area;
+    };
+    std::vector<EmissiveTriangle> lights;
+    Distribution1D light_distribution;
+    float env_selection_probability = 0.f;  // probability that light sampling picks the envmap
+
+    bool intersect(const Ray& ray, Hit& hit) const;
+    bool occluded(const Ray& ray) const;
+
+    SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
+    SurfacePoint surface_point(const Hit& h) const { return surface_point(h.mesh, h.prim, h.b1, h.b2); }
+    BsdfParams bsdf_params(const SurfacePoint& sp) const;
+    // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
+    Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
+
+    bool has_lights() const { return light_distribution.valid() || env_selection_probability > 0.f; }
+    // Samples an emitter (area light or environment) as seen from p; u0 picks the emitter.
+    bool sample_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const;
+    // Solid-angle density with which sample_light would produce the direction from p to the
+    // emitting surface point `on_light`.
+    float light_pdf(const Vec3f& p, const SurfacePoint& on_light) const;
+    float env_pdf(const Vec3f& dir) const { return env_selection_probability * envmap.pdf(dir); }
+
+    RTCScene rtc_scene() const { return rtc_; }
+
+private:
+    Scene() = default;
+    RTCScene rtc_ = nullptr;
+};
+
+}  // namespace edgepath

@@ -1,0 +1,316 @@
+// Closed-form checks of the forward renderer.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <vector>
+
+#include "edgepath.h"
+#include "render/path.h"
+#include "scene/scene.h"
+#include "scene/shapes.h"
+
+namespace edgepath {
+namespace {
+
+struct ConstTex {
+    std::vector<float> v;
+    explicit ConstTex(std::vector<float> x) : v(std::move(x)) {}
+    TextureDesc desc() const {
+        TextureDesc t;
+        t.data = v.data();
+        t.height = 1;
+        t.width = 1;
+        t.channels = int(v.size());
+        return t;
+    }
+};
+
+MaterialDesc material(const ConstTex& kd, const ConstTex& ks, const ConstTex& r) {
+    MaterialDesc m;
+    m.diffuse = kd.desc();
+    m.specular = ks.desc();
+    m.roughness = r.desc();
+    return m;
+}
+
+CameraDesc camera(Vec3f pos, Vec3f target, int w, int h, float fov) {
+    CameraDesc c;
+    for (int k = 0; k < 3; ++k) {
+        c.position[k] = pos[k];
+        c.look_at[k] = target[k];
+    }
+    c.up[0] = 0;
+    c.up[1] = 1;
+    c.up[2] = 0;
+    c.width = w;
+    c.height = h;
+    c.fov = fov;
+    return c;
+}
+
+// Per-pixel mean and standard error from `runs` independent renders.
+struct Stats {
+    std::vector<double> mean, stderr_;
+};
+Stats render_stats(const Scene& s, RenderOptions opt, int runs) {
+    size_t n = size_t(image_width(s)) * image_height(s) * 3;
+    std::vector<double> sum(n, 0), sum2(n, 0);
+    std::vector<float> img(n);
+    for (int r = 0; r < runs; ++r) {
+        opt.seed = 1000 + r;
+        render(s, opt, img.data());
+        for (size_t i = 0; i < n; ++i) {
+            sum[i] += img[i];
+            sum2[i] += double(img[i]) * img[i];
+        }
+    }
+    Stats st;
+    st.mean.resize(n);
+    st.stderr_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        st.mean[i] = sum[i] / runs;
+        double var = std::max(0.0, sum2[i] / runs - st.mean[i] * st.mean[i]) * runs / (runs - 1);
+        st.stderr_[i] = std::sqrt(var / runs);
+    }
+    return st;
+}
+
+// White furnace: a convex object of albedo rho under a uniform environment of radiance 1 has
+// radiance rho everywhere, for any max_bounces >= 1.
+TEST(Render, WhiteFurnaceFlatSphere) {
+    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 24, 48);
+    sphere.normals.clear();  // flat shading: the polyhedron is convex, it never sees itself
+    ConstTex kd({0.6f, 0.6f, 0.6f}), ks({0, 0, 0}), rough({0.5f}), env({1, 1, 1});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 0, 4), Vec3f(0, 0, 0), 32, 32, 40);
+    d.materials.push_back(material(kd, ks, rough));
+    d.meshes.push_back(sphere.desc(0));
+    d.has_envmap = true;
+    d.envmap.values = env.desc();
+    auto scene = build_scene(d);
+    for (int bounces : {1, 3}) {
+        RenderOptions opt;
+        opt.spp = 8;
+        opt.max_bounces = bounces;
+        Stats st = render_stats(*scene, opt, 8);
+        // Pixels whose whole footprint lies on the sphere: the projected radius is tan(asin(1/4))
+        // / tan(20 deg) of the half width; keep those well inside it.
+        double R = std::tan(std::asin(0.25)) / std::tan(20.0 * M_PI / 180.0) * 16.0;
+        int tested = 0;
+        for (int y = 0; y < 32; ++y)
+            for (int x = 0; x < 32; ++x) {
+                double r = std::hypot(x + 0.5 - 16, y + 0.5 - 16);
+                if (r > R - 1.5) continue;
+                for (int c = 0; c < 3; ++c) {
+                    size_t i = (size_t(y) * 32 + x) * 3 + c;
+                    EXPECT_NEAR(st.mean[i], 0.6, 5 * st.stderr_[i] + 1e-4) << "pixel " << x << "," << y;
+                }
+                ++tested;
+            }
+        EXPECT_GT(tested, 100);
+    }
+}
+
+
+// Projects a world point to full-film pixel coordinates (perspective camera of scene/camera.h).
+Vec2f project(const Camera& c, const Vec3f& p) {
+    Vec3f d = p - c.position;
+    float z = dot(d, c.forward);
+    float sx = dot(d, c.right) / z, sy = dot(d, c.up) / z;
+    float px = (sx / c.tx + 1.f) * 0.5f * float(c.width);
+    float py = (1.f - sy / (c.tx * float(c.height) / float(c.width))) * 0.5f * float(c.height);
+    return {px, py};
+}
+
+// Area (in pixels) of the part of a convex polygon inside the film rectangle.
+double clipped_area(std::vector<Vec2d> poly, double W, double H) {
+    auto clip = [](const std::vector<Vec2d>& in, int axis, double bound, bool keep_less) {
+        std::vector<Vec2d> out;
+        for (size_t i = 0; i < in.size(); ++i) {
+            Vec2d a = in[i], b = in[(i + 1) % in.size()];
+            auto inside = [&](const Vec2d& p) { return keep_less ? p[axis] <= bound : p[axis] >= bound; };
+            if (inside(a)) out.push_back(a);
+            if (inside(a) != inside(b)) {
+                double t = (bound - a[axis]) / (b[axis] - a[axis]);
+                out.push_back(Vec2d(a.x + t * (b.x - a.x), a.y + t * (b.y - a.y)));
+            }
+        }
+        return out;
+    };
+    poly = clip(poly, 0, 0, false);
+    poly = clip(poly, 0, W, true);
+    poly = clip(poly, 1, 0, false);
+    poly = clip(poly, 1, H, true);
+    double a = 0;
+    for (size_t i = 0; i < poly.size(); ++i) {
+        const Vec2d &p = poly[i], &q = poly[(i + 1) % poly.size()];
+        a += p.x * q.y - q.x * p.y;
+    }
+    return std::abs(a) * 0.5;
+}
+
+// An emissive triangle over black seen directly: the image sum is its projected area (in
+// pixels) times its radiance, also when part of it lies outside the image.
+TEST(Render, EmissiveTriangleProjectedArea) {
+    const std::vector<std::vector<float>> tris = {
+        {-1.7f, 1.f, 0.f, 1.f, 1.f, 0.f, -0.5f, -1.f, 0.f},    // the classic test triangle
+        {-3.5f, 0.5f, 1.f, 0.5f, 2.5f, 0.f, 0.2f, -0.4f, -1.f}, // partly outside the image
+    };
+    for (const auto& v : tris) {
+        MeshData m;
+        m.vertices = v;
+        m.indices = {0, 1, 2};
+        ConstTex kd({0, 0, 0}), ks({0, 0, 0}), rough({0.5f}), le({2.f, 1.f, 0.5f});
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 64, 48, 45);
+        d.materials.push_back(material(kd, ks, rough));
+        d.meshes.push_back(m.desc(0));
+        d.meshes[0].emission = le.desc();
+        d.meshes[0].two_sided_emission = true;
+        auto scene = build_scene(d);
+        std::vector<Vec2d> poly;
+        for (int k = 0; k < 3; ++k) {
+            Vec2f p = project(scene->camera, Vec3f(v[3 * k], v[3 * k + 1], v[3 * k + 2]));
+            poly.push_back(Vec2d(p.x, p.y));
+        }
+        double area = clipped_area(poly, 64, 48);
+        RenderOptions opt;
+        opt.spp = 64;
+        opt.max_bounces = 0;
+        std::vector<float> img(64 * 48 * 3);
+        render(*scene, opt, img.data());
+        double sum[3] = {0, 0, 0};
+        for (size_t i = 0; i < img.size(); ++i) sum[i % 3] += img[i];
+        // Only edge pixels are noisy: each contributes at most its radiance, with binomial noise
+        // of a stratum-free estimate; 64 spp bounds the relative error of the sum well below 1%.
+        for (int c = 0; c < 3; ++c) EXPECT_NEAR(sum[c], area * le.v[c], 0.01 * area * le.v[c]) << "channel " << c;
+    }
+}
+
+// Irradiance at p from a polygonal Lambertian emitter of unit radiance (Lambert's formula).
+double polygon_irradiance(const Vec3d& p, const Vec3d& n, const std::vector<Vec3d>& poly) {
+    double e = 0;
+    for (size_t i = 0; i < poly.size(); ++i) {
+        Vec3d a = normalize(poly[i] - p), b = normalize(poly[(i + 1) % poly.size()] - p);
+        double theta = std::acos(std::clamp(dot(a, b), -1.0, 1.0));
+        e += theta * dot(normalize(cross(a, b)), n);
+    }
+    return std::abs(e) * 0.5;
+}
+
+// A diffuse plane lit by one rectangular light: each pixel equals albedo / pi times the analytic
+// irradiance, averaged over the pixel's footprint (orthographic camera looking straight down).
+TEST(Render, RectangleLightIrradiance) {
+    MeshData floor = make_quad(Vec3f(-2, 0, -2), Vec3f(0, 0, 4), Vec3f(4, 0, 0));  // normal +y
+    MeshData lamp = make_quad(Vec3f(-0.3f, 1.f, -0.2f), Vec3f(0.7f, 0, 0), Vec3f(0, 0, 0.5f));  // normal -y
+    ConstTex kd({0.7f, 0.5f, 0.3f}), black({0, 0, 0}), ks({0, 0, 0}), rough({0.5f}), le({3.f, 3.f, 3.f});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 3, 0), Vec3f(0, 0, 0), 24, 24, 45);
+    d.camera.up[1] = 0;
+    d.camera.up[2] = 1;
+    d.camera.type = CameraType::Orthographic;
+    d.camera.ortho_scale = 1.5f;
+    d.materials.push_back(material(kd, ks, rough));
+    d.materials.push_back(material(black, ks, rough));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(lamp.desc(1));
+    d.meshes[1].emission = le.desc();
+    auto scene = build_scene(d);
+    std::vector<Vec3d> poly;
+    for (int k = 0; k < 4; ++k) poly.push_back(Vec3d(Vec3f::load(lamp.vertices.data() + 3 * k)));
+    RenderOptions opt;
+    opt.spp = 4;
+    opt.max_bounces = 1;
+    Stats st = render_stats(*scene, opt, 32);
+    const Camera& cam = scene->camera;
+    int checked = 0, outliers = 0;
+    double zsum = 0;
+    for (int y = 0; y < 24; ++y)
+        for (int x = 0; x < 24; ++x) {
+            double e = 0;
+            const int sub = 6;
+            bool under_lamp = false;
+            for (int j = 0; j < sub; ++j)
+                for (int i = 0; i < sub; ++i) {
+                    Ray r = cam.generate_ray(x + (i + 0.5f) / sub, y + (j + 0.5f) / sub);
+                    Vec3d p(r.origin.x, 0.0, r.origin.z);
+                    if (p.x > -0.35 && p.x < 0.45 && p.z > -0.25 && p.z < 0.35) under_lamp = true;
+                    e += polygon_irradiance(p, Vec3d(0, 1, 0), poly);
+                }
+            e /= sub * sub;
+            if (under_lamp) continue;  // the camera sees the lamp's black back there
+            for (int c = 0; c < 3; ++c) {
+                size_t idx = (size_t(y) * 24 + x) * 3 + c;
+                double expect = kd.v[c] / M_PI * le.v[c] * e;
+                double z = std::abs(st.mean[idx] - expect) / (st.stderr_[idx] + 1e-6);
+                if (z > 4.5) ++outliers;
+                zsum += (st.mean[idx] - expect) / (st.stderr_[idx] + 1e-6);
+                ++checked;
+            }
+        }
+    // With ~1600 values and 32-run error estimates (t with 31 degrees of freedom), a correct
+    // renderer exceeds 4.5 standard errors about 0.1 times; a bias shows up in the mean z-score
+    // (standard deviation 1/sqrt(checked) without bias; neighbouring channels are correlated, so
+    // allow 6 of those).
+    EXPECT_LE(outliers, 3) << "of " << checked;
+    EXPECT_LT(std::abs(zsum / checked), 6.0 / std::sqrt(double(checked)));
+}
+
+// Light sampling alone, BSDF sampling alone and their MIS combination estimate the same image:
+// compared per pixel and over the whole image with bounds from the sample variance.
+TEST(Render, SamplingStrategiesAgree) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.2f, -0.3f, 0.3f), 0.7f, 12, 24);
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.5f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), ks_floor({0.2f, 0.2f, 0.2f}), r_floor({0.3f});
+    ConstTex kd_ball({0.2f, 0.3f, 0.6f}), ks_ball({0.5f, 0.5f, 0.5f}), r_ball({0.25f});
+    ConstTex black({0, 0, 0}), le({4.f, 4.f, 4.f}), r_any({0.5f});
+    const int EW = 16, EH = 8;
+    std::vector<float> env(EW * EH * 3);
+    for (int j = 0; j < EH; ++j)
+        for (int i = 0; i < EW; ++i)
+            for (int c = 0; c < 3; ++c) env[(j * EW + i) * 3 + c] = 0.2f + 0.1f * c + (j < 3 ? 0.5f : 0.f) + (i == 3 ? 1.f : 0.f);
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.5f, 5), Vec3f(0, -0.3f, 0), 32, 24, 50);
+    d.materials.push_back(material(kd, ks_floor, r_floor));
+    d.materials.push_back(material(kd_ball, ks_ball, r_ball));
+    d.materials.push_back(material(black, black, r_any));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(1));
+    d.meshes.push_back(lamp.desc(2));
+    d.meshes[2].emission = le.desc();
+    d.meshes[2].two_sided_emission = true;
+    d.has_envmap = true;
+    d.envmap.values.data = env.data();
+    d.envmap.values.height = EH;
+    d.envmap.values.width = EW;
+    d.envmap.values.channels = 3;
+    auto scene = build_scene(d);
+    RenderOptions opt;
+    opt.spp = 8;
+    opt.max_bounces = 2;
+    std::vector<Stats> st;
+    for (LightSampling mode : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly}) {
+        opt.sampling = mode;
+        st.push_back(render_stats(*scene, opt, 24));
+    }
+    for (int b = 1; b < 3; ++b) {
+        const Stats &x = st[0], &y = st[b];
+        size_t n = x.mean.size();
+        int outliers = 0;
+        double diff[3] = {0, 0, 0}, var[3] = {0, 0, 0};
+        for (size_t i = 0; i < n; ++i) {
+            double se2 = x.stderr_[i] * x.stderr_[i] + y.stderr_[i] * y.stderr_[i];
+            double dlt = x.mean[i] - y.mean[i];
+            if (std::abs(dlt) > 5.0 * std::sqrt(se2) + 1e-6) ++outliers;
+            diff[i % 3] += dlt;
+            var[i % 3] += se2;
+        }
+        EXPECT_LE(outliers, int(n / 200)) << "strategy " << b;
+        for (int c = 0; c < 3; ++c)
+            EXPECT_LT(std::abs(diff[c]), 5.0 * std::sqrt(var[c])) << "strategy " << b << " channel " << c;
+    }
+}
+
+}  // namespace
+}  // namespace edgepath
