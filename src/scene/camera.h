@@ -3,6 +3,7 @@
 #pragma once
 #include <cmath>
 #include "math/ray.h"
+#include "math/vec_diff.h"
 #include "scene/desc.h"
 
 namespace edgepath {
@@ -46,5 +47,102 @@ struct Camera {
         return r;
     }
 };
+
+
+// The camera as a differentiable function of its parameters (pose, fov or orthographic scale).
+template <class T>
+struct TCameraParams {
+    TVec3<T> position, look_at, up;
+    T fov = 45, ortho_scale = 1;
+    CameraType type = CameraType::Perspective;
+    int width = 1, height = 1;
+
+    static TCameraParams from_desc(const CameraDesc& d) {
+        TCameraParams c;
+        c.position = TVec3<T>(TVec3<float>::load(d.position));
+        c.look_at = TVec3<T>(TVec3<float>::load(d.look_at));
+        c.up = TVec3<T>(TVec3<float>::load(d.up));
+        c.fov = T(d.fov);
+        c.ortho_scale = T(d.ortho_scale);
+        c.type = d.type;
+        c.width = d.width;
+        c.height = d.height;
+        return c;
+    }
+};
+
+// Gradient slots of the camera, in this order: position[3], look_at[3], up[3], fov, ortho_scale.
+constexpr int kCameraParams = 11;
+
+template <class T>
+void camera_ray(const TCameraParams<T>& c, T px, T py, TVec3<T>& o, TVec3<T>& d) {
+    TVec3<T> f = normalize(c.look_at - c.position);
+    TVec3<T> r = normalize(cross(f, c.up));
+    TVec3<T> u = cross(r, f);
+    T tx = c.type == CameraType::Perspective ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
+    T sx = (2 * px / T(c.width) - 1) * tx;
+    T sy = (1 - 2 * py / T(c.height)) * tx * T(c.height) / T(c.width);
+    if (c.type == CameraType::Perspective) {
+        o = c.position;
+        d = normalize(f + r * sx + u * sy);
+    } else {
+        o = c.position + r * sx + u * sy;
+        d = f;
+    }
+}
+
+// Adds the adjoint of camera_ray for output adjoints (d_o, d_d) to grad[kCameraParams].
+template <class T>
+void d_camera_ray(const TCameraParams<T>& c, T px, T py, const TVec3<T>& d_o, const TVec3<T>& d_d, T* grad) {
+    TVec3<T> F = c.look_at - c.position;
+    TVec3<T> f = normalize(F);
+    TVec3<T> R = cross(f, c.up);
+    TVec3<T> r = normalize(R);
+    TVec3<T> u = cross(r, f);
+    bool persp = c.type == CameraType::Perspective;
+    T tx = persp ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
+    T ax = 2 * px / T(c.width) - 1, ay = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
+    T sx = ax * tx, sy = ay * tx;
+    TVec3<T> dposition(T(0)), df(T(0)), dr(T(0)), du(T(0));
+    T dsx, dsy;
+    if (persp) {
+        // o = position; d = normalize(f + r sx + u sy)
+        dposition += d_o;
+        TVec3<T> dD = d_normalize(f + r * sx + u * sy, d_d);
+        df += dD;
+        dr += dD * sx;
+        du += dD * sy;
+        dsx = dot(dD, r);
+        dsy = dot(dD, u);
+    } else {
+        // o = position + r sx + u sy; d = f
+        dposition += d_o;
+        dr += d_o * sx;
+        du += d_o * sy;
+        dsx = dot(d_o, r);
+        dsy = dot(d_o, u);
+        df += d_d;
+    }
+    // sx = ax tx, sy = ay tx
+    T dtx = dsx * ax + dsy * ay;
+    // tx = tan(fov pi / 360) or ortho_scale
+    if (persp)
+        grad[9] += dtx * (1 + tx * tx) * T(3.14159265358979323846 / 360.0);
+    else
+        grad[10] += dtx;
+    // u = cross(r, f)
+    d_cross(r, f, du, dr, df);
+    // r = normalize(R), R = cross(f, up)
+    TVec3<T> dR = d_normalize(R, dr);
+    TVec3<T> dup(T(0));
+    d_cross(f, c.up, dR, df, dup);
+    // f = normalize(look_at - position)
+    TVec3<T> dF = d_normalize(F, df);
+    for (int k = 0; k < 3; ++k) {
+        grad[k] += dposition[k] - dF[k];
+        grad[3 + k] += dF[k];
+        grad[6 + k] += dup[k];
+    }
+}
 
 }  // namespace edgepath

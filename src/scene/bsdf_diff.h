@@ -1,0 +1,156 @@
+// The material model evaluated in world space, and its adjoint. Frame-free: an isotropic BSDF
+// depends only on the shading normal n and the two directions, so gradients reach the normal
+// without differentiating a tangent frame. Same model as scene/bsdf.h (which the sampler uses);
+// the test suite checks the two agree.
+//
+// Each forward line appears as a comment above the lines of its adjoint.
+#pragma once
+#include <algorithm>
+#include <cmath>
+#include "math/vec.h"
+
+namespace edgepath {
+
+template <class T>
+struct TBsdfParams {
+    TVec3<T> diffuse, specular;
+    T alpha = T(0.5);
+    bool two_sided = false;
+};
+
+template <class T>
+struct DBsdf {
+    TVec3<T> diffuse, specular, n, wo, wi;
+    T alpha = 0;
+};
+
+namespace detail {
+template <class T> constexpr T pi() { return T(3.14159265358979323846); }
+
+// D(c) = a^2 / (pi d^2), d = c^2 (a^2 - 1) + 1, zero for c <= 0.
+template <class T> T ggx_d(T c, T a) {
+    if (c <= 0) return 0;
+    T d = c * c * (a * a - 1) + 1;
+    return a * a / (pi<T>() * d * d);
+}
+template <class T> void d_ggx_d(T c, T a, T dD, T& dc, T& da) {
+    if (c <= 0) return;
+    T d = c * c * (a * a - 1) + 1;
+    T D = a * a / (pi<T>() * d * d);
+    // dD/dd = -2 D / d
+    T dd = -2 * D / d * dD;
+    dc += dd * 2 * c * (a * a - 1);
+    da += dD * 2 * a / (pi<T>() * d * d) + dd * 2 * a * c * c;
+}
+// G1(c) = 2 / (1 + sqrt(1 + a^2 (1 - c^2) / c^2)) for a direction with cosine c to the normal and
+// cosine ch > 0 to the microfacet normal (zero otherwise).
+template <class T> T smith_g1(T c, T ch, T a) {
+    if (ch * c <= 0) return 0;
+    if (c * c >= 1) return 1;
+    T t2 = (1 - c * c) / (c * c);
+    return 2 / (1 + std::sqrt(1 + a * a * t2));
+}
+template <class T> void d_smith_g1(T c, T ch, T a, T dG, T& dc, T& da) {
+    if (ch * c <= 0 || c * c >= 1) return;
+    T t2 = (1 - c * c) / (c * c);
+    T q = std::sqrt(1 + a * a * t2);
+    // G = 2 / (1 + q)
+    T dq = -2 / ((1 + q) * (1 + q)) * dG;
+    // q = sqrt(1 + a^2 t2)
+    da += dq * a * t2 / q;
+    T dt2 = dq * a * a / (2 * q);
+    // t2 = 1 / c^2 - 1
+    dc += dt2 * (-2 / (c * c * c));
+}
+}  // namespace detail
+
+// f(wo, wi) * cos(theta_i), world space; n unit shading normal, wo/wi unit.
+template <class T>
+TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi) {
+    T co = dot(n, wo);
+    if (p.two_sided && co < 0) {
+        n = -n;
+        co = -co;
+    }
+    T ci = dot(n, wi);
+    if (co <= 0 || ci <= 0) return TVec3<T>(T(0));
+    TVec3<T> result = p.diffuse * (ci / detail::pi<T>());
+    if (!is_black(p.specular)) {
+        TVec3<T> H = wo + wi;
+        T hl = length(H);
+        if (!(hl > 0)) return result;
+        TVec3<T> h = H / hl;
+        T ch = dot(n, h), oh = dot(wo, h);
+        T D = detail::ggx_d(ch, p.alpha);
+        T Go = detail::smith_g1(co, oh, p.alpha), Gi = detail::smith_g1(ci, oh, p.alpha);
+        T m = std::clamp(1 - oh, T(0), T(1));
+        T m5 = m * m * m * m * m;
+        TVec3<T> F = p.specular + (TVec3<T>(T(1)) - p.specular) * m5;
+        result += F * (D * Go * Gi / (4 * co));
+    }
+    return result;
+}
+
+// Adds to `d` the adjoint of bsdf_eval_world for the output adjoint `dr`.
+template <class T>
+void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi,
+                       const TVec3<T>& dr, DBsdf<T>& d) {
+    T co = dot(n, wo);
+    bool flipped = p.two_sided && co < 0;
+    if (flipped) {
+        n = -n;
+        co = -co;
+    }
+    T ci = dot(n, wi);
+    if (co <= 0 || ci <= 0) return;
+    TVec3<T> dn(T(0));
+    T dco = 0, dci = 0;
+    // result = diffuse * ci / pi
+    d.diffuse += dr * (ci / detail::pi<T>());
+    dci += dot(dr, p.diffuse) / detail::pi<T>();
+    if (!is_black(p.specular)) {
+        TVec3<T> H = wo + wi;
+        T hl = length(H);
+        if (hl > 0) {
+            TVec3<T> h = H / hl;
+            T ch = dot(n, h), oh = dot(wo, h);
+            T D = detail::ggx_d(ch, p.alpha);
+            T Go = detail::smith_g1(co, oh, p.alpha), Gi = detail::smith_g1(ci, oh, p.alpha);
+            T m = std::clamp(1 - oh, T(0), T(1));
+            T m5 = m * m * m * m * m;
+            TVec3<T> F = p.specular + (TVec3<T>(T(1)) - p.specular) * m5;
+            T S = D * Go * Gi / (4 * co);
+            // result += F * S
+            TVec3<T> dF = dr * S;
+            T dS = dot(dr, F);
+            // F = ks + (1 - ks) m^5
+            d.specular += dF * (1 - m5);
+            T dm = (1 - oh > 0 && 1 - oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m * m * m * m : T(0);
+            T doh = -dm;
+            // S = D Go Gi / (4 co)
+            T dD = dS * Go * Gi / (4 * co);
+            T dGo = dS * D * Gi / (4 * co);
+            T dGi = dS * D * Go / (4 * co);
+            dco += -dS * S / co;
+            T dch = 0;
+            detail::d_ggx_d(ch, p.alpha, dD, dch, d.alpha);
+            detail::d_smith_g1(co, oh, p.alpha, dGo, dco, d.alpha);
+            detail::d_smith_g1(ci, oh, p.alpha, dGi, dci, d.alpha);
+            // ch = n.h, oh = wo.h
+            TVec3<T> dh = n * dch + wo * doh;
+            dn += h * dch;
+            d.wo += h * doh;
+            // h = H / |H|
+            TVec3<T> dH = (dh - h * dot(h, dh)) / hl;
+            d.wo += dH;
+            d.wi += dH;
+        }
+    }
+    // co = n.wo, ci = n.wi
+    dn += wo * dco + wi * dci;
+    d.wo += n * dco;
+    d.wi += n * dci;
+    d.n += flipped ? -dn : dn;
+}
+
+}  // namespace edgepath

@@ -1,0 +1,53 @@
+// Where a fixed ray meets a triangle's plane, and its adjoint. The gradient pass holds ray
+// directions fixed, so a hit point moves with the ray origin and with the triangle it lands on.
+#pragma once
+#include "math/vec.h"
+
+namespace edgepath {
+
+template <class T>
+struct TriangleHit {
+    T t = 0, b1 = 0, b2 = 0;
+};
+
+// Solves o + t d = v0 + b1 (v1 - v0) + b2 (v2 - v0) (Moeller-Trumbore, no range checks).
+template <class T>
+bool intersect_triangle(const TVec3<T>& o, const TVec3<T>& d, const TVec3<T>& v0, const TVec3<T>& v1,
+                        const TVec3<T>& v2, TriangleHit<T>& h) {
+    TVec3<T> e1 = v1 - v0, e2 = v2 - v0;
+    TVec3<T> pvec = cross(d, e2);
+    T det = dot(e1, pvec);
+    if (det == 0) return false;
+    T inv = T(1) / det;
+    TVec3<T> tvec = o - v0;
+    TVec3<T> qvec = cross(tvec, e1);
+    h.b1 = dot(tvec, pvec) * inv;
+    h.b2 = dot(d, qvec) * inv;
+    h.t = dot(e2, qvec) * inv;
+    return true;
+}
+
+template <class T>
+struct DTriangle {
+    TVec3<T> o, d, v0, v1, v2;
+};
+
+// Adjoint of intersect_triangle. With M = [-d, e1, e2] and x = (t, b1, b2), M x = o - v0, so
+// lambda = M^-T dx and do = lambda, dv0 = -lambda, dd = lambda t, de1 = -lambda b1, de2 = -lambda b2.
+template <class T>
+void d_intersect_triangle(const TVec3<T>& /*o*/, const TVec3<T>& d, const TVec3<T>& v0, const TVec3<T>& v1,
+                          const TVec3<T>& v2, const TriangleHit<T>& h, T dt, T db1, T db2, DTriangle<T>& g) {
+    TVec3<T> e1 = v1 - v0, e2 = v2 - v0, nd = -d;
+    T det = dot(nd, cross(e1, e2));
+    if (det == 0) return;
+    // Rows of M^T are (-d, e1, e2); its inverse has columns (e1 x e2, e2 x -d, -d x e1) / det.
+    TVec3<T> lambda = (cross(e1, e2) * dt + cross(e2, nd) * db1 + cross(nd, e1) * db2) / det;
+    g.o += lambda;
+    g.d += lambda * h.t;
+    TVec3<T> de1 = -lambda * h.b1, de2 = -lambda * h.b2;
+    g.v0 += -lambda - de1 - de2;
+    g.v1 += de1;
+    g.v2 += de2;
+}
+
+}  // namespace edgepath
