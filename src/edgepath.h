@@ -2,6 +2,7 @@
 // (scene/desc.h), build it once, render into your own buffer.
 #pragma once
 #include <memory>
+#include "diff/gradients.h"
 #include "scene/desc.h"
 
 namespace edgepath {
@@ -21,5 +22,16 @@ int image_height(const Scene& scene);
 // Renders into `image`, (image_height, image_width, 3) float32, row 0 at the top, linear.
 // Deterministic for a given seed whatever the thread count.
 RenderStats render(const Scene& scene, const RenderOptions& options, float* image);
+
+// The gradient pass (interior term). `adjoint` is d loss / d image, shaped like the image; the
+// gradients are ADDED into the buffers of `grads` (slots left null are skipped). Uses the same
+// random numbers as render() with the same options, so with the same seed it differentiates
+// exactly the paths of that image.
+void render_gradients(const Scene& scene, const RenderOptions& options, const float* adjoint,
+                      const SceneGradients& grads);
+
+// Forward-mode derivative image: out (image_height, image_width, 3) = dI/dtheta along the
+// directions in `dirs` (their `dir` slots), computed by the same adjoint code.
+void derivative_image(const Scene& scene, const RenderOptions& options, const SceneGradients& dirs, float* out);
 
 }  // namespace edgepath

@@ -2,7 +2,8 @@
 
 namespace edgepath {
 
-Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters) {
+Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
+                 PathRecord* record) {
     const bool use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
     const bool use_hits = opt.sampling != LightSampling::LightOnly;
     const bool mis = opt.sampling == LightSampling::MIS;
@@ -10,12 +11,29 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
     Vec3f L(0.f), beta(1.f);
     ++counters.camera;
     Hit hit;
+    if (record) {
+        record->vertices.clear();
+        record->camera_missed = record->escaped = false;
+    }
     if (!scene.intersect(ray, hit)) {
         if (scene.has_envmap) L += scene.envmap.eval(ray.dir);
+        if (record) record->camera_missed = true;
         return L;
     }
     SurfacePoint sp = scene.surface_point(hit);
     L += scene.emitted(sp, -ray.dir);
+    PathVertexRecord* rv = nullptr;
+    auto push_vertex = [&](const Ray& r, float emission_weight) {
+        if (!record) return;
+        record->vertices.emplace_back();
+        rv = &record->vertices.back();
+        rv->hit = hit;
+        rv->origin = r.origin;
+        rv->dir = r.dir;
+        rv->beta = beta;
+        rv->emission_weight = emission_weight;
+    };
+    push_vertex(ray, 1.f);
 
     for (int bounce = 0; bounce < opt.max_bounces; ++bounce) {
         BsdfParams bp = scene.bsdf_params(sp);
@@ -35,6 +53,13 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
                 if (!scene.occluded(shadow)) {
                     float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
                     L += beta * f * ls.radiance * (w / ls.pdf);
+                    if (rv) {
+                        rv->nee = true;
+                        rv->nee_env = !std::isfinite(ls.dist);
+                        rv->nee_dir = ls.dir;
+                        rv->nee_scale = w / ls.pdf;
+                        rv->nee_hit = ls.hit;
+                    }
                 }
             }
         }
@@ -47,23 +72,34 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         if (is_black(beta)) break;
         Vec3f dir = frame.to_world(bs.wi);
         Vec3f prev_p = sp.p;
+        if (rv) {
+            rv->next = true;
+            rv->next_dir = dir;
+            rv->next_inv_pdf = 1.f / bs.pdf;
+        }
         ray = spawn_ray(sp.p, sp.ng, dir);
         ++counters.bounce;
         if (!scene.intersect(ray, hit)) {
             if (scene.has_envmap && use_hits) {
                 float w = (mis && use_nee) ? mis_power(bs.pdf, scene.env_pdf(dir)) : 1.f;
                 L += beta * scene.envmap.eval(dir) * w;
+                if (record) {
+                    record->escaped = true;
+                    record->escape_weight = w;
+                }
             }
             break;
         }
         sp = scene.surface_point(hit);
+        float emission_weight = 0.f;
         if (use_hits) {
             Vec3f Le = scene.emitted(sp, -dir);
             if (!is_black(Le)) {
-                float w = (mis && use_nee) ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
-                L += beta * Le * w;
+                emission_weight = (mis && use_nee) ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
+                L += beta * Le * emission_weight;
             }
         }
+        push_vertex(ray, emission_weight);
     }
     return L;
 }

@@ -11,8 +11,36 @@ struct RayCounters {
     uint64_t camera = 0, shadow = 0, bounce = 0;
 };
 
-// Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`.
-Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters);
+// What the gradient pass needs to replay one path: its vertices with the fixed directions and
+// the constant factors (1 / pdf, MIS weights) chosen when it was traced.
+struct PathVertexRecord {
+    Hit hit;
+    Vec3f origin, dir;            // the ray that found this vertex
+    Vec3f beta;                   // throughput of the path up to this vertex
+    float emission_weight = 0.f;  // MIS weight of the emission seen here (0: not counted)
+    // Next-event estimation at this vertex (only when it contributed).
+    bool nee = false, nee_env = false;
+    Vec3f nee_dir;
+    float nee_scale = 0.f;        // MIS weight / pdf
+    Hit nee_hit;                  // the point on the light (area lights)
+    // Continuation by BSDF sampling.
+    bool next = false;
+    Vec3f next_dir;
+    float next_inv_pdf = 0.f;
+};
+
+struct PathRecord {
+    Vec2f film;
+    bool camera_missed = false;  // the camera ray left the scene
+    bool escaped = false;        // the last continuation left the scene
+    float escape_weight = 0.f;   // MIS weight of the environment seen by that continuation
+    std::vector<PathVertexRecord> vertices;
+};
+
+// Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
+// `record` is given, also records the path for the gradient pass.
+Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
+                 PathRecord* record = nullptr);
 
 // Film point of sample `s` of film pixel (x, y), and its random stream.
 inline Vec2f sample_film_point(const Scene& scene, int x, int y, Rng& rng) {

@@ -152,6 +152,7 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     std::shared_ptr<Scene> s(new Scene());
     const CameraDesc& cd = desc.camera;
     s->camera = Camera::from_desc(cd);
+    s->camera_params = TCameraParams<float>::from_desc(cd);
     s->filter.build(cd.filter, cd.filter_stddev);
     s->crop_x = cd.crop_x;
     s->crop_y = cd.crop_y;
@@ -345,6 +346,11 @@ bool Scene::sample_light(const Vec3f& p, float u0, float u1, float u2, LightSamp
     if (is_black(ls.radiance)) return false;
     ls.dir = d;
     ls.dist = dist;
+    ls.hit.mesh = lt.mesh;
+    ls.hit.prim = lt.prim;
+    ls.hit.b1 = b.x;
+    ls.hit.b2 = b.y;
+    ls.hit.t = dist;
     ls.pdf = (1.f - env_selection_probability) * light_distribution.pmf(li) / lt.area * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }

@@ -62,6 +62,7 @@ struct LightSample {
     float dist = 0.f;    // infinity for the environment
     Vec3f radiance;      // emitted radiance towards the shading point
     float pdf = 0.f;     // solid angle, including the choice of light
+    Hit hit;             // the point on an area light (mesh, triangle, barycentrics)
 };
 
 class Scene {
@@ -74,6 +75,7 @@ public:
     static std::shared_ptr<Scene> build(const SceneDesc& desc);
 
     Camera camera;
+    TCameraParams<float> camera_params;  // the same camera, as differentiable parameters
     PixelFilter filter;
     int crop_x = 0, crop_y = 0, out_width = 0, out_height = 0;
     std::vector<Mesh> meshes;

@@ -1,0 +1,253 @@
+#include "diff/backprop.h"
+
+#include "math/vec_diff.h"
+#include "scene/bsdf_diff.h"
+#include "scene/geometry.h"
+
+namespace edgepath {
+
+namespace {
+
+const GradSlot kNoSlot{};
+
+// Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
+void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv) {
+    if (tex.is_constant()) {
+        if (slot.wanted())
+            for (int c = 0; c < tex.channels; ++c) sink.add(slot, c, dval[c]);
+        return;
+    }
+    TexelFootprint f = bilinear_footprint(tex, uv);
+    for (int k = 0; k < 4; ++k)
+        for (int c = 0; c < tex.channels; ++c) {
+            if (slot.wanted()) sink.add(slot, f.texel[k] * tex.channels + c, f.weight[k] * dval[c]);
+            if (duv) {
+                float t = tex.data[f.texel[k] * tex.channels + c] * dval[c];
+                duv->x += f.dweight_du[k] * t;
+                duv->y += f.dweight_dv[k] * t;
+            }
+        }
+}
+
+// Adjoint of Envmap::eval for a fixed direction: texels only.
+void d_envmap(const Envmap& env, const GradSlot& slot, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
+    if (!slot.wanted()) return;
+    Vec2f p = env.position(dir);
+    int x0 = std::min(int(p.x), env.cols - 1), y0 = std::min(int(p.y), env.rows - 1);
+    float tx = p.x - float(x0), ty = env.tex.height > 1 ? p.y - float(y0) : 0.f;
+    int x1 = (x0 + 1) % env.cols, y1 = std::min(y0 + 1, env.tex.height - 1);
+    const int64_t W = env.tex.width;
+    const int64_t texel[4] = {y0 * W + x0, y0 * W + x1, y1 * W + x0, y1 * W + x1};
+    const float w[4] = {(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty};
+    for (int k = 0; k < 4; ++k)
+        sink.add3(slot, texel[k], dL.x * w[k] * env.scale, dL.y * w[k] * env.scale, dL.z * w[k] * env.scale);
+}
+
+// The differentiable geometry of a hit: a fixed ray meeting a triangle.
+struct VertexGeometry {
+    const Mesh* mesh;
+    const int32_t* tri;
+    Vec3f v[3];
+    TriangleHit<float> th;
+    SurfacePoint sp;
+
+    VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir) {
+        mesh = &scene.meshes[hit.mesh];
+        tri = mesh->indices + 3 * hit.prim;
+        for (int k = 0; k < 3; ++k) v[k] = mesh->vertex(tri[k]);
+        th.b1 = hit.b1;
+        th.b2 = hit.b2;
+        th.t = hit.t;
+        // Re-solve the barycentrics from the ray so that value and adjoint agree exactly.
+        TriangleHit<float> h;
+        if (intersect_triangle(origin, dir, v[0], v[1], v[2], h)) th = h;
+        sp = scene.surface_point(hit.mesh, hit.prim, th.b1, th.b2);
+    }
+};
+
+// Accumulates adjoints of the quantities derived from a hit and sends them to the mesh's
+// buffers; returns the adjoint of the ray (origin, direction) through the intersection.
+struct HitAdjoint {
+    Vec3f dp, dn;    // position, shading normal
+    Vec2f duv;       // texture coordinates
+    HitAdjoint() : dp(0.f), dn(0.f), duv(0.f, 0.f) {}
+};
+
+void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
+                const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir) {
+    const Mesh& m = *g.mesh;
+    float b[3] = {1.f - g.th.b1 - g.th.b2, g.th.b1, g.th.b2};
+    float db1 = 0.f, db2 = 0.f;
+    Vec3f dv[3] = {Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
+    // uv = sum b_i uv_i   (or uv = (b1, b2) without uvs)
+    if (m.uvs) {
+        const int32_t* ti = m.uv_indices + 3 * (g.tri - m.indices) / 3;
+        const float* t[3] = {m.uvs + 2 * ti[0], m.uvs + 2 * ti[1], m.uvs + 2 * ti[2]};
+        if (ms && ms->uvs.wanted())
+            for (int k = 0; k < 3; ++k) {
+                sink.add(ms->uvs, 2 * int64_t(ti[k]), b[k] * a.duv.x);
+                sink.add(ms->uvs, 2 * int64_t(ti[k]) + 1, b[k] * a.duv.y);
+            }
+        db1 += a.duv.x * (t[1][0] - t[0][0]) + a.duv.y * (t[1][1] - t[0][1]);
+        db2 += a.duv.x * (t[2][0] - t[0][0]) + a.duv.y * (t[2][1] - t[0][1]);
+    } else {
+        db1 += a.duv.x;
+        db2 += a.duv.y;
+    }
+    // Shading normal.
+    if (m.normals) {
+        // ns = normalize(N), N = sum b_i n_i
+        const int32_t* ni = m.normal_indices + 3 * (g.tri - m.indices) / 3;
+        Vec3f n[3] = {Vec3f::load(m.normals + 3 * ni[0]), Vec3f::load(m.normals + 3 * ni[1]),
+                      Vec3f::load(m.normals + 3 * ni[2])};
+        Vec3f N = n[0] * b[0] + n[1] * b[1] + n[2] * b[2];
+        Vec3f dN = d_normalize(N, a.dn);
+        if (ms && ms->normals.wanted())
+            for (int k = 0; k < 3; ++k) sink.add3(ms->normals, ni[k], dN.x * b[k], dN.y * b[k], dN.z * b[k]);
+        db1 += dot(dN, n[1] - n[0]);
+        db2 += dot(dN, n[2] - n[0]);
+    } else {
+        // ns = normalize(cross(e1, e2))
+        Vec3f e1 = g.v[1] - g.v[0], e2 = g.v[2] - g.v[0];
+        Vec3f dC = d_normalize(cross(e1, e2), a.dn);
+        Vec3f de1(0.f), de2(0.f);
+        d_cross(e1, e2, dC, de1, de2);
+        dv[1] += de1;
+        dv[2] += de2;
+        dv[0] -= de1 + de2;
+    }
+    // p = sum b_i v_i
+    for (int k = 0; k < 3; ++k) dv[k] += a.dp * b[k];
+    db1 += dot(a.dp, g.v[1] - g.v[0]);
+    db2 += dot(a.dp, g.v[2] - g.v[0]);
+    // (t, b1, b2) = intersect(origin, dir, v0, v1, v2)
+    DTriangle<float> dt{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
+    d_intersect_triangle(origin, dir, g.v[0], g.v[1], g.v[2], g.th, 0.f, db1, db2, dt);
+    d_origin += dt.o;
+    d_dir += dt.d;
+    dv[0] += dt.v0;
+    dv[1] += dt.v1;
+    dv[2] += dt.v2;
+    if (ms && ms->vertices.wanted())
+        for (int k = 0; k < 3; ++k) sink.add3(ms->vertices, g.tri[k], dv[k].x, dv[k].y, dv[k].z);
+}
+
+const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
+    return size_t(mesh) < s.meshes.size() ? &s.meshes[mesh] : nullptr;
+}
+
+TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp) {
+    BsdfParams p = scene.bsdf_params(sp);
+    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided};
+}
+
+}  // namespace
+
+void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
+                   GradSink& sink) {
+    const auto& V = rec.vertices;
+    if (rec.camera_missed) {
+        // L = env(d0); the direction's own derivative is not propagated (texels only).
+        Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y);
+        if (scene.has_envmap) d_envmap(scene.envmap, slots.envmap, r.dir, a, sink);
+        return;
+    }
+    const int K = int(V.size());
+    Vec3f A_next(0.f);   // adjoint of the throughput after vertex k
+    Vec3f dp_next(0.f);  // adjoint of vertex k's position from the ray that leaves it
+    if (rec.escaped) {
+        const PathVertexRecord& last = V[K - 1];
+        Vec3f Le = scene.envmap.eval(last.next_dir);
+        A_next = a * Le * rec.escape_weight;
+        // beta after the last vertex = beta_last * T_last
+        VertexGeometry g(scene, last.hit, last.origin, last.dir);
+        Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), g.sp.ns, -last.dir, last.next_dir) * last.next_inv_pdf;
+        d_envmap(scene.envmap, slots.envmap, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+    }
+    for (int k = K - 1; k >= 0; --k) {
+        const PathVertexRecord& r = V[k];
+        VertexGeometry g(scene, r.hit, r.origin, r.dir);
+        const SurfacePoint& sp = g.sp;
+        const Mesh& mesh = *g.mesh;
+        const SceneGradients::MeshSlots* ms = mesh_slots(slots, r.hit.mesh);
+        const Material& mat = scene.materials[mesh.material];
+        const SceneGradients::MaterialSlots* mats =
+            size_t(mesh.material) < slots.materials.size() ? &slots.materials[mesh.material] : nullptr;
+        Vec3f wo = -r.dir;
+        Vec3f ab = a * r.beta;  // adjoint of anything added to the radiance at this vertex
+        Vec3f A_k(0.f);
+        HitAdjoint ha;
+        ha.dp = dp_next;
+        Vec3f dwo(0.f);
+
+        // Emission seen at this vertex: E = w Le(uv)
+        if (r.emission_weight > 0.f) {
+            Vec3f Le = scene.emitted(sp, wo);
+            if (!is_black(Le)) {
+                A_k += a * Le * r.emission_weight;
+                Vec3f dLe = ab * r.emission_weight;
+                float d3[3] = {dLe.x, dLe.y, dLe.z};
+                d_texture(mesh.emission, ms ? ms->emission : kNoSlot, sp.uv, d3, sink, &ha.duv);
+            }
+        }
+
+        TBsdfParams<float> bp = bsdf_params_world(scene, sp);
+        DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+        // Next-event estimation: N = f(wo, w_l) Le_l scale
+        if (r.nee) {
+            Vec3f f = bsdf_eval_world(bp, sp.ns, wo, r.nee_dir);
+            Vec3f Le;
+            if (r.nee_env) {
+                Le = scene.envmap.eval(r.nee_dir);
+                d_envmap(scene.envmap, slots.envmap, r.nee_dir, ab * f * r.nee_scale, sink);
+            } else {
+                const Mesh& lm = scene.meshes[r.nee_hit.mesh];
+                const SceneGradients::MeshSlots* lms = mesh_slots(slots, r.nee_hit.mesh);
+                VertexGeometry lg(scene, r.nee_hit, sp.p, r.nee_dir);
+                Le = scene.emitted(lg.sp, -r.nee_dir);
+                Vec3f dLe = ab * f * r.nee_scale;
+                float d3[3] = {dLe.x, dLe.y, dLe.z};
+                HitAdjoint la;
+                d_texture(lm.emission, lms ? lms->emission : kNoSlot, lg.sp.uv, d3, sink,
+                          lm.emission.is_constant() ? nullptr : &la.duv);
+                if (!lm.emission.is_constant()) {
+                    Vec3f d_dir_unused(0.f);
+                    finish_hit(lg, la, lms, sink, sp.p, r.nee_dir, ha.dp, d_dir_unused);
+                }
+            }
+            A_k += a * f * Le * r.nee_scale;
+            d_bsdf_eval_world(bp, sp.ns, wo, r.nee_dir, ab * Le * r.nee_scale, db);
+        }
+        // Continuation: beta_next = beta T, T = f(wo, w_next) / pdf
+        if (r.next && (k + 1 < K || rec.escaped)) {
+            Vec3f T = bsdf_eval_world(bp, sp.ns, wo, r.next_dir) * r.next_inv_pdf;
+            A_k += T * A_next;
+            d_bsdf_eval_world(bp, sp.ns, wo, r.next_dir, r.beta * A_next * r.next_inv_pdf, db);
+        }
+        // Material parameters at uv.
+        {
+            float dd[3] = {db.diffuse.x, db.diffuse.y, db.diffuse.z};
+            float ds[3] = {db.specular.x, db.specular.y, db.specular.z};
+            float dr[1] = {eval_texture1(mat.roughness, sp.uv) > kMinRoughness ? db.alpha : 0.f};
+            d_texture(mat.diffuse, mats ? mats->diffuse : kNoSlot, sp.uv, dd, sink, &ha.duv);
+            d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
+            d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
+        }
+        ha.dn += db.n;
+        dwo += db.wo;
+
+        Vec3f d_origin(0.f), d_dir(0.f);
+        finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir);
+        dp_next = d_origin;
+        A_next = A_k;
+        if (k == 0 && slots.camera.wanted()) {
+            // wo = -d0; the camera ray (origin, d0) comes from the camera parameters.
+            d_dir -= dwo;
+            float cam[kCameraParams] = {};
+            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, d_origin, d_dir, cam);
+            for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
+        }
+    }
+}
+
+}  // namespace edgepath

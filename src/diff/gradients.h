@@ -1,0 +1,94 @@
+// Gradient buffers that mirror the scene, and the sink the adjoint sweep writes into.
+// A slot is either a gradient buffer (reverse mode: accumulate d loss / d parameter) or a
+// direction (forward mode: project each sample's derivative on it, for derivative images).
+// Null slots are parameters nobody asked about: the sweep skips their work.
+#pragma once
+#include <cstdint>
+#include <vector>
+#include "scene/camera.h"
+
+namespace edgepath {
+
+struct GradSlot {
+    float* grad = nullptr;       // reverse mode
+    const float* dir = nullptr;  // forward mode
+    bool wanted() const { return grad != nullptr || dir != nullptr; }
+};
+
+struct SceneGradients {
+    struct MeshSlots {
+        GradSlot vertices, uvs, normals, emission;
+    };
+    struct MaterialSlots {
+        GradSlot diffuse, specular, roughness;
+    };
+    std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
+    std::vector<MaterialSlots> materials; // one per material
+    GradSlot envmap;                      // (H, W, 3)
+    GradSlot camera;                      // kCameraParams values (see scene/camera.h)
+};
+
+inline void atomic_add(float* p, float v) {
+    float old, desired;
+    __atomic_load(p, &old, __ATOMIC_RELAXED);
+    do {
+        desired = old + v;
+    } while (!__atomic_compare_exchange(p, &old, &desired, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED));
+}
+
+// Receives d(sample value)/d(parameter) contributions. Reverse mode buffers them in a small
+// direct-mapped cache (constant textures and the camera get hit by every sample) and flushes
+// with atomic adds; forward mode sums value * direction.
+class GradSink {
+public:
+    explicit GradSink(bool project) : project_(project) {
+        for (auto& e : cache_) e = {nullptr, 0.0};
+    }
+    ~GradSink() { flush(); }
+
+    void add(const GradSlot& slot, int64_t i, float v) {
+        if (project_) {
+            if (slot.dir) projection_ += double(slot.dir[i]) * v;
+            return;
+        }
+        if (!slot.grad) return;
+        float* p = slot.grad + i;
+        Entry& e = cache_[(reinterpret_cast<uintptr_t>(p) >> 2) & (kCacheSize - 1)];
+        if (e.ptr != p) {
+            if (e.ptr) atomic_add(e.ptr, float(e.value));
+            e.ptr = p;
+            e.value = 0.0;
+        }
+        e.value += v;
+    }
+    void add3(const GradSlot& slot, int64_t i, float x, float y, float z) {
+        add(slot, 3 * i, x);
+        add(slot, 3 * i + 1, y);
+        add(slot, 3 * i + 2, z);
+    }
+
+    void flush() {
+        for (auto& e : cache_)
+            if (e.ptr) {
+                atomic_add(e.ptr, float(e.value));
+                e.ptr = nullptr;
+            }
+    }
+    double take_projection() {
+        double p = projection_;
+        projection_ = 0.0;
+        return p;
+    }
+
+private:
+    static constexpr int kCacheSize = 256;
+    struct Entry {
+        float* ptr;
+        double value;
+    };
+    bool project_;
+    double projection_ = 0.0;
+    Entry cache_[kCacheSize];
+};
+
+}  // namespace edgepath

@@ -1,0 +1,45 @@
+// Parallel loop over the output image in tiles (oneTBB), shared by every pass.
+#pragma once
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "scene/desc.h"
+#include "scene/scene.h"
+
+namespace edgepath {
+
+inline void check_options(const RenderOptions& opt) {
+    if (opt.spp < 1) throw std::invalid_argument("spp: must be at least 1, got " + std::to_string(opt.spp));
+    if (opt.max_bounces < 0)
+        throw std::invalid_argument("max_bounces: must be non-negative, got " + std::to_string(opt.max_bounces));
+}
+
+// Calls tile_fn(x0, y0, x1, y1) for tiles of the output image, in parallel on opt.num_threads.
+template <class TileFn>
+void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_fn) {
+    constexpr int kTileSize = 16;
+    const int W = scene.out_width, H = scene.out_height;
+    const int tiles_x = (W + kTileSize - 1) / kTileSize, tiles_y = (H + kTileSize - 1) / kTileSize;
+    int threads = opt.num_threads > 0 ? opt.num_threads : tbb::this_task_arena::max_concurrency();
+    tbb::task_arena arena(threads);
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
+            for (int tile = range.begin(); tile < range.end(); ++tile) {
+                int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
+                tile_fn(x0, y0, std::min(x0 + kTileSize, W), std::min(y0 + kTileSize, H));
+            }
+        });
+    });
+}
+
+// Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
+// renders the same samples as the full image.
+inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
+    return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
+}
+
+}  // namespace edgepath
