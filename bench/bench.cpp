@@ -1,0 +1,697 @@
+// Forward-rendering benchmark. Builds a procedural scene of about 114k triangles (a glossy
+// teapot, glossy and diffuse spheres, boxes on a textured floor, a rectangular area light and a
+// procedural sky), renders it at a few bounce counts and thread counts, and compares the
+// renderer's time with the time Embree alone takes to trace the same numbers of rays of the same
+// kinds. The ratio "Embree only / renderer" says how close the renderer is to being bound by ray
+// traversal; the goal is at least 0.5.
+//
+// The Embree-only rays are generated before timing: camera rays exactly as the renderer makes
+// them (same film samples, same tile order); shadow rays from the camera rays' hit points to
+// emitter samples (Scene::sample_light: area light or sky) on the visible side of the surface;
+// bounce rays from the same hit points in cosine-distributed directions. Their counts are the
+// renderer's RenderStats. Deeper path vertices are stood in for by first hits, so at several
+// bounces the Embree-only rays are somewhat more coherent than the renderer's.
+//
+// Renderer and Embree-only runs alternate within each timed run, so both see the same machine
+// load; fractions are medians of per-run fractions, in wall time and in process CPU time (the
+// steadier of the two on a busy machine).
+//
+//   edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]
+//                  [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv] [--render-only]
+//
+// --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
+// the renderer alone.
+//
+// Output: machine and scene information, then one table per measurement family. Each number
+// is also kept as a (section, config, metric, value, unit) record, written by --csv, so new
+// measurements (backward pass, memory) are new records and new tables, not a new format.
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <deque>
+#include <fstream>
+#include <functional>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <embree3/rtcore.h>
+#include <sys/resource.h>
+#include <time.h>
+#include <tbb/blocked_range.h>
+#include <tbb/info.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include "edgepath.h"
+#include "io/image.h"
+#include "math/frame.h"
+#include "render/path.h"
+#include "sampling/rng.h"
+#include "sampling/warp.h"
+#include "scene/scene.h"
+#include "scene/shapes.h"
+#include "scene/teapot.h"
+
+namespace {
+
+using namespace edgepath;
+using Clock = std::chrono::steady_clock;
+
+// ---------------------------------------------------------------------------------------------
+// Options
+
+struct Options {
+    int runs = 5;              // timed runs per measurement (the median is reported)
+    int spp = 4;
+    int size = 256;            // image width = height
+    int threads = 2;           // the fixed thread count measured
+    bool all_cores = true;     // also measure with every core
+    std::vector<int> bounces = {1, 3};
+    int teapot_subdivisions = 32;
+    std::string image_path;    // optional: writes the last rendered image
+    std::string csv_path;      // optional: writes every record
+    bool render_only = false;  // skip the Embree-only runs (for profilers)
+};
+
+[[noreturn]] void usage(const char* msg, int status = 2) {
+    std::fprintf(status ? stderr : stdout,
+                 "%s\nusage: edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]\n"
+                 "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
+                 "                      [--render-only]\n",
+                 msg);
+    std::exit(status);
+}
+
+int parse_int(const char* s, const char* flag, int lo, int hi) {
+    char* end = nullptr;
+    long v = std::strtol(s, &end, 10);
+    if (end == s || *end != '\0' || v < lo || v > hi)
+        usage((std::string(flag) + ": expected an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+               "], got '" + s + "'")
+                  .c_str());
+    return int(v);
+}
+
+Options parse_options(int argc, char** argv) {
+    Options o;
+    for (int i = 1; i < argc; ++i) {
+        std::string a = argv[i];
+        auto value = [&]() -> const char* {
+            if (i + 1 >= argc) usage((a + ": missing value").c_str());
+            return argv[++i];
+        };
+        if (a == "--runs") o.runs = parse_int(value(), "--runs", 1, 1000);
+        else if (a == "--spp") o.spp = parse_int(value(), "--spp", 1, 1 << 16);
+        else if (a == "--size") o.size = parse_int(value(), "--size", 1, 1 << 14);
+        else if (a == "--threads") o.threads = parse_int(value(), "--threads", 1, 4096);
+        else if (a == "--teapot") o.teapot_subdivisions = parse_int(value(), "--teapot", 1, 1024);
+        else if (a == "--no-all-cores") o.all_cores = false;
+        else if (a == "--render-only") o.render_only = true;
+        else if (a == "--image") o.image_path = value();
+        else if (a == "--csv") o.csv_path = value();
+        else if (a == "--bounces") {
+            o.bounces.clear();
+            std::stringstream ss(value());
+            std::string item;
+            while (std::getline(ss, item, ',')) o.bounces.push_back(parse_int(item.c_str(), "--bounces", 0, 64));
+            if (o.bounces.empty()) usage("--bounces: empty list");
+        } else if (a == "-h" || a == "--help") usage("edgepath forward benchmark", 0);
+        else usage(("unknown argument '" + a + "'").c_str());
+    }
+    return o;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Results: records, and tables printed from them
+
+struct Record {
+    std::string section, config, metric;
+    double value;
+    std::string unit;
+};
+
+class Table {
+public:
+    explicit Table(std::vector<std::string> header) : header_(std::move(header)) {}
+    void add(std::vector<std::string> row) { rows_.push_back(std::move(row)); }
+    void print(const std::string& title) const {
+        std::vector<size_t> w(header_.size());
+        for (size_t c = 0; c < header_.size(); ++c) {
+            w[c] = header_[c].size();
+            for (const auto& r : rows_) w[c] = std::max(w[c], c < r.size() ? r[c].size() : 0);
+        }
+        std::printf("\n%s\n", title.c_str());
+        auto line = [&](const std::vector<std::string>& r) {
+            std::string s;
+            for (size_t c = 0; c < header_.size(); ++c) {
+                const std::string& cell = c < r.size() ? r[c] : std::string();
+                s += (c ? "  " : "") + std::string(w[c] - cell.size(), ' ') + cell;
+            }
+            std::printf("%s\n", s.c_str());
+        };
+        line(header_);
+        size_t total = 0;
+        for (size_t c = 0; c < w.size(); ++c) total += w[c] + (c ? 2 : 0);
+        std::printf("%s\n", std::string(total, '-').c_str());
+        for (const auto& r : rows_) line(r);
+    }
+
+private:
+    std::vector<std::string> header_;
+    std::vector<std::vector<std::string>> rows_;
+};
+
+std::string fmt(double v, int decimals) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.*f", decimals, v);
+    return buf;
+}
+
+std::string grouped(uint64_t v) {
+    std::string s = std::to_string(v), out;
+    for (size_t i = 0; i < s.size(); ++i) {
+        if (i && (s.size() - i) % 3 == 0) out += ',';
+        out += s[i];
+    }
+    return out;
+}
+
+double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+// Wall time of one call of f, in milliseconds.
+double time_once(const std::function<void()>& f) {
+    auto t0 = Clock::now();
+    f();
+    return std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+}
+
+// CPU time of the whole process (all threads), in milliseconds. On a busy machine it is a
+// steadier measure of work done than wall time.
+double process_cpu_ms() {
+    timespec ts{};
+    clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &ts);
+    return double(ts.tv_sec) * 1e3 + double(ts.tv_nsec) * 1e-6;
+}
+
+struct Timing {
+    double wall_ms, cpu_ms;
+};
+
+Timing time_once_cpu(const std::function<void()>& f) {
+    double c0 = process_cpu_ms();
+    double w = time_once(f);
+    return {w, process_cpu_ms() - c0};
+}
+
+// Runs f once to warm up, then `runs` times; returns the median wall time in milliseconds.
+double time_ms(int runs, const std::function<void()>& f) {
+    f();
+    std::vector<double> t;
+    for (int i = 0; i < runs; ++i) t.push_back(time_once(f));
+    return median(t);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Machine
+
+std::string cpu_model() {
+    std::ifstream f("/proc/cpuinfo");
+    std::string line;
+    while (std::getline(f, line))
+        if (line.rfind("model name", 0) == 0) {
+            size_t c = line.find(':');
+            if (c != std::string::npos) return line.substr(c + 2);
+        }
+    return "unknown";
+}
+
+// The 1-minute load average (other processes competing for the cores make timings noisy).
+std::string load_average() {
+    std::ifstream f("/proc/loadavg");
+    std::string first;
+    if (!(f >> first)) return "unknown";
+    return first;
+}
+
+double peak_rss_mib() {
+    rusage u{};
+    getrusage(RUSAGE_SELF, &u);
+    return double(u.ru_maxrss) / 1024.0;  // Linux reports KiB
+}
+
+// ---------------------------------------------------------------------------------------------
+// The scene
+
+// Owns every array the scene description points into (deques: addresses never move).
+struct BenchScene {
+    std::deque<MeshData> meshes;
+    std::deque<std::vector<float>> textures;
+    SceneDesc desc;
+    std::vector<std::string> parts;  // "name: triangles" for the summary
+
+    TextureDesc texture(std::vector<float> data, int height, int width, int channels) {
+        textures.push_back(std::move(data));
+        TextureDesc t;
+        t.data = textures.back().data();
+        t.height = height;
+        t.width = width;
+        t.channels = channels;
+        return t;
+    }
+    TextureDesc constant(std::initializer_list<float> v) { return texture(v, 1, 1, int(v.size())); }
+
+    int material(TextureDesc diffuse, std::initializer_list<float> specular, float roughness) {
+        MaterialDesc m;
+        m.diffuse = diffuse;
+        m.specular = constant(specular);
+        m.roughness = constant({roughness});
+        desc.materials.push_back(m);
+        return int(desc.materials.size()) - 1;
+    }
+
+    MeshDesc& add(const std::string& name, MeshData mesh, int material) {
+        meshes.push_back(std::move(mesh));
+        parts.push_back(name + " " + grouped(uint64_t(meshes.back().num_triangles())));
+        desc.meshes.push_back(meshes.back().desc(material));
+        return desc.meshes.back();
+    }
+
+    int64_t num_triangles() const {
+        int64_t n = 0;
+        for (const auto& m : meshes) n += m.num_triangles();
+        return n;
+    }
+};
+
+// A 64x128 lat-long sky: blue at the zenith, pale at the horizon, dark ground below, and a
+// bright sun (a Gaussian blob a few texels wide) up and to the right.
+TextureDesc make_sky(BenchScene& bs, int height, int width) {
+    std::vector<float> v(size_t(height) * width * 3);
+    const double pi = 3.14159265358979323846;
+    Vec3d sun = normalize(Vec3d(0.6, 0.55, 0.45));
+    const double sun_width = 0.06;  // radians
+    for (int j = 0; j < height; ++j) {
+        double theta = pi * j / (height - 1);  // row j sits at v = j / (H - 1)
+        for (int i = 0; i < width; ++i) {
+            double phi = 2 * pi * i / width;  // column i sits at u = i / W
+            Vec3d d(std::sin(theta) * std::sin(phi), std::cos(theta), -std::sin(theta) * std::cos(phi));
+            Vec3d c;
+            if (d.y >= 0) {
+                double h = std::pow(1.0 - d.y, 3.0);  // 0 at the zenith, 1 at the horizon
+                c = Vec3d(0.15, 0.3, 0.8) * (1 - h) + Vec3d(0.85, 0.9, 1.0) * h;
+            } else {
+                c = Vec3d(0.12, 0.1, 0.08);
+            }
+            double a = std::acos(std::clamp(dot(d, sun), -1.0, 1.0)) / sun_width;
+            c += Vec3d(120.0, 110.0, 90.0) * std::exp(-a * a);
+            for (int k = 0; k < 3; ++k) v[(size_t(j) * width + i) * 3 + k] = float(c[k]);
+        }
+    }
+    return bs.texture(std::move(v), height, width, 3);
+}
+
+TextureDesc make_checker(BenchScene& bs, int n) {
+    std::vector<float> v(size_t(n) * n * 3);
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            float g = ((i / 4 + j / 4) % 2) ? 0.65f : 0.35f;
+            for (int k = 0; k < 3; ++k) v[(size_t(j) * n + i) * 3 + k] = g * (k == 2 ? 0.9f : 1.f);
+        }
+    return bs.texture(std::move(v), n, n, 3);
+}
+
+void build_bench_scene(BenchScene& bs, const Options& o) {
+    SceneDesc& d = bs.desc;
+    d.camera.position[0] = 0.f, d.camera.position[1] = 3.2f, d.camera.position[2] = 9.f;
+    d.camera.look_at[0] = 0.f, d.camera.look_at[1] = 0.8f, d.camera.look_at[2] = 0.f;
+    d.camera.fov = 40.f;
+    d.camera.width = d.camera.height = o.size;
+
+    int floor_mat = bs.material(make_checker(bs, 64), {0.f, 0.f, 0.f}, 1.f);
+    int teapot_mat = bs.material(bs.constant({0.3f, 0.12f, 0.05f}), {0.5f, 0.5f, 0.5f}, 0.1f);
+    int glossy_mat = bs.material(bs.constant({0.05f, 0.05f, 0.08f}), {0.6f, 0.6f, 0.6f}, 0.08f);
+    int red_mat = bs.material(bs.constant({0.7f, 0.15f, 0.1f}), {0.f, 0.f, 0.f}, 1.f);
+    int green_mat = bs.material(bs.constant({0.15f, 0.6f, 0.2f}), {0.f, 0.f, 0.f}, 1.f);
+    int box_mat = bs.material(bs.constant({0.6f, 0.6f, 0.55f}), {0.f, 0.f, 0.f}, 1.f);
+    int lamp_mat = bs.material(bs.constant({0.f, 0.f, 0.f}), {0.f, 0.f, 0.f}, 1.f);
+
+    // Floor: 30 x 30 at y = 0, facing up; the checker repeats 6 times across it.
+    MeshData floor = make_quad(Vec3f(-15.f, 0.f, -15.f), Vec3f(0.f, 0.f, 30.f), Vec3f(30.f, 0.f, 0.f));
+    for (float& uv : floor.uvs) uv *= 6.f;
+    bs.add("floor", std::move(floor), floor_mat);
+
+    // Teapot: 0.6 x the original (about 1.9 high), standing at the origin, spout to +x.
+    MeshData teapot = make_teapot(o.teapot_subdivisions);
+    teapot.transform(Vec3f(0.6f), Vec3f(0.f));
+    bs.add("teapot", std::move(teapot), teapot_mat);
+
+    bs.add("glossy sphere", make_sphere(Vec3f(-2.7f, 0.8f, 0.9f), 0.8f, 64, 128), glossy_mat);
+    bs.add("sphere", make_sphere(Vec3f(2.7f, 0.6f, 0.9f), 0.6f, 64, 128), red_mat);
+    bs.add("sphere", make_sphere(Vec3f(1.0f, 0.45f, 2.4f), 0.45f, 64, 128), green_mat);
+
+    bs.add("box", make_box(Vec3f(-2.0f, 0.f, -2.6f), Vec3f(-1.0f, 0.9f, -1.6f)), box_mat);
+    bs.add("box", make_box(Vec3f(1.4f, 0.f, -2.4f), Vec3f(2.6f, 1.3f, -1.2f)), box_mat);
+    bs.add("box", make_box(Vec3f(-1.2f, 0.f, 2.0f), Vec3f(-0.4f, 0.4f, 2.8f)), box_mat);
+    bs.add("box", make_box(Vec3f(3.6f, 0.f, -1.0f), Vec3f(4.2f, 2.0f, -0.4f)), box_mat);
+
+    // Area light: 1.6 x 1.6 at y = 4.5, facing down.
+    MeshData lamp = make_quad(Vec3f(-0.8f, 4.5f, -0.3f), Vec3f(1.6f, 0.f, 0.f), Vec3f(0.f, 0.f, 1.6f));
+    MeshDesc& lamp_desc = bs.add("area light", std::move(lamp), lamp_mat);
+    lamp_desc.emission = bs.constant({12.f, 11.f, 9.f});
+
+    d.has_envmap = true;
+    d.envmap.values = make_sky(bs, 64, 128);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Embree alone: the same numbers of rays of the same kinds, generated before timing
+
+struct RaySet {
+    std::vector<Ray> camera, shadow, bounce;
+};
+
+constexpr int kRenderTile = 16;  // the renderer's tile size: camera rays in the same order
+
+RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats& stats) {
+    RaySet rs;
+    const int W = scene.out_width, H = scene.out_height;
+    const int tiles_x = (W + kRenderTile - 1) / kRenderTile, tiles_y = (H + kRenderTile - 1) / kRenderTile;
+    rs.camera.reserve(size_t(W) * H * opt.spp);
+    for (int tile = 0; tile < tiles_x * tiles_y; ++tile) {
+        int x0 = (tile % tiles_x) * kRenderTile, y0 = (tile / tiles_x) * kRenderTile;
+        for (int y = y0; y < std::min(y0 + kRenderTile, H); ++y)
+            for (int x = x0; x < std::min(x0 + kRenderTile, W); ++x) {
+                int fx = x + scene.crop_x, fy = y + scene.crop_y;
+                uint64_t pixel = uint64_t(fy) * uint64_t(scene.camera.width) + uint64_t(fx);
+                for (int s = 0; s < opt.spp; ++s) {
+                    Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
+                    Vec2f film = sample_film_point(scene, fx, fy, rng);
+                    rs.camera.push_back(scene.camera.generate_ray(film.x, film.y));
+                }
+            }
+    }
+
+    // Where the camera rays land (in the same order), as origins of shadow and bounce rays.
+    struct Origin {
+        Vec3f p, ng, front;  // front: ng turned towards the camera
+    };
+    std::vector<Origin> origins;
+    origins.reserve(rs.camera.size());
+    for (const Ray& r : rs.camera) {
+        Hit h;
+        if (!scene.intersect(r, h)) continue;
+        SurfacePoint sp = scene.surface_point(h);
+        origins.push_back({sp.p, sp.ng, dot(sp.ng, r.dir) < 0.f ? sp.ng : -sp.ng});
+    }
+    if (origins.empty()) return rs;
+
+    // Shadow rays: towards points sampled on the emitters (area light or sky, as the renderer
+    // samples them), on the side of the surface the camera sees, as the renderer only traces
+    // shadow rays where the BSDF is non-zero.
+    Rng rng(opt.seed + 12345, 7);
+    rs.shadow.reserve(stats.shadow_rays);
+    for (uint64_t k = 0; k < stats.shadow_rays; ++k) {
+        const Origin& o = origins[k % origins.size()];
+        LightSample ls, first;
+        bool have = false;
+        for (int attempt = 0; attempt < 16; ++attempt) {
+            if (!scene.sample_light(o.p, rng.next_float(), rng.next_float(), rng.next_float(), ls)) continue;
+            if (!have) first = ls, have = true;
+            if (dot(ls.dir, o.front) > 0.f) {
+                first = ls;
+                break;
+            }
+        }
+        if (!have) {
+            first.dir = o.front;
+            first.dist = std::numeric_limits<float>::infinity();
+        }
+        Ray r = spawn_ray(o.p, o.ng, first.dir);
+        r.tmax = std::isfinite(first.dist) ? first.dist * (1.f - kShadowEpsilon) : first.dist;
+        rs.shadow.push_back(r);
+    }
+
+    // Bounce rays: cosine-distributed about the visible side of the surface.
+    rs.bounce.reserve(stats.bounce_rays);
+    for (uint64_t k = 0; k < stats.bounce_rays; ++k) {
+        const Origin& o = origins[k % origins.size()];
+        Vec3f dir = Frame(o.front).to_world(square_to_cosine_hemisphere(rng.next_float(), rng.next_float()));
+        rs.bounce.push_back(spawn_ray(o.p, o.ng, normalize(dir)));
+    }
+    return rs;
+}
+
+// Traces `rays` with rtcIntersect1 (or rtcOccluded1) on `threads` threads, in chunks of the size
+// of one render tile's camera rays. Returns the number of hits (keeps the work observable).
+uint64_t trace_rays(RTCScene rtc, const std::vector<Ray>& rays, bool occlusion, tbb::task_arena& arena, size_t chunk) {
+    std::atomic<uint64_t> hits{0};
+    const size_t n_chunks = (rays.size() + chunk - 1) / chunk;
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n_chunks, 1), [&](const tbb::blocked_range<size_t>& range) {
+            uint64_t local = 0;
+            RTCIntersectContext ctx;
+            rtcInitIntersectContext(&ctx);
+            for (size_t c = range.begin(); c < range.end(); ++c) {
+                const size_t end = std::min(rays.size(), (c + 1) * chunk);
+                for (size_t i = c * chunk; i < end; ++i) {
+                    const Ray& ray = rays[i];
+                    if (occlusion) {
+                        RTCRay r;
+                        r.org_x = ray.origin.x, r.org_y = ray.origin.y, r.org_z = ray.origin.z;
+                        r.dir_x = ray.dir.x, r.dir_y = ray.dir.y, r.dir_z = ray.dir.z;
+                        r.tnear = ray.tmin;
+                        r.tfar = ray.tmax;
+                        r.mask = 0xFFFFFFFFu;
+                        r.flags = 0;
+                        r.time = 0.f;
+                        rtcOccluded1(rtc, &ctx, &r);
+                        local += r.tfar < 0.f;
+                    } else {
+                        RTCRayHit rh;
+                        rh.ray.org_x = ray.origin.x, rh.ray.org_y = ray.origin.y, rh.ray.org_z = ray.origin.z;
+                        rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
+                        rh.ray.tnear = ray.tmin;
+                        rh.ray.tfar = ray.tmax;
+                        rh.ray.mask = 0xFFFFFFFFu;
+                        rh.ray.flags = 0;
+                        rh.ray.time = 0.f;
+                        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+                        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+                        rtcIntersect1(rtc, &ctx, &rh);
+                        local += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
+                    }
+                }
+            }
+            hits += local;
+        });
+    });
+    return hits;
+}
+
+// ---------------------------------------------------------------------------------------------
+
+struct ForwardResult {
+    int threads_requested;  // 0: all cores
+    int threads;            // actual
+    int bounces;
+    double render_ms;
+    RenderStats stats;
+    double embree_ms, embree_camera_ms, embree_shadow_ms, embree_bounce_ms;
+    double fraction;  // median over runs of (Embree-only time / renderer time)
+    double render_cpu_ms, embree_cpu_ms, fraction_cpu;  // the same in process CPU time
+    uint64_t embree_hits;
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    const Options o = parse_options(argc, argv);
+    std::vector<Record> records;
+    auto record = [&](const std::string& section, const std::string& config, const std::string& metric, double v,
+                      const std::string& unit) { records.push_back({section, config, metric, v, unit}); };
+
+    try {
+        const int all_cores = tbb::info::default_concurrency();
+        std::printf("edgepath forward benchmark\n");
+        std::printf("machine  : %s; %u hardware threads, oneTBB default concurrency %d; Embree %s; load %s\n",
+                    cpu_model().c_str(), std::thread::hardware_concurrency(), all_cores, RTC_VERSION_STRING,
+                    load_average().c_str());
+        record("machine", "", "hardware_threads", std::thread::hardware_concurrency(), "");
+        record("machine", "", "tbb_default_concurrency", all_cores, "");
+
+        BenchScene bs;
+        auto t_setup = Clock::now();
+        build_bench_scene(bs, o);
+        double setup_ms = std::chrono::duration<double, std::milli>(Clock::now() - t_setup).count();
+        std::string parts;
+        for (size_t i = 0; i < bs.parts.size(); ++i) parts += (i ? ", " : "") + bs.parts[i];
+        std::printf("scene    : %s triangles in %zu meshes (%s); sky %dx%d\n", grouped(uint64_t(bs.num_triangles())).c_str(),
+                    bs.desc.meshes.size(), parts.c_str(), bs.desc.envmap.values.height, bs.desc.envmap.values.width);
+        std::printf("settings : %dx%d pixels, %d spp, median of %d runs after one warm-up\n", o.size, o.size, o.spp,
+                    o.runs);
+        record("scene", "", "triangles", double(bs.num_triangles()), "");
+
+        // build_scene: validation, BVH, light distributions (one cold build with --render-only).
+        std::shared_ptr<const Scene> scene;
+        std::vector<double> build_times;
+        const int builds = o.render_only ? 1 : o.runs + 1;
+        for (int i = 0; i < builds; ++i) {
+            scene.reset();
+            auto t0 = Clock::now();
+            scene = build_scene(bs.desc);
+            if (i > 0 || builds == 1)
+                build_times.push_back(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
+        }
+        double build_ms = median(build_times);
+        std::printf("build    : procedural meshes %.1f ms (once); build_scene %.1f ms (%s, all cores)\n", setup_ms,
+                    build_ms, builds == 1 ? "one cold build" : "median");
+        record("build", "", "procedural_meshes_ms", setup_ms, "ms");
+        record("build", "", "build_scene_ms", build_ms, "ms");
+
+        std::vector<int> thread_configs = {o.threads};
+        if (o.all_cores) thread_configs.push_back(0);
+
+        const int W = image_width(*scene), H = image_height(*scene);
+        std::vector<float> image(size_t(W) * H * 3);
+        std::vector<ForwardResult> results;
+        for (int bounces : o.bounces) {
+            RenderOptions ro;
+            ro.spp = o.spp;
+            ro.max_bounces = bounces;
+            ro.seed = 1;
+            // The rays Embree alone traces: counts from a render, generated once per bounce count.
+            ro.num_threads = o.threads;
+            RenderStats counts = render(*scene, ro, image.data());
+            RaySet rays = o.render_only ? RaySet() : make_rays(*scene, ro, counts);
+            for (int threads : thread_configs) {
+                ForwardResult r{};
+                r.threads_requested = threads;
+                r.threads = threads > 0 ? threads : all_cores;
+                r.bounces = bounces;
+                ro.num_threads = threads;
+                if (o.render_only) {
+                    r.render_ms = time_ms(o.runs, [&] { r.stats = render(*scene, ro, image.data()); });
+                    results.push_back(r);
+                    continue;
+                }
+                // Renderer and Embree alone take turns within each run, so that both see the same
+                // machine load; the fraction is the median of the per-run fractions.
+                tbb::task_arena arena(r.threads);
+                const size_t chunk = size_t(kRenderTile) * kRenderTile * size_t(o.spp);
+                RTCScene rtc = scene->rtc_scene();
+                std::vector<double> t_render, t_camera, t_shadow, t_bounce, fractions, cpu_render, cpu_embree,
+                    cpu_fractions;
+                for (int run = 0; run <= o.runs; ++run) {  // run 0 warms up
+                    Timing tr = time_once_cpu([&] { r.stats = render(*scene, ro, image.data()); });
+                    Timing tc = time_once_cpu([&] { r.embree_hits = trace_rays(rtc, rays.camera, false, arena, chunk); });
+                    Timing ts = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.shadow, true, arena, chunk); });
+                    Timing tb = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.bounce, false, arena, chunk); });
+                    if (run == 0) continue;
+                    t_render.push_back(tr.wall_ms);
+                    t_camera.push_back(tc.wall_ms);
+                    t_shadow.push_back(ts.wall_ms);
+                    t_bounce.push_back(tb.wall_ms);
+                    fractions.push_back((tc.wall_ms + ts.wall_ms + tb.wall_ms) / tr.wall_ms);
+                    const double ce = tc.cpu_ms + ts.cpu_ms + tb.cpu_ms;
+                    cpu_render.push_back(tr.cpu_ms);
+                    cpu_embree.push_back(ce);
+                    cpu_fractions.push_back(ce / tr.cpu_ms);
+                }
+                r.render_ms = median(t_render);
+                r.embree_camera_ms = median(t_camera);
+                r.embree_shadow_ms = median(t_shadow);
+                r.embree_bounce_ms = median(t_bounce);
+                r.embree_ms = r.embree_camera_ms + r.embree_shadow_ms + r.embree_bounce_ms;
+                r.fraction = median(fractions);
+                r.render_cpu_ms = median(cpu_render);
+                r.embree_cpu_ms = median(cpu_embree);
+                r.fraction_cpu = median(cpu_fractions);
+                if (rays.camera.size() != r.stats.camera_rays || rays.shadow.size() != r.stats.shadow_rays ||
+                    rays.bounce.size() != r.stats.bounce_rays)
+                    std::fprintf(stderr, "warning: Embree-only ray counts differ from the renderer's\n");
+                results.push_back(r);
+            }
+        }
+
+        // Image sanity: the mean must be finite and positive.
+        double mean = 0.0;
+        for (float v : image) mean += v;
+        mean /= double(image.size());
+        if (!o.image_path.empty()) write_image(o.image_path, image.data(), H, W, 3);
+
+        Table forward({"threads", "bounces", "render ms", "camera rays", "shadow rays", "bounce rays", "Mrays/s",
+                       "embree ms", "embree Mrays/s", "embree/render", "(cpu time)"});
+        Table split({"threads", "bounces", "camera ms", "shadow ms", "bounce ms", "embree ms", "render ms",
+                     "non-embree ms", "ns/ray outside embree"});
+        for (const ForwardResult& r : results) {
+            const uint64_t rays = r.stats.camera_rays + r.stats.shadow_rays + r.stats.bounce_rays;
+            const std::string threads = r.threads_requested > 0 ? std::to_string(r.threads)
+                                                                : "all (" + std::to_string(r.threads) + ")";
+            const std::string config = "threads=" + std::to_string(r.threads) + (r.threads_requested ? "" : "(all)") +
+                                       " bounces=" + std::to_string(r.bounces);
+            const double fraction = r.fraction;
+            const double outside = r.render_ms - r.embree_ms;
+            record("forward", config, "render_ms", r.render_ms, "ms");
+            record("forward", config, "camera_rays", double(r.stats.camera_rays), "rays");
+            record("forward", config, "shadow_rays", double(r.stats.shadow_rays), "rays");
+            record("forward", config, "bounce_rays", double(r.stats.bounce_rays), "rays");
+            record("forward", config, "rays_per_second", rays / r.render_ms * 1e3, "rays/s");
+            if (o.render_only) {
+                forward.add({threads, std::to_string(r.bounces), fmt(r.render_ms, 1), grouped(r.stats.camera_rays),
+                             grouped(r.stats.shadow_rays), grouped(r.stats.bounce_rays),
+                             fmt(rays / r.render_ms * 1e-3, 2), "-", "-", "-", "-"});
+                continue;
+            }
+            forward.add({threads, std::to_string(r.bounces), fmt(r.render_ms, 1), grouped(r.stats.camera_rays),
+                         grouped(r.stats.shadow_rays), grouped(r.stats.bounce_rays), fmt(rays / r.render_ms * 1e-3, 2),
+                         fmt(r.embree_ms, 1), fmt(rays / r.embree_ms * 1e-3, 2), fmt(fraction, 2),
+                         fmt(r.fraction_cpu, 2)});
+            split.add({threads, std::to_string(r.bounces), fmt(r.embree_camera_ms, 1), fmt(r.embree_shadow_ms, 1),
+                       fmt(r.embree_bounce_ms, 1), fmt(r.embree_ms, 1), fmt(r.render_ms, 1), fmt(outside, 1),
+                       fmt(outside * 1e6 / double(rays) * r.threads, 0)});
+            record("embree_only", config, "camera_ms", r.embree_camera_ms, "ms");
+            record("embree_only", config, "shadow_ms", r.embree_shadow_ms, "ms");
+            record("embree_only", config, "bounce_ms", r.embree_bounce_ms, "ms");
+            record("embree_only", config, "total_ms", r.embree_ms, "ms");
+            record("embree_only", config, "rays_per_second", rays / r.embree_ms * 1e3, "rays/s");
+            record("embree_only", config, "fraction_of_render", fraction, "");
+            record("forward", config, "render_cpu_ms", r.render_cpu_ms, "ms");
+            record("embree_only", config, "total_cpu_ms", r.embree_cpu_ms, "ms");
+            record("embree_only", config, "fraction_of_render_cpu", r.fraction_cpu, "");
+        }
+        forward.print("Forward pass, " + std::to_string(o.spp) + " spp, " + std::to_string(W) + "x" +
+                      std::to_string(H) + " (embree/render: Embree-only time over renderer time, wall and CPU; "
+                      "target >= 0.5)");
+        if (!o.render_only)
+            split.print("Embree-only time by ray kind, and the renderer's time outside Embree (per ray, per thread)");
+
+        record("memory", "", "peak_rss_mib", peak_rss_mib(), "MiB");
+        std::printf("\nlast image mean %.4f; peak RSS %.0f MiB\n", mean, peak_rss_mib());
+        if (!(std::isfinite(mean) && mean > 0.0)) {
+            std::fprintf(stderr, "error: the rendered image is black or not finite\n");
+            return 1;
+        }
+
+        if (!o.csv_path.empty()) {
+            std::ofstream f(o.csv_path);
+            f << "section,config,metric,value,unit\n";
+            for (const Record& r : records) f << r.section << ',' << r.config << ',' << r.metric << ',' << r.value << ',' << r.unit << '\n';
+            if (!f) throw std::runtime_error(o.csv_path + ": could not write");
+        }
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "error: %s\n", e.what());
+        return 1;
+    }
+    return 0;
+}

@@ -1,0 +1,26 @@
+#!/usr/bin/env bash
+# Runs the forward-rendering benchmark.
+#   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
+# Without a path, looks for the binary in the usual build folders. Options go to the binary
+# (edgepath_bench --help lists them), e.g.  bench/run.sh --runs 9 --csv bench.csv
+set -euo pipefail
+root="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+
+bin=""
+if [[ $# -gt 0 && "$1" != -* ]]; then
+    bin="$1"
+    shift
+else
+    for candidate in "$root"/build/py/bench/edgepath_bench "$root"/build/dev/bench/edgepath_bench \
+                     "$root"/build/*/bench/edgepath_bench "$root"/build/bench/edgepath_bench; do
+        if [[ -x "$candidate" ]]; then
+            bin="$candidate"
+            break
+        fi
+    done
+fi
+if [[ -z "$bin" || ! -x "$bin" ]]; then
+    echo "edgepath_bench not found${bin:+ at $bin}; build it first (make build, or cmake --build <dir> --target edgepath_bench)" >&2
+    exit 1
+fi
+exec "$bin" "$@"

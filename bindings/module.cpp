@@ -1,0 +1,312 @@
+// edgepath._core: the nanobind module. No logic here: it turns plain Python descriptions
+// (dicts of numbers and CPU arrays, which python/edgepath builds and validates) into the core's
+// SceneDesc as zero-copy views, calls the core, and hands results back as arrays.
+//
+// Arrays arrive through DLPack (torch tensors, numpy arrays) and are never converted here:
+// a view that is not C-contiguous, on the CPU and of the exact dtype is refused with a
+// ValueError naming the field. std::invalid_argument from the core becomes ValueError
+// (nanobind's default translation), edgepath::IoError becomes OSError.
+#include <nanobind/nanobind.h>
+#include <nanobind/ndarray.h>
+#include <nanobind/stl/string.h>
+#include <nanobind/stl/vector.h>
+
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "edgepath.h"
+#include "io/image.h"
+#include "io/obj.h"
+
+namespace nb = nanobind;
+using namespace nb::literals;
+
+namespace {
+
+using FloatView = nb::ndarray<const float, nb::c_contig, nb::device::cpu>;
+using IndexView = nb::ndarray<const int32_t, nb::c_contig, nb::device::cpu>;
+using ImageOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
+
+[[noreturn]] void fail(const std::string& field, const std::string& what) {
+    throw std::invalid_argument(field + ": " + what);
+}
+
+// Keeps every array view alive (and referenced) while the core uses its memory. Views are
+// handles: copying one only adds a reference.
+struct Views {
+    std::vector<FloatView> floats;
+    std::vector<IndexView> indices;
+};
+
+nb::handle item(const nb::dict& d, const char* key, const std::string& field) {
+    if (!d.contains(key)) fail(field + "." + key, "missing");
+    return d[key];
+}
+
+bool has(const nb::dict& d, const char* key) { return d.contains(key) && !d[key].is_none(); }
+
+template <typename T>
+T scalar(const nb::dict& d, const char* key, const std::string& field) {
+    T value;
+    if (!nb::try_cast(item(d, key, field), value))
+        fail(field + "." + key, "expected a number");
+    return value;
+}
+
+void vec3(const nb::dict& d, const char* key, const std::string& field, float out[3]) {
+    std::vector<float> v;
+    if (!nb::try_cast(item(d, key, field), v) || v.size() != 3)
+        fail(field + "." + key, "expected a sequence of 3 numbers");
+    for (int i = 0; i < 3; ++i) out[i] = v[i];
+}
+
+// A float array of `ndim` dimensions whose last dimension is `last` (if > 0).
+FloatView float_view(Views& views, nb::handle obj, const std::string& field, size_t ndim,
+                     size_t last) {
+    FloatView view;
+    if (!nb::try_cast(obj, view, false))
+        fail(field, "expected a C-contiguous float32 CPU array (use tensor.detach().contiguous())");
+    if (view.ndim() != ndim || (last > 0 && view.shape(ndim - 1) != last))
+        fail(field, "unexpected array shape with " + std::to_string(view.ndim()) + " dimensions");
+    views.floats.push_back(view);
+    return view;
+}
+
+IndexView index_view(Views& views, nb::handle obj, const std::string& field) {
+    IndexView view;
+    if (!nb::try_cast(obj, view, false))
+        fail(field, "expected a C-contiguous int32 CPU array");
+    if (view.ndim() != 2 || view.shape(1) != 3) fail(field, "expected shape (num_triangles, 3)");
+    views.indices.push_back(view);
+    return view;
+}
+
+// (H, W, C) array -> TextureDesc.
+edgepath::TextureDesc texture(Views& views, nb::handle obj, const std::string& field) {
+    const FloatView v = float_view(views, obj, field, 3, 0);
+    edgepath::TextureDesc t;
+    t.data = v.data();
+    t.height = static_cast<int>(v.shape(0));
+    t.width = static_cast<int>(v.shape(1));
+    t.channels = static_cast<int>(v.shape(2));
+    return t;
+}
+
+edgepath::CameraDesc camera_desc(const nb::dict& d) {
+    const std::string f = "camera";
+    edgepath::CameraDesc c;
+    vec3(d, "position", f, c.position);
+    vec3(d, "look_at", f, c.look_at);
+    vec3(d, "up", f, c.up);
+    c.fov = scalar<float>(d, "fov", f);
+    c.ortho_scale = scalar<float>(d, "ortho_scale", f);
+    c.type = static_cast<edgepath::CameraType>(scalar<int>(d, "type", f));
+    c.height = scalar<int>(d, "height", f);
+    c.width = scalar<int>(d, "width", f);
+    if (has(d, "crop_window")) {
+        std::vector<int> crop;
+        if (!nb::try_cast(d["crop_window"], crop) || crop.size() != 4)
+            fail("camera.crop_window", "expected (x, y, width, height)");
+        c.crop_x = crop[0];
+        c.crop_y = crop[1];
+        c.crop_width = crop[2];
+        c.crop_height = crop[3];
+    }
+    c.filter = static_cast<edgepath::FilterType>(scalar<int>(d, "filter", f));
+    c.filter_stddev = scalar<float>(d, "filter_stddev", f);
+    return c;
+}
+
+edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std::string& f) {
+    edgepath::MaterialDesc m;
+    m.diffuse = texture(views, item(d, "diffuse", f), f + ".diffuse");
+    m.specular = texture(views, item(d, "specular", f), f + ".specular");
+    m.roughness = texture(views, item(d, "roughness", f), f + ".roughness");
+    m.two_sided = scalar<bool>(d, "two_sided", f);
+    return m;
+}
+
+edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string& f) {
+    edgepath::MeshDesc m;
+    const FloatView vertices = float_view(views, item(d, "vertices", f), f + ".vertices", 2, 3);
+    m.vertices = vertices.data();
+    m.num_vertices = static_cast<int64_t>(vertices.shape(0));
+    const IndexView indices = index_view(views, item(d, "indices", f), f + ".indices");
+    m.indices = indices.data();
+    m.num_triangles = static_cast<int64_t>(indices.shape(0));
+    if (has(d, "uvs")) {
+        const FloatView uvs = float_view(views, d["uvs"], f + ".uvs", 2, 2);
+        m.uvs = uvs.data();
+        m.num_uvs = static_cast<int64_t>(uvs.shape(0));
+    }
+    if (has(d, "uv_indices")) {
+        const IndexView uv_indices = index_view(views, d["uv_indices"], f + ".uv_indices");
+        if (uv_indices.shape(0) != indices.shape(0))
+            fail(f + ".uv_indices", "must have as many rows as indices");
+        m.uv_indices = uv_indices.data();
+    }
+    if (has(d, "normals")) {
+        const FloatView normals = float_view(views, d["normals"], f + ".normals", 2, 3);
+        m.normals = normals.data();
+        m.num_normals = static_cast<int64_t>(normals.shape(0));
+    }
+    if (has(d, "normal_indices")) {
+        const IndexView normal_indices =
+            index_view(views, d["normal_indices"], f + ".normal_indices");
+        if (normal_indices.shape(0) != indices.shape(0))
+            fail(f + ".normal_indices", "must have as many rows as indices");
+        m.normal_indices = normal_indices.data();
+    }
+    m.material = scalar<int>(d, "material", f);
+    if (has(d, "emission")) m.emission = texture(views, d["emission"], f + ".emission");
+    m.two_sided_emission = scalar<bool>(d, "two_sided_emission", f);
+    return m;
+}
+
+edgepath::EnvmapDesc envmap_desc(Views& views, const nb::dict& d) {
+    edgepath::EnvmapDesc e;
+    e.values = texture(views, item(d, "values", "envmap"), "envmap.values");
+    std::vector<float> to_world;
+    if (!nb::try_cast(item(d, "to_world", "envmap"), to_world) || to_world.size() != 9)
+        fail("envmap.to_world", "expected 9 numbers (a row-major 3x3 rotation)");
+    for (int i = 0; i < 9; ++i) e.to_world[i] = to_world[i];
+    e.scale = scalar<float>(d, "scale", "envmap");
+    return e;
+}
+
+nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                nb::object envmap, nb::handle image, int spp, int max_bounces, uint64_t seed,
+                int num_threads, int sampling) {
+    Views views;
+    edgepath::SceneDesc desc;
+    desc.camera = camera_desc(camera);
+    for (size_t i = 0; i < materials.size(); ++i)
+        desc.materials.push_back(material_desc(views, nb::cast<nb::dict>(materials[i]),
+                                               "materials[" + std::to_string(i) + "]"));
+    for (size_t i = 0; i < meshes.size(); ++i)
+        desc.meshes.push_back(mesh_desc(views, nb::cast<nb::dict>(meshes[i]),
+                                        "meshes[" + std::to_string(i) + "]"));
+    if (!envmap.is_none()) {
+        desc.has_envmap = true;
+        desc.envmap = envmap_desc(views, nb::cast<nb::dict>(envmap));
+    }
+    ImageOut out;
+    if (!nb::try_cast(image, out, false) || out.ndim() != 3 || out.shape(2) != 3)
+        fail("image", "expected a writable C-contiguous float32 CPU array of shape (H, W, 3)");
+
+    edgepath::RenderOptions options;
+    options.spp = spp;
+    options.max_bounces = max_bounces;
+    options.seed = seed;
+    options.num_threads = num_threads;
+    options.sampling = static_cast<edgepath::LightSampling>(sampling);
+
+    edgepath::RenderStats stats;
+    {
+        nb::gil_scoped_release release;
+        std::shared_ptr<const edgepath::Scene> scene = edgepath::build_scene(desc);
+        const size_t height = edgepath::image_height(*scene), width = edgepath::image_width(*scene);
+        if (out.shape(0) != height || out.shape(1) != width)
+            fail("image", "has shape (" + std::to_string(out.shape(0)) + ", " +
+                              std::to_string(out.shape(1)) + ", 3) but the camera renders (" +
+                              std::to_string(height) + ", " + std::to_string(width) + ", 3)");
+        stats = edgepath::render(*scene, options, out.data());
+    }
+    nb::dict result;
+    result["camera_rays"] = stats.camera_rays;
+    result["shadow_rays"] = stats.shadow_rays;
+    result["bounce_rays"] = stats.bounce_rays;
+    return result;
+}
+
+// Moves `values` into a numpy array of the given shape (owned by a capsule).
+template <typename T>
+nb::object to_numpy(std::vector<T>&& values, std::initializer_list<size_t> shape) {
+    auto* storage = new std::vector<T>(std::move(values));
+    nb::capsule owner(storage, [](void* p) noexcept { delete static_cast<std::vector<T>*>(p); });
+    return nb::cast(nb::ndarray<nb::numpy, T>(storage->data(), shape, owner));
+}
+
+template <typename T>
+nb::object to_numpy_or_none(std::vector<T>&& values, size_t columns) {
+    if (values.empty()) return nb::none();
+    const size_t rows = values.size() / columns;
+    return to_numpy(std::move(values), {rows, columns});
+}
+
+nb::object imread(const std::string& path) {
+    edgepath::Image image;
+    {
+        nb::gil_scoped_release release;
+        image = edgepath::read_image(path);
+    }
+    return to_numpy(std::move(image.pixels), {size_t(image.height), size_t(image.width),
+                                              size_t(image.channels)});
+}
+
+void imwrite(const std::string& path, nb::handle array) {
+    FloatView view;
+    if (!nb::try_cast(array, view, false) || (view.ndim() != 2 && view.ndim() != 3))
+        fail("image", "expected a C-contiguous float32 CPU array of shape (H, W) or (H, W, C)");
+    const int channels = view.ndim() == 3 ? static_cast<int>(view.shape(2)) : 1;
+    nb::gil_scoped_release release;
+    edgepath::write_image(path, view.data(), static_cast<int>(view.shape(0)),
+                          static_cast<int>(view.shape(1)), channels);
+}
+
+nb::list load_obj(const std::string& path) {
+    std::vector<edgepath::ObjMesh> meshes;
+    {
+        nb::gil_scoped_release release;
+        meshes = edgepath::load_obj(path);
+    }
+    nb::list result;
+    for (edgepath::ObjMesh& m : meshes) {
+        const edgepath::ObjMaterial& mat = m.material;
+        nb::dict material;
+        material["name"] = mat.name;
+        material["defined"] = mat.defined;
+        material["diffuse"] = std::vector<float>(mat.diffuse, mat.diffuse + 3);
+        material["specular"] = std::vector<float>(mat.specular, mat.specular + 3);
+        material["emission"] = std::vector<float>(mat.emission, mat.emission + 3);
+        material["roughness"] = mat.roughness;
+        material["diffuse_texture"] = mat.diffuse_texture;
+        nb::dict mesh;
+        mesh["positions"] = to_numpy_or_none(std::move(m.positions), 3);
+        mesh["indices"] = to_numpy_or_none(std::move(m.indices), 3);
+        mesh["uvs"] = to_numpy_or_none(std::move(m.uvs), 2);
+        mesh["uv_indices"] = to_numpy_or_none(std::move(m.uv_indices), 3);
+        mesh["normals"] = to_numpy_or_none(std::move(m.normals), 3);
+        mesh["normal_indices"] = to_numpy_or_none(std::move(m.normal_indices), 3);
+        mesh["material"] = material;
+        result.append(mesh);
+    }
+    return result;
+}
+
+}  // namespace
+
+NB_MODULE(_core, m) {
+    m.doc() = "edgepath core bindings (internal; use the edgepath package)";
+
+    nb::register_exception_translator([](const std::exception_ptr& p, void*) {
+        try {
+            std::rethrow_exception(p);
+        } catch (const edgepath::IoError& e) {
+            PyErr_SetString(PyExc_OSError, e.what());
+        }
+    });
+
+    m.def("render", &render, "camera"_a, "materials"_a, "meshes"_a, "envmap"_a.none(),
+          "image"_a, "spp"_a, "max_bounces"_a, "seed"_a, "num_threads"_a, "sampling"_a,
+          "Renders the described scene into `image` (H, W, 3) float32, in place. Returns the "
+          "render counters as a dict.");
+    m.def("imread", &imread, "path"_a,
+          "Reads a PNG/JPEG (linearised) or EXR file as a float32 (H, W, C) numpy array.");
+    m.def("imwrite", &imwrite, "path"_a, "image"_a,
+          "Writes a float32 (H, W) or (H, W, C) array as PNG (sRGB, 8-bit) or EXR (linear).");
+    m.def("load_obj", &load_obj, "path"_a,
+          "Loads an OBJ file as a list of per-material meshes (dicts of numpy arrays).");
+}

@@ -1,0 +1,146 @@
+"""Checks at the border between the user's scene and the core.
+
+Here: Python types, devices, dtypes and shapes, and the conversions the core needs
+(float32 / int32, C-contiguous), which copy only when needed and never touch the caller's
+tensors. The C++ core checks values (NaN/Inf, index ranges, degenerate triangles, camera
+degeneracies) when the scene is built; both name fields the same way, e.g.
+``meshes[1].indices: index 7 out of range for 3 vertices``.
+"""
+
+from __future__ import annotations
+
+import numbers
+from typing import Optional, Sequence, Union
+
+import torch
+
+_INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+
+# A shape spec is a tuple of ints (exact sizes) and strings (any size >= `min_rows`, named in
+# messages), e.g. ("N", 3).
+Shape = Sequence[Union[int, str]]
+
+
+def fail(field: str, message: str):
+    raise ValueError(f"{field}: {message}")
+
+
+def _shape_str(shape: Sequence) -> str:
+    if len(shape) == 1:
+        return f"({shape[0]},)"
+    return "(" + ", ".join(str(s) for s in shape) + ")"
+
+
+def tensor(value, field: str) -> torch.Tensor:
+    """`value` must be a torch.Tensor on the CPU."""
+    if not isinstance(value, torch.Tensor):
+        fail(field, f"expected a torch.Tensor, got {type(value).__name__}")
+    if value.device.type != "cpu":
+        fail(field, f"tensor is on device '{value.device}', but edgepath renders on the CPU "
+                    "(move it with .cpu())")
+    return value
+
+
+def check_shape(t: torch.Tensor, field: str, shape: Shape, min_rows: int = 1) -> None:
+    ok = t.dim() == len(shape)
+    if ok:
+        for size, spec in zip(t.shape, shape):
+            if isinstance(spec, str):
+                ok = ok and size >= min_rows
+            else:
+                ok = ok and size == spec
+    if not ok:
+        if t.dim() == len(shape) and any(isinstance(s, str) and n < min_rows
+                                         for n, s in zip(t.shape, shape)):
+            fail(field, f"is empty: shape {_shape_str(tuple(t.shape))}, expected {_shape_str(shape)}"
+                        f" with {'/'.join(s for s in shape if isinstance(s, str))} >= {min_rows}")
+        fail(field, f"expected shape {_shape_str(shape)}, got {_shape_str(tuple(t.shape))}")
+
+
+def float_tensor(value, field: str, shape: Shape, min_rows: int = 1) -> torch.Tensor:
+    """A floating-point tensor of the given shape, as float32 C-contiguous (copied only if
+    needed, detached from autograd)."""
+    t = tensor(value, field)
+    if not t.dtype.is_floating_point:
+        fail(field, f"expected a floating-point tensor, got {t.dtype}")
+    check_shape(t, field, shape, min_rows)
+    return t.detach().to(torch.float32).contiguous()
+
+
+def index_tensor(value, field: str, shape: Shape = ("M", 3)) -> torch.Tensor:
+    """An int32 or int64 index tensor, as int32 C-contiguous. int64 values must fit in int32
+    (narrowing must not change an index); range checks against vertex counts are the core's."""
+    t = tensor(value, field)
+    if t.dtype not in (torch.int32, torch.int64):
+        fail(field, f"expected an int32 or int64 tensor, got {t.dtype}")
+    check_shape(t, field, shape)
+    t = t.detach()
+    if t.dtype == torch.int64 and t.numel() > 0:
+        lo, hi = int(t.min()), int(t.max())
+        if lo < _INT32_MIN or hi > _INT32_MAX:
+            bad = lo if lo < _INT32_MIN else hi
+            fail(field, f"index {bad} does not fit in int32")
+    return t.to(torch.int32).contiguous()
+
+
+def number(value, field: str) -> float:
+    """A Python real number or a 0-d (or one-element) floating tensor, as a float."""
+    if isinstance(value, bool):
+        fail(field, "expected a number, got bool")
+    if isinstance(value, numbers.Real):
+        return float(value)
+    if isinstance(value, torch.Tensor):
+        t = tensor(value, field)
+        if not t.dtype.is_floating_point and t.dtype not in (torch.int32, torch.int64):
+            fail(field, f"expected a number, got a tensor of {t.dtype}")
+        if t.numel() != 1 or t.dim() > 1:
+            fail(field, f"expected a number or a 0-d tensor, got shape {_shape_str(tuple(t.shape))}")
+        return float(t.detach().reshape(()).item())
+    fail(field, f"expected a number, got {type(value).__name__}")
+
+
+def integer(value, field: str, minimum: Optional[int] = None) -> int:
+    """A Python int (not bool), optionally at least `minimum`."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        fail(field, f"expected an int, got {type(value).__name__}")
+    value = int(value)
+    if minimum is not None and value < minimum:
+        fail(field, f"must be >= {minimum}, got {value}")
+    return value
+
+
+def boolean(value, field: str) -> bool:
+    if not isinstance(value, bool):
+        fail(field, f"expected True or False, got {type(value).__name__}")
+    return value
+
+
+def choice(value, field: str, options: dict):
+    if not isinstance(value, str) or value not in options:
+        fail(field, f"expected one of {', '.join(repr(k) for k in options)}, got {value!r}")
+    return options[value]
+
+
+def texture(value, field: str, channels: int) -> torch.Tensor:
+    """A constant or a texture, as a float32 (H, W, channels) tensor; a constant is 1x1.
+
+    Constants: a Python number, a 0-d tensor, or a tensor of shape (channels,) or (1,).
+    Textures: (H, W, channels); with channels == 1 also (H, W)."""
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return torch.full((1, 1, channels), float(value), dtype=torch.float32)
+    t = tensor(value, field)
+    if not t.dtype.is_floating_point:
+        fail(field, f"expected a floating-point tensor, got {t.dtype}")
+    if t.dim() <= 1:
+        if t.numel() not in (1, channels):
+            expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
+            fail(field, f"a constant must have shape {expected}, got {_shape_str(tuple(t.shape))}")
+        t = t.detach().to(torch.float32).reshape(1, 1, -1)
+        return t.expand(1, 1, channels).contiguous()
+    if channels == 1 and t.dim() == 2:
+        check_shape(t, field, ("H", "W"))
+        return t.detach().to(torch.float32).unsqueeze(-1).contiguous()
+    if t.dim() != 3 or t.shape[2] != channels:
+        shapes = f"(H, W, {channels})" + (" or (H, W)" if channels == 1 else "")
+        fail(field, f"a texture must have shape {shapes}, got {_shape_str(tuple(t.shape))}")
+    return float_tensor(t, field, ("H", "W", channels))

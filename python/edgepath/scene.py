@@ -1,0 +1,151 @@
+"""Scene classes: plain holders of the tensors that describe a scene.
+
+They keep exactly what they are given (no copies, no conversions), so a tensor with
+``requires_grad`` stays the leaf the caller optimises. Everything is checked when the scene is
+rendered (see ``_validate``), with errors that name the field, e.g. ``meshes[1].vertices``.
+
+Conventions (as Mitsuba 3): images are (height, width, channels), row 0 at the top; the camera
+looks from ``position`` towards ``look_at``, the image's right is normalize(cross(forward, up));
+``fov`` is horizontal, in degrees; uv v = 0 is the top row of a texture image.
+"""
+
+from __future__ import annotations
+
+from typing import Optional, Sequence, Tuple, Union
+
+import torch
+
+Constant = Union[float, torch.Tensor]
+
+
+def frame_from_to_world(to_world: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """(position, look_at, up) of a 4x4 camera-to-world matrix in Mitsuba's convention:
+    columns are local x (towards the image's left), local y (up), local z (forward) and the
+    translation. Built from torch ops, so gradients flow back to the matrix."""
+    position = to_world[:3, 3]
+    return position, position + to_world[:3, 2], to_world[:3, 1]
+
+
+class Camera:
+    """A pinhole (``camera_type="perspective"``) or orthographic camera.
+
+    Place it with ``position``/``look_at``/``up`` (tensors of shape (3,)), or with ``to_world``
+    (4x4 camera-to-world matrix, see ``frame_from_to_world``), not both. ``resolution`` is
+    (height, width) of the full film. ``fov``: horizontal field of view in degrees;
+    ``ortho_scale``: half the width of an orthographic view; both a float or a 0-d tensor.
+    ``pixel_filter``: "box" (one pixel) or "gaussian" (``filter_stddev`` pixels).
+    ``crop_window``: None or (x, y, width, height) in full-film pixels; renders only that part.
+    """
+
+    def __init__(self, position: Optional[torch.Tensor] = None,
+                 look_at: Optional[torch.Tensor] = None,
+                 up: Optional[torch.Tensor] = None,
+                 fov: Constant = 45.0,
+                 resolution: Tuple[int, int] = (256, 256),
+                 camera_type: str = "perspective",
+                 ortho_scale: Constant = 1.0,
+                 to_world: Optional[torch.Tensor] = None,
+                 pixel_filter: str = "box",
+                 filter_stddev: float = 0.5,
+                 crop_window: Optional[Tuple[int, int, int, int]] = None):
+        self.position = position
+        self.look_at = look_at
+        self.up = up
+        self.fov = fov
+        self.resolution = resolution
+        self.camera_type = camera_type
+        self.ortho_scale = ortho_scale
+        self.to_world = to_world
+        self.pixel_filter = pixel_filter
+        self.filter_stddev = filter_stddev
+        self.crop_window = crop_window
+
+    def frame(self) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(position, look_at, up), from ``to_world`` if it is set."""
+        if self.to_world is not None:
+            return frame_from_to_world(self.to_world)
+        up = self.up if self.up is not None else torch.tensor([0.0, 1.0, 0.0])
+        return self.position, self.look_at, up
+
+    def __repr__(self):
+        return (f"Camera(resolution={tuple(self.resolution)}, camera_type={self.camera_type!r}, "
+                f"fov={self.fov})")
+
+
+class Material:
+    """Diffuse (Lambert) plus a GGX specular lobe.
+
+    ``diffuse``/``specular``: constant (shape (3,) or (1,), or a float) or texture (H, W, 3);
+    ``roughness``: GGX alpha, a float, shape (1,), or texture (H, W) / (H, W, 1).
+    ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs)."""
+
+    def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
+                 roughness: Constant = 0.5, two_sided: bool = False):
+        self.diffuse = diffuse
+        self.specular = specular
+        self.roughness = roughness
+        self.two_sided = two_sided
+
+    def __repr__(self):
+        return f"Material(two_sided={self.two_sided})"
+
+
+class Mesh:
+    """A triangle mesh. ``vertices`` (N, 3) float, ``indices`` (M, 3) int32/int64.
+
+    Optional: ``uvs`` (K, 2) with ``uv_indices`` (M, 3) (or one uv per vertex without),
+    ``normals`` (K, 3) shading normals with ``normal_indices`` (M, 3) (or one per vertex),
+    ``material`` (default: diffuse 0.5, or black diffuse if the mesh emits), ``emission``:
+    radiance, constant (3,) or texture (H, W, 3) over the uvs, which makes the mesh an area
+    light emitting on the side of its face normal (both sides if ``two_sided_emission``)."""
+
+    def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
+                 uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
+                 uv_indices: Optional[torch.Tensor] = None,
+                 normal_indices: Optional[torch.Tensor] = None,
+                 material: Optional[Material] = None,
+                 emission: Optional[Constant] = None,
+                 two_sided_emission: bool = False):
+        self.vertices = vertices
+        self.indices = indices
+        self.uvs = uvs
+        self.normals = normals
+        self.uv_indices = uv_indices
+        self.normal_indices = normal_indices
+        self.material = material
+        self.emission = emission
+        self.two_sided_emission = two_sided_emission
+
+    def __repr__(self):
+        n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"
+        m = tuple(self.indices.shape) if isinstance(self.indices, torch.Tensor) else "?"
+        return f"Mesh(vertices={n}, indices={m}, emissive={self.emission is not None})"
+
+
+class EnvironmentMap:
+    """Lat-long environment light: ``values`` (H, W, 3) radiance, Mitsuba's mapping (row 0 is
+    +y, the image centre looks along +z). ``to_world``: None, a 3x3 rotation or a 4x4 matrix
+    (its translation is ignored); ``scale`` multiplies the radiance."""
+
+    def __init__(self, values: torch.Tensor, to_world: Optional[torch.Tensor] = None,
+                 scale: Constant = 1.0):
+        self.values = values
+        self.to_world = to_world
+        self.scale = scale
+
+    def __repr__(self):
+        shape = tuple(self.values.shape) if isinstance(self.values, torch.Tensor) else "?"
+        return f"EnvironmentMap(values={shape}, scale={self.scale})"
+
+
+class Scene:
+    """A camera, a list of meshes (some of them emitters), and an optional environment map."""
+
+    def __init__(self, camera: Camera, meshes: Sequence[Mesh],
+                 envmap: Optional[EnvironmentMap] = None):
+        self.camera = camera
+        self.meshes = meshes
+        self.envmap = envmap
+
+    def __repr__(self):
+        return f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r})"
