@@ -29,18 +29,21 @@ void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* 
         }
 }
 
-// Adjoint of Envmap::eval for a fixed direction: texels only.
-void d_envmap(const Envmap& env, const GradSlot& slot, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
-    if (!slot.wanted()) return;
-    Vec2f p = env.position(dir);
-    int x0 = std::min(int(p.x), env.cols - 1), y0 = std::min(int(p.y), env.rows - 1);
-    float tx = p.x - float(x0), ty = env.tex.height > 1 ? p.y - float(y0) : 0.f;
-    int x1 = (x0 + 1) % env.cols, y1 = std::min(y0 + 1, env.tex.height - 1);
-    const int64_t W = env.tex.width;
-    const int64_t texel[4] = {y0 * W + x0, y0 * W + x1, y1 * W + x0, y1 * W + x1};
-    const float w[4] = {(1 - tx) * (1 - ty), tx * (1 - ty), (1 - tx) * ty, tx * ty};
-    for (int k = 0; k < 4; ++k)
-        sink.add3(slot, texel[k], dL.x * w[k] * env.scale, dL.y * w[k] * env.scale, dL.z * w[k] * env.scale);
+// Adjoint of Envmap::eval: texels and rotation into their slots; returns d L / d world
+// direction (the caller decides whether the direction moves).
+Vec3f d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
+    Envmap::Footprint f = env.footprint(dir);
+    const Vec3f dLs = dL * env.scale;
+    Vec3f d_local(0.f);
+    for (int k = 0; k < 4; ++k) {
+        if (slots.envmap.wanted()) sink.add3(slots.envmap, f.texel[k], dLs.x * f.weight[k], dLs.y * f.weight[k], dLs.z * f.weight[k]);
+        d_local += f.dweight[k] * dot(dLs, env.texel(f.texel[k]));
+    }
+    // local = R^T world: d local_i / d R_ji = world_j; d local / d world = R^T.
+    if (slots.envmap_rotation.wanted())
+        for (int j = 0; j < 3; ++j)
+            for (int i = 0; i < 3; ++i) sink.add(slots.envmap_rotation, 3 * j + i, d_local[i] * dir[j]);
+    return env.to_world_dir(d_local);
 }
 
 // The differentiable geometry of a hit: a fixed ray meeting a triangle.
@@ -147,9 +150,15 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
                    GradSink& sink) {
     const auto& V = rec.vertices;
     if (rec.camera_missed) {
-        // L = env(d0); the direction's own derivative is not propagated (texels only).
+        // L = env(d0), d0 = the camera ray's direction.
+        if (!scene.has_envmap) return;
         Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y);
-        if (scene.has_envmap) d_envmap(scene.envmap, slots.envmap, r.dir, a, sink);
+        Vec3f d_dir = d_envmap(scene.envmap, slots, r.dir, a, sink);
+        if (slots.camera.wanted()) {
+            float cam[kCameraParams] = {};
+            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, Vec3f(0.f), d_dir, cam);
+            for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
+        }
         return;
     }
     const int K = int(V.size());
@@ -162,7 +171,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         // beta after the last vertex = beta_last * T_last
         VertexGeometry g(scene, last.hit, last.origin, last.dir);
         Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), g.sp.ns, -last.dir, last.next_dir) * last.next_inv_pdf;
-        d_envmap(scene.envmap, slots.envmap, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+        d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
     }
     for (int k = K - 1; k >= 0; --k) {
         const PathVertexRecord& r = V[k];
@@ -199,7 +208,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             Vec3f Le;
             if (r.nee_env) {
                 Le = scene.envmap.eval(r.nee_dir);
-                d_envmap(scene.envmap, slots.envmap, r.nee_dir, ab * f * r.nee_scale, sink);
+                d_envmap(scene.envmap, slots, r.nee_dir, ab * f * r.nee_scale, sink);
             } else {
                 const Mesh& lm = scene.meshes[r.nee_hit.mesh];
                 const SceneGradients::MeshSlots* lms = mesh_slots(slots, r.nee_hit.mesh);

@@ -25,6 +25,7 @@ struct SceneGradients {
     std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
     std::vector<MaterialSlots> materials; // one per material
     GradSlot envmap;                      // (H, W, 3)
+    GradSlot envmap_rotation;             // 9 values: the row-major to_world rotation
     GradSlot camera;                      // kCameraParams values (see scene/camera.h)
 };
 

@@ -63,7 +63,8 @@ struct CameraDesc {
 };
 
 // Lat-long environment map, Mitsuba's convention: local direction d maps to
-// u = atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi; texel column i sits at u = i / W,
+// u = atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi; texel column i sits at u = (i + 0.5) / W
+// (wrapping),
 // row j at v = j / (H - 1); bilinear. world = to_world * local.
 struct EnvmapDesc {
     TextureDesc values;                     // (H, W, 3) radiance

@@ -51,24 +51,65 @@ struct Envmap {
                 m[6] * l.x + m[7] * l.y + m[8] * l.z};
     }
 
-    // Texel-space position (x in [0, W), y in [0, rows]) of a world direction.
+    // Texel-space position of a world direction: x in [0, W) (column i at x = i, so u = (x +
+    // 0.5) / W, wrapping), y in [0, rows] (row j at y = j).
     Vec2f position(const Vec3f& world_dir) const {
         Vec3f d = to_local(world_dir);
         float u = std::atan2(d.x, -d.z) * (0.5f * kInvPi);
-        u -= std::floor(u);
+        float x = u * float(cols) - 0.5f;
+        x -= float(cols) * std::floor(x / float(cols));
+        if (x >= float(cols)) x = 0.f;  // rounding of tiny negative x
         float v = std::acos(std::clamp(d.y, -1.f, 1.f)) * kInvPi;
-        return {u * float(cols), v * float(rows)};
+        return {x, v * float(rows)};
     }
 
-    Vec3f eval(const Vec3f& world_dir) const {
+    // The four texels of a lookup, their weights, and the derivatives of the weights with
+    // respect to the local direction (for unit directions).
+    struct Footprint {
+        int64_t texel[4];
+        float weight[4];
+        Vec3f dweight[4];  // d weight / d local direction
+    };
+
+    Footprint footprint(const Vec3f& world_dir) const {
+        Footprint f;
         Vec2f p = position(world_dir);
         int x0 = std::min(int(p.x), cols - 1), y0 = std::min(int(p.y), rows - 1);
         float tx = p.x - float(x0), ty = tex.height > 1 ? p.y - float(y0) : 0.f;
         int x1 = (x0 + 1) % cols, y1 = std::min(y0 + 1, tex.height - 1);
-        Vec3f v = texel(y0, x0) * ((1 - tx) * (1 - ty)) + texel(y0, x1) * (tx * (1 - ty)) +
-                  texel(y1, x0) * ((1 - tx) * ty) + texel(y1, x1) * (tx * ty);
+        const int64_t W = tex.width;
+        f.texel[0] = y0 * W + x0;
+        f.texel[1] = y0 * W + x1;
+        f.texel[2] = y1 * W + x0;
+        f.texel[3] = y1 * W + x1;
+        f.weight[0] = (1 - tx) * (1 - ty);
+        f.weight[1] = tx * (1 - ty);
+        f.weight[2] = (1 - tx) * ty;
+        f.weight[3] = tx * ty;
+        // x = W atan2(d.x, -d.z) / (2 pi) - 1/2, y = rows acos(d.y) / pi.
+        Vec3f d = to_local(world_dir);
+        float r2 = d.x * d.x + d.z * d.z;
+        Vec3f dx(0.f), dy(0.f);
+        if (r2 > 1e-12f) {
+            float k = float(cols) * 0.5f * kInvPi / r2;
+            dx = Vec3f(-d.z * k, 0.f, d.x * k);
+            if (tex.height > 1)
+                dy = Vec3f(0.f, -float(rows) * kInvPi / std::sqrt(std::max(1.f - d.y * d.y, 1e-12f)), 0.f);
+        }
+        f.dweight[0] = dx * (-(1 - ty)) + dy * (-(1 - tx));
+        f.dweight[1] = dx * (1 - ty) + dy * (-tx);
+        f.dweight[2] = dx * (-ty) + dy * (1 - tx);
+        f.dweight[3] = dx * ty + dy * tx;
+        return f;
+    }
+
+    Vec3f eval(const Vec3f& world_dir) const {
+        Footprint f = footprint(world_dir);
+        Vec3f v(0.f);
+        for (int k = 0; k < 4; ++k) v += texel(f.texel[k]) * f.weight[k];
         return v * scale;
     }
+    Vec3f texel(int64_t index) const { return Vec3f::load(tex.data + index * tex.channels); }
 
     float pdf(const Vec3f& world_dir) const {
         if (!dist.valid()) return 0.f;
@@ -83,7 +124,8 @@ struct Envmap {
         if (!dist.valid()) return false;
         int r, c;
         dist.sample(u1, u2, r, c);
-        float x = (float(c) + u2) / float(cols), y = (float(r) + u1) / float(rows);
+        // Cell c lies between columns c and c + 1: u from (c + 0.5) / W to (c + 1.5) / W.
+        float x = (float(c) + 0.5f + u2) / float(cols), y = (float(r) + u1) / float(rows);
         float theta = y * kPi, phi = x * 2.f * kPi;
         float sin_theta = std::sin(theta);
         if (sin_theta <= 0.f) return false;

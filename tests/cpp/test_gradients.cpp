@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <functional>
 #include <vector>
 
@@ -135,11 +136,33 @@ std::vector<Param> params() {
                      g.camera.dir = d.data();
                  }});
     p.push_back({"camera position",
-                 [](FloorScene& s, double t) { s.desc.camera.position[0] += float(t); s.desc.camera.position[1] += float(0.5 * t); },
+                 [](FloorScene& s, double t) { s.desc.camera.position[0] += float(0.3 * t); s.desc.camera.position[1] += float(t); },
                  [](SceneGradients& g, std::vector<float>& d) {
                      d.assign(kCameraParams, 0.f);
-                     d[0] = 1.f;
-                     d[1] = 0.5f;
+                     d[0] = 0.3f;
+                     d[1] = 1.f;
+                     g.camera.dir = d.data();
+                 }});
+    p.push_back({"envmap rotation",
+                 [](FloorScene& s, double t) {  // about y by t radians
+                     float c = float(std::cos(t)), sn = float(std::sin(t));
+                     const float R[9] = {c, 0, sn, 0, 1, 0, -sn, 0, c};
+                     std::copy(R, R + 9, s.desc.envmap.to_world);
+                 },
+                 [](SceneGradients& g, std::vector<float>& d) {
+                     d = {0, 0, 1, 0, 0, 0, -1, 0, 0};
+                     g.envmap_rotation.dir = d.data();
+                 }});
+    // The camera turned to the sky: only the environment map is seen, through moving directions.
+    p.push_back({"camera look_at (sky in view)",
+                 [](FloorScene& s, double t) {
+                     const float at[3] = {0.3f + float(t), 10.f, -0.5f + float(0.5 * t)};
+                     std::copy(at, at + 3, s.desc.camera.look_at);
+                 },
+                 [](SceneGradients& g, std::vector<float>& d) {
+                     d.assign(kCameraParams, 0.f);
+                     d[3] = 1.f;
+                     d[5] = 0.5f;
                      g.camera.dir = d.data();
                  }});
     return p;
@@ -191,6 +214,7 @@ void check_param(bool smooth, const Param& p, double eps, bool geometric) {
         prepare(base);
         p.perturb(plus, 0.5 * eps);
         p.perturb(minus, -0.5 * eps);
+        p.perturb(base, 0.0);
         render(*build_scene(plus.desc), opt, ip.data());
         render(*build_scene(minus.desc), opt, im.data());
         double fd = (image_sum(ip) - image_sum(im)) / eps;
@@ -207,6 +231,7 @@ void check_param(bool smooth, const Param& p, double eps, bool geometric) {
     }
     double md = sd / runs, se_d = std::sqrt(std::max(0.0, sd2 / runs - md * md) / (runs - 1));
     double mf = sf / runs, se_f = std::sqrt(std::max(0.0, sf2 / runs - mf * mf) / (runs - 1));
+    std::printf("%-32s derivative - fd %10.4g +- %8.3g   fd %10.4g +- %8.3g\n", p.name, md, se_d, mf, se_f);
     EXPECT_GT(std::abs(mf), 5 * se_f) << p.name << ": the finite difference is too noisy to test anything";
     EXPECT_LT(std::abs(md), 5 * se_d + 1e-3 * std::abs(mf)) << p.name << ": derivative - finite difference = " << md
                                                                << " (finite difference " << mf << ")";
@@ -236,7 +261,8 @@ TEST(Gradients, ReverseModeEqualsForwardMode) {
     std::vector<float> adj(n), D(n);
     for (size_t i = 0; i < n; ++i) adj[i] = float(std::sin(0.37 * i) + 0.2);
     for (const Param& p : params()) {
-        FloorScene base(true);
+        FloorScene base(true, true);
+        p.perturb(base, 0.0);
         auto scene = build_scene(base.desc);
         SceneGradients fwd;
         std::vector<float> dir;
@@ -256,6 +282,7 @@ TEST(Gradients, ReverseModeEqualsForwardMode) {
         for (auto& m : rev.meshes) { to_grad(m.vertices); to_grad(m.uvs); to_grad(m.normals); to_grad(m.emission); }
         for (auto& m : rev.materials) { to_grad(m.diffuse); to_grad(m.specular); to_grad(m.roughness); }
         to_grad(rev.envmap);
+        to_grad(rev.envmap_rotation);
         to_grad(rev.camera);
         render_gradients(*scene, opt, adj.data(), rev);
         double g_dot_dir = 0;

@@ -143,7 +143,8 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
 }
 
 TEST(Envmap, MitsubaLookupConvention) {
-    // Texel column i sits at u = i / W, row j at v = j / (H - 1); -z is u = 0, +y is row 0.
+    // Texel column i sits at u = (i + 0.5) / W, row j at v = j / (H - 1); -z is u = 0, +y is
+    // row 0; u wraps between the last column and the first.
     const int W = 8, H = 5;
     std::vector<float> data(W * H * 3, 0.f);
     for (int j = 0; j < H; ++j)
@@ -155,11 +156,52 @@ TEST(Envmap, MitsubaLookupConvention) {
     d.values.channels = 3;
     Envmap env;
     env.build(d);
-    EXPECT_NEAR(env.eval(normalize(Vec3f(0, 1, -1e-5f))).x, 0.f, 1e-2f);          // row 0, u = 0
-    EXPECT_NEAR(env.eval(Vec3f(0, 0, -1)).x, 200.f, 1e-3f);             // equator, column 0
-    EXPECT_NEAR(env.eval(Vec3f(0, 0, 1)).x, 204.f, 1e-3f);              // u = 0.5 -> column 4
-    EXPECT_NEAR(env.eval(Vec3f(1, 0, 0)).x, 202.f, 1e-3f);              // u = 0.25 -> column 2
-    EXPECT_NEAR(env.eval(normalize(Vec3f(0, -1, -1e-5f))).x, 400.f, 1e-2f);        // last row
+    auto dir = [](double u, double v) {  // the local direction of (u, v)
+        double phi = 2 * M_PI * u, theta = M_PI * v;
+        return Vec3f(float(std::sin(theta) * std::sin(phi)), float(std::cos(theta)),
+                     float(-std::sin(theta) * std::cos(phi)));
+    };
+    EXPECT_NEAR(env.eval(dir(0.5 / W, 0.5)).x, 200.f, 1e-3f);   // equator, column 0
+    EXPECT_NEAR(env.eval(dir(4.5 / W, 0.5)).x, 204.f, 1e-3f);   // column 4
+    EXPECT_NEAR(env.eval(dir(2.5 / W, 0.25)).x, 102.f, 1e-3f);  // row 1, column 2
+    EXPECT_NEAR(env.eval(Vec3f(0, 0, -1)).x, 203.5f, 1e-3f);     // u = 0: half column 7, half column 0
+    EXPECT_NEAR(env.eval(Vec3f(0, 0, 1)).x, 203.5f, 1e-3f);      // u = 0.5: columns 3 and 4
+    EXPECT_NEAR(env.eval(dir(6.5 / W, 1e-6)).x, 6.f, 1e-2f);     // row 0
+    EXPECT_NEAR(env.eval(dir(6.5 / W, 1 - 1e-6)).x, 406.f, 1e-2f);  // last row
+}
+
+TEST(Envmap, FootprintDerivativeMatchesFiniteDifferences) {
+    const int W = 7, H = 6;
+    std::vector<float> data(W * H * 3);
+    Rng rng(3, 1);
+    for (float& x : data) x = rng.next_float();
+    EnvmapDesc d;
+    d.values.data = data.data();
+    d.values.height = H;
+    d.values.width = W;
+    d.values.channels = 3;
+    const float a = 0.4f;  // a rotation about y
+    const float R[9] = {std::cos(a), 0, std::sin(a), 0, 1, 0, -std::sin(a), 0, std::cos(a)};
+    std::copy(R, R + 9, d.to_world);
+    Envmap env;
+    env.build(d);
+    for (int trial = 0; trial < 50; ++trial) {
+        Vec3f w(2 * rng.next_float() - 1, 2 * rng.next_float() - 1, 2 * rng.next_float() - 1);
+        if (length(w) < 0.2f || std::abs(normalize(w).y) > 0.9f) continue;  // away from the poles
+        w = normalize(w);
+        Envmap::Footprint f = env.footprint(w);
+        Vec3f dl(0.f);  // d(red) / d(local direction)
+        for (int k = 0; k < 4; ++k) dl += f.dweight[k] * data[f.texel[k] * 3];
+        Vec3f local = env.to_local(w);
+        for (int i = 0; i < 3; ++i) {
+            const float h = 1e-3f;
+            Vec3f lp = local, lm = local;
+            lp[i] += h;
+            lm[i] -= h;
+            float fd = (env.eval(env.to_world_dir(lp)).x - env.eval(env.to_world_dir(lm)).x) / (2 * h);
+            EXPECT_NEAR(dl[i], fd, 2e-2f * (1.f + std::abs(fd))) << "trial " << trial << " component " << i;
+        }
+    }
 }
 
 TEST(Filter, GaussianSamplerMatchesWeights) {
