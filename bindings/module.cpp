@@ -176,49 +176,183 @@ edgepath::EnvmapDesc envmap_desc(Views& views, const nb::dict& d) {
     return e;
 }
 
-nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
-                nb::object envmap, nb::handle image, int spp, int max_bounces, uint64_t seed,
-                int num_threads, int sampling) {
+// A described scene: the SceneDesc and the array views it points into.
+struct Described {
     Views views;
     edgepath::SceneDesc desc;
-    desc.camera = camera_desc(camera);
+};
+
+void describe(Described& out, const nb::dict& camera, const nb::list& materials,
+              const nb::list& meshes, const nb::object& envmap) {
+    out.desc.camera = camera_desc(camera);
     for (size_t i = 0; i < materials.size(); ++i)
-        desc.materials.push_back(material_desc(views, nb::cast<nb::dict>(materials[i]),
-                                               "materials[" + std::to_string(i) + "]"));
+        out.desc.materials.push_back(material_desc(out.views, nb::cast<nb::dict>(materials[i]),
+                                                   "materials[" + std::to_string(i) + "]"));
     for (size_t i = 0; i < meshes.size(); ++i)
-        desc.meshes.push_back(mesh_desc(views, nb::cast<nb::dict>(meshes[i]),
-                                        "meshes[" + std::to_string(i) + "]"));
+        out.desc.meshes.push_back(mesh_desc(out.views, nb::cast<nb::dict>(meshes[i]),
+                                            "meshes[" + std::to_string(i) + "]"));
     if (!envmap.is_none()) {
-        desc.has_envmap = true;
-        desc.envmap = envmap_desc(views, nb::cast<nb::dict>(envmap));
+        out.desc.has_envmap = true;
+        out.desc.envmap = envmap_desc(out.views, nb::cast<nb::dict>(envmap));
     }
+}
+
+edgepath::RenderOptions render_options(const nb::dict& d) {
+    const std::string f = "options";
+    edgepath::RenderOptions o;
+    o.spp = scalar<int>(d, "spp", f);
+    o.max_bounces = scalar<int>(d, "max_bounces", f);
+    o.seed = scalar<uint64_t>(d, "seed", f);
+    o.num_threads = scalar<int>(d, "num_threads", f);
+    o.sampling = static_cast<edgepath::LightSampling>(scalar<int>(d, "sampling", f));
+    return o;
+}
+
+std::shared_ptr<const edgepath::Scene> build(const edgepath::SceneDesc& desc) {
+    nb::gil_scoped_release release;
+    return edgepath::build_scene(desc);
+}
+
+// An (H, W, 3) float32 image buffer of the size the scene renders.
+ImageOut image_buffer(nb::handle obj, const edgepath::Scene& scene, const std::string& field) {
     ImageOut out;
-    if (!nb::try_cast(image, out, false) || out.ndim() != 3 || out.shape(2) != 3)
-        fail("image", "expected a writable C-contiguous float32 CPU array of shape (H, W, 3)");
+    if (!nb::try_cast(obj, out, false) || out.ndim() != 3 || out.shape(2) != 3)
+        fail(field, "expected a C-contiguous float32 CPU array of shape (H, W, 3)");
+    const size_t height = edgepath::image_height(scene), width = edgepath::image_width(scene);
+    if (out.shape(0) != height || out.shape(1) != width)
+        fail(field, "has shape (" + std::to_string(out.shape(0)) + ", " +
+                        std::to_string(out.shape(1)) + ", 3) but the camera renders (" +
+                        std::to_string(height) + ", " + std::to_string(width) + ", 3)");
+    return out;
+}
 
-    edgepath::RenderOptions options;
-    options.spp = spp;
-    options.max_bounces = max_bounces;
-    options.seed = seed;
-    options.num_threads = num_threads;
-    options.sampling = static_cast<edgepath::LightSampling>(sampling);
-
+nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                nb::object envmap, nb::handle image, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    const ImageOut out = image_buffer(image, *scene, "image");
     edgepath::RenderStats stats;
     {
         nb::gil_scoped_release release;
-        std::shared_ptr<const edgepath::Scene> scene = edgepath::build_scene(desc);
-        const size_t height = edgepath::image_height(*scene), width = edgepath::image_width(*scene);
-        if (out.shape(0) != height || out.shape(1) != width)
-            fail("image", "has shape (" + std::to_string(out.shape(0)) + ", " +
-                              std::to_string(out.shape(1)) + ", 3) but the camera renders (" +
-                              std::to_string(height) + ", " + std::to_string(width) + ", 3)");
-        stats = edgepath::render(*scene, options, out.data());
+        stats = edgepath::render(*scene, opt, out.data());
     }
     nb::dict result;
     result["camera_rays"] = stats.camera_rays;
     result["shadow_rays"] = stats.shadow_rays;
     result["bounce_rays"] = stats.bounce_rays;
     return result;
+}
+
+// ---- gradient slots --------------------------------------------------------------------------
+// `slots` mirrors the scene: {"camera": a, "envmap": a, "envmap_rotation": a,
+// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a} or None, ...],
+// "materials": [{"diffuse": a, "specular": a, "roughness": a} or None, ...]}, any entry None or
+// absent. Reverse mode: writable buffers the gradients are added into; forward mode: directions.
+// Each array must have exactly as many values as the parameter it stands for.
+using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
+
+struct SlotViews {
+    bool reverse;
+    std::vector<GradOut> outs;
+    std::vector<FloatView> dirs;
+
+    edgepath::GradSlot slot(const nb::dict& d, const char* key, int64_t size, const std::string& field) {
+        edgepath::GradSlot s;
+        if (!has(d, key)) return s;
+        const std::string name = field + "." + key;
+        if (size == 0) fail(name, "the scene has no such parameter");
+        nb::handle obj = d[key];
+        if (reverse) {
+            GradOut g;
+            if (!nb::try_cast(obj, g, false)) fail(name, "expected a writable C-contiguous float32 CPU array");
+            if (int64_t(g.size()) != size)
+                fail(name, "has " + std::to_string(g.size()) + " values, the parameter " + std::to_string(size));
+            outs.push_back(g);
+            s.grad = g.data();
+        } else {
+            FloatView v;
+            if (!nb::try_cast(obj, v, false)) fail(name, "expected a C-contiguous float32 CPU array");
+            if (int64_t(v.size()) != size)
+                fail(name, "has " + std::to_string(v.size()) + " values, the parameter " + std::to_string(size));
+            dirs.push_back(v);
+            s.dir = v.data();
+        }
+        return s;
+    }
+};
+
+int64_t texture_size(const edgepath::TextureDesc& t) {
+    return t.data ? int64_t(t.height) * t.width * t.channels : 0;
+}
+
+edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, const edgepath::SceneDesc& desc) {
+    edgepath::SceneGradients g;
+    g.camera = views.slot(d, "camera", edgepath::kCameraParams, "gradients");
+    g.envmap = views.slot(d, "envmap", desc.has_envmap ? texture_size(desc.envmap.values) : 0, "gradients");
+    g.envmap_rotation = views.slot(d, "envmap_rotation", desc.has_envmap ? 9 : 0, "gradients");
+    if (has(d, "meshes")) {
+        nb::list meshes = nb::cast<nb::list>(d["meshes"]);
+        if (meshes.size() != desc.meshes.size()) fail("gradients.meshes", "must have one entry per mesh");
+        g.meshes.resize(meshes.size());
+        for (size_t i = 0; i < meshes.size(); ++i) {
+            if (meshes[i].is_none()) continue;
+            const nb::dict m = nb::cast<nb::dict>(meshes[i]);
+            const edgepath::MeshDesc& md = desc.meshes[i];
+            const std::string f = "gradients.meshes[" + std::to_string(i) + "]";
+            g.meshes[i].vertices = views.slot(m, "vertices", md.num_vertices * 3, f);
+            g.meshes[i].uvs = views.slot(m, "uvs", md.uvs ? md.num_uvs * 2 : 0, f);
+            g.meshes[i].normals = views.slot(m, "normals", md.normals ? md.num_normals * 3 : 0, f);
+            g.meshes[i].emission = views.slot(m, "emission", texture_size(md.emission), f);
+        }
+    }
+    if (has(d, "materials")) {
+        nb::list materials = nb::cast<nb::list>(d["materials"]);
+        if (materials.size() != desc.materials.size())
+            fail("gradients.materials", "must have one entry per material");
+        g.materials.resize(materials.size());
+        for (size_t i = 0; i < materials.size(); ++i) {
+            if (materials[i].is_none()) continue;
+            const nb::dict m = nb::cast<nb::dict>(materials[i]);
+            const edgepath::MaterialDesc& md = desc.materials[i];
+            const std::string f = "gradients.materials[" + std::to_string(i) + "]";
+            g.materials[i].diffuse = views.slot(m, "diffuse", texture_size(md.diffuse), f);
+            g.materials[i].specular = views.slot(m, "specular", texture_size(md.specular), f);
+            g.materials[i].roughness = views.slot(m, "roughness", texture_size(md.roughness), f);
+        }
+    }
+    return g;
+}
+
+void render_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                      nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    SlotViews views{true, {}, {}};
+    const edgepath::SceneGradients slots = gradient_slots(views, grads, d.desc);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    FloatView a;
+    if (!nb::try_cast(adjoint, a, false) || a.ndim() != 3 || a.shape(2) != 3 ||
+        a.shape(0) != size_t(edgepath::image_height(*scene)) ||
+        a.shape(1) != size_t(edgepath::image_width(*scene)))
+        fail("adjoint", "expected a C-contiguous float32 CPU array shaped like the image");
+    nb::gil_scoped_release release;
+    edgepath::render_gradients(*scene, opt, a.data(), slots);
+}
+
+void derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                      nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    SlotViews views{false, {}, {}};
+    const edgepath::SceneGradients slots = gradient_slots(views, directions, d.desc);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    const ImageOut out = image_buffer(image, *scene, "image");
+    nb::gil_scoped_release release;
+    edgepath::derivative_image(*scene, opt, slots, out.data());
 }
 
 // Moves `values` into a numpy array of the given shape (owned by a capsule).
@@ -300,9 +434,15 @@ NB_MODULE(_core, m) {
     });
 
     m.def("render", &render, "camera"_a, "materials"_a, "meshes"_a, "envmap"_a.none(),
-          "image"_a, "spp"_a, "max_bounces"_a, "seed"_a, "num_threads"_a, "sampling"_a,
+          "image"_a, "options"_a,
           "Renders the described scene into `image` (H, W, 3) float32, in place. Returns the "
           "render counters as a dict.");
+    m.def("render_gradients", &render_gradients, "camera"_a, "materials"_a, "meshes"_a,
+          "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a,
+          "Adds d(sum(adjoint * image))/d(parameter) into the buffers of `gradients`.");
+    m.def("derivative_image", &derivative_image, "camera"_a, "materials"_a, "meshes"_a,
+          "envmap"_a.none(), "directions"_a, "image"_a, "options"_a,
+          "Writes the derivative of the image along `directions` into `image` (H, W, 3).");
     m.def("imread", &imread, "path"_a,
           "Reads a PNG/JPEG (linearised) or EXR file as a float32 (H, W, C) numpy array.");
     m.def("imwrite", &imwrite, "path"_a, "image"_a,

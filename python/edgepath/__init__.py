@@ -3,14 +3,15 @@
     import torch, edgepath as ep
     scene = ep.Scene(camera=ep.Camera(...), meshes=[ep.Mesh(...), ...])
     image = ep.render(scene, spp=16)          # (H, W, 3) float32 tensor, linear radiance
+    loss(image).backward()                    # gradients into every tensor that requires grad
     ep.imwrite(image, "out.png")
 """
 
 from .io import imread, imwrite, load_obj
-from .render import render
+from .render import derivative_image, finite_difference_image, render
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "EnvironmentMap", "Material", "Mesh", "Scene", "render", "imread",
-           "imwrite", "load_obj", "__version__"]
+__all__ = ["Camera", "EnvironmentMap", "Material", "Mesh", "Scene", "render", "derivative_image",
+           "finite_difference_image", "imread", "imwrite", "load_obj", "__version__"]

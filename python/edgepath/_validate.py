@@ -59,12 +59,24 @@ def check_shape(t: torch.Tensor, field: str, shape: Shape, min_rows: int = 1) ->
 
 def float_tensor(value, field: str, shape: Shape, min_rows: int = 1) -> torch.Tensor:
     """A floating-point tensor of the given shape, as float32 C-contiguous (copied only if
-    needed, detached from autograd)."""
+    needed). The conversion is a differentiable torch op: the result stays attached to the
+    caller's tensor, so gradients flow back to it (and to its dtype)."""
     t = tensor(value, field)
     if not t.dtype.is_floating_point:
         fail(field, f"expected a floating-point tensor, got {t.dtype}")
     check_shape(t, field, shape, min_rows)
-    return t.detach().to(torch.float32).contiguous()
+    return t.to(torch.float32).contiguous()
+
+
+def scalar_tensor(value, field: str) -> torch.Tensor:
+    """A Python number or a one-element floating tensor, as a float32 tensor of shape (1,)
+    (attached to the caller's tensor)."""
+    number(value, field)  # type and shape checks
+    if isinstance(value, torch.Tensor):
+        if not value.dtype.is_floating_point:
+            fail(field, f"expected a floating-point tensor, got {value.dtype}")
+        return value.to(torch.float32).reshape(1)
+    return torch.tensor([float(value)], dtype=torch.float32)
 
 
 def index_tensor(value, field: str, shape: Shape = ("M", 3)) -> torch.Tensor:
@@ -123,6 +135,7 @@ def choice(value, field: str, options: dict):
 
 def texture(value, field: str, channels: int) -> torch.Tensor:
     """A constant or a texture, as a float32 (H, W, channels) tensor; a constant is 1x1.
+    Attached to the caller's tensor like ``float_tensor``.
 
     Constants: a Python number, a 0-d tensor, or a tensor of shape (channels,) or (1,).
     Textures: (H, W, channels); with channels == 1 also (H, W)."""
@@ -135,11 +148,11 @@ def texture(value, field: str, channels: int) -> torch.Tensor:
         if t.numel() not in (1, channels):
             expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
             fail(field, f"a constant must have shape {expected}, got {_shape_str(tuple(t.shape))}")
-        t = t.detach().to(torch.float32).reshape(1, 1, -1)
+        t = t.to(torch.float32).reshape(1, 1, -1)
         return t.expand(1, 1, channels).contiguous()
     if channels == 1 and t.dim() == 2:
         check_shape(t, field, ("H", "W"))
-        return t.detach().to(torch.float32).unsqueeze(-1).contiguous()
+        return t.to(torch.float32).unsqueeze(-1).contiguous()
     if t.dim() != 3 or t.shape[2] != channels:
         shapes = f"(H, W, {channels})" + (" or (H, W)" if channels == 1 else "")
         fail(field, f"a texture must have shape {shapes}, got {_shape_str(tuple(t.shape))}")

@@ -1,17 +1,24 @@
-"""Rendering: check and flatten a Scene into the core's plain description, call the core.
+"""Rendering and its derivatives: check and flatten a Scene into the core's plain description,
+call the core, and connect it to autograd.
 
-``render`` = ``flatten_scene`` (validation, float32/int32 views) + ``render_flat`` (one call
-into the C++ core). A torch.autograd.Function can wrap ``render_flat`` later: the flat scene
-lists every tensor the core reads.
+``flatten_scene`` validates the scene and converts every tensor the core reads with
+differentiable torch ops (dtype, layout, constants to 1x1 textures, the camera's parameters
+gathered into one vector), so that ``FlatScene.params`` lists, per gradient slot of the core,
+a float32 tensor still attached to the caller's tensors. ``render`` wraps the core in a
+``torch.autograd.Function`` whose inputs are those tensors: autograd carries the core's
+gradients back to whatever the user differentiates (vertices, a camera matrix, a float64
+colour, ...). ``derivative_image`` does the same in forward mode, with torch's forward-mode AD
+turning a direction on the user's tensor into directions on the core's slots.
 """
 
 from __future__ import annotations
 
 import re
 from dataclasses import dataclass, field
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import torch
+import torch.autograd.forward_ad as fwad
 
 from . import _core
 from . import _validate as v
@@ -21,18 +28,42 @@ SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1}
 
+# A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
+# ("meshes", i, "vertices" | "uvs" | "normals" | "emission"),
+# ("materials", i, "diffuse" | "specular" | "roughness").
+Slot = Tuple
+
 
 @dataclass
 class FlatScene:
-    """A validated scene in the form the core takes: dicts of numbers and float32/int32
-    C-contiguous CPU tensors (views of the caller's tensors where no conversion was needed).
-    ``materials[i]`` belongs to ``meshes[i]``, so core messages map back to mesh fields."""
+    """A validated scene in the form the core takes: dicts of numbers and detached float32 /
+    int32 C-contiguous CPU tensors (views of the caller's tensors where no conversion was
+    needed). ``params`` maps each differentiable slot to the same values as a tensor attached
+    to the caller's tensors. ``materials[i]`` belongs to ``meshes[i]``."""
     camera: dict
     materials: List[dict] = field(default_factory=list)
     meshes: List[dict] = field(default_factory=list)
     envmap: Optional[dict] = None
     height: int = 0  # size of the rendered image (the crop window if one is set)
     width: int = 0
+    params: Dict[Slot, torch.Tensor] = field(default_factory=dict)
+
+    def core_args(self):
+        return self.camera, self.materials, self.meshes, self.envmap
+
+    def slot_buffers(self, buffers: Dict[Slot, torch.Tensor]) -> dict:
+        """The core's nested description of gradient slots, from {slot: float32 tensor}."""
+        out: dict = {}
+        for slot, t in buffers.items():
+            if len(slot) == 1:
+                out[slot[0]] = t
+            else:
+                group, i, name = slot
+                lst = out.setdefault(group, [None] * len(getattr(self, group)))
+                if lst[i] is None:
+                    lst[i] = {}
+                lst[i][name] = t
+        return out
 
 
 @dataclass
@@ -43,19 +74,103 @@ class RenderOptions:
     num_threads: int = 0  # 0: all cores
     sampling: int = 0
 
+    def core(self) -> dict:
+        return {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
+                "num_threads": self.num_threads, "sampling": self.sampling}
+
 
 def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
-           num_threads: Optional[int] = None, sampling: str = "mis") -> torch.Tensor:
+           num_threads: Optional[int] = None, sampling: str = "mis",
+           backward_spp: Optional[int] = None,
+           backward_seed: Optional[int] = None) -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
 
     ``spp``: samples per pixel; ``max_bounces``: scattering events per path (0: emitters
     seen directly, 1: direct lighting, ...); ``seed`` fixes the image bit for bit whatever
     ``num_threads`` (None: all cores); ``sampling``: "mis", "light" or "bsdf" (direct light
-    by multiple importance sampling, by light sampling only, or by BSDF sampling only)."""
+    by multiple importance sampling, by light sampling only, or by BSDF sampling only).
+
+    Differentiable: if a scene tensor requires grad, ``loss.backward()`` runs the gradient pass
+    with ``backward_spp`` samples per pixel (default: ``spp``). Its random numbers are
+    independent of the image's by default (an unbiased gradient of the expected image);
+    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling)
-    image, _ = render_flat(flatten_scene(scene), options)
+    flat = flatten_scene(scene)
+    attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
+    if not attached or not torch.is_grad_enabled():
+        image, _ = render_flat(flat, options)
+        return image
+    grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
+                                  _backward_seed(options.seed) if backward_seed is None else backward_seed,
+                                  num_threads, sampling)
+    slots = [slot for slot, _ in attached]
+    return _RenderFunction.apply(flat, options, grad_options, slots, *[t for _, t in attached])
+
+
+class _RenderFunction(torch.autograd.Function):
+    """Inputs: the flat scene (its dicts hold detached copies of the values) and, as tensors
+    autograd tracks, the attached params of the slots that need gradients."""
+
+    @staticmethod
+    def forward(ctx, flat, options, grad_options, slots, *tensors):
+        image, _ = render_flat(flat, options)
+        ctx.flat, ctx.grad_options, ctx.slots = flat, grad_options, slots
+        return image
+
+    @staticmethod
+    def backward(ctx, grad_image):
+        flat = ctx.flat
+        needed = ctx.needs_input_grad[4:]
+        buffers = {slot: torch.zeros(flat.params[slot].shape, dtype=torch.float32)
+                   for slot, need in zip(ctx.slots, needed) if need}
+        if buffers:
+            adjoint = grad_image.detach().to(torch.float32).contiguous()
+            _call_core(_core.render_gradients, *flat.core_args(), adjoint,
+                       flat.slot_buffers(buffers), ctx.grad_options.core())
+        return (None, None, None, None, *[buffers.get(slot) for slot in ctx.slots])
+
+
+def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
+                     spp: int = 16, max_bounces: int = 1, seed: int = 0,
+                     num_threads: Optional[int] = None, sampling: str = "mis") -> torch.Tensor:
+    """The derivative of the image along ``direction`` in the space of ``param`` (forward mode):
+    (H, W, 3) float32, dI/dt of the image of the scene with ``param + t * direction``.
+
+    ``param`` is any tensor the scene holds (vertices, a texture, ``camera.to_world``, the
+    envmap's ``scale``, ...), or a tensor with ``requires_grad`` that the scene's tensors were
+    computed from (a pose, a scalar offset); ``direction`` has its shape. Computed by the gradient pass's own
+    code, per camera sample, with the same random numbers as ``render`` for the same seed."""
+    options = render_options(spp, max_bounces, seed, num_threads, sampling)
+    directions = _slot_directions(scene, param, direction)
+    flat = flatten_scene(scene)
+    image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
+    if directions:
+        _call_core(_core.derivative_image, *flat.core_args(), flat.slot_buffers(directions),
+                   image, options.core())
+    else:
+        image.zero_()
     return image
+
+
+def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
+                            eps: float = 1e-3, spp: int = 16, max_bounces: int = 1, seed: int = 0,
+                            num_threads: Optional[int] = None,
+                            sampling: str = "mis") -> torch.Tensor:
+    """Central finite difference (I(param + eps/2 direction) - I(param - eps/2 direction)) / eps,
+    both images rendered with the same seed (the same random numbers), as Mitsuba's references
+    are made. Compare it with ``derivative_image``. ``param`` must be a tensor the scene holds
+    (to difference a tensor the scene is computed from, rebuild the scene at both values)."""
+    eps = v.number(eps, "eps")
+    if not eps > 0:
+        v.fail("eps", f"must be > 0, got {eps}")
+    base, direction = _check_direction(param, direction)
+    images = []
+    with torch.no_grad():
+        for sign in (0.5, -0.5):
+            moved = _substitute(scene, param, (base + sign * eps * direction).to(param.dtype))
+            images.append(render(moved, spp, max_bounces, seed, num_threads, sampling))
+    return (images[0] - images[1]) / eps
 
 
 def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis") -> RenderOptions:
@@ -71,19 +186,15 @@ def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mi
 def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, dict]:
     """One call into the core. Returns the image and the core's counters."""
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
-    try:
-        stats = _core.render(flat.camera, flat.materials, flat.meshes, flat.envmap, image,
-                             options.spp, options.max_bounces, options.seed,
-                             options.num_threads, options.sampling)
-    except ValueError as error:
-        raise ValueError(_user_field_names(str(error))) from None
+    stats = _call_core(_core.render, *flat.core_args(), image, options.core())
     return image, stats
 
 
 def flatten_scene(scene: Scene) -> FlatScene:
     if not isinstance(scene, Scene):
         v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
-    flat = FlatScene(camera=_flatten_camera(scene.camera))
+    flat = FlatScene(camera={})
+    _flatten_camera(scene.camera, flat)
     crop = flat.camera.get("crop_window")
     flat.height = crop[3] if crop else flat.camera["height"]
     flat.width = crop[2] if crop else flat.camera["width"]
@@ -94,17 +205,21 @@ def flatten_scene(scene: Scene) -> FlatScene:
     if len(meshes) == 0:
         v.fail("meshes", "the scene has no meshes")
     for i, mesh in enumerate(meshes):
-        mesh_dict, material_dict = _flatten_mesh(mesh, f"meshes[{i}]")
-        mesh_dict["material"] = i
-        flat.meshes.append(mesh_dict)
-        flat.materials.append(material_dict)
+        _flatten_mesh(mesh, i, flat)
 
     if scene.envmap is not None:
-        flat.envmap = _flatten_envmap(scene.envmap)
+        _flatten_envmap(scene.envmap, flat)
     return flat
 
 
 # ---- pieces -------------------------------------------------------------------------------
+
+def _call_core(fn, *args):
+    try:
+        return fn(*args)
+    except ValueError as error:
+        raise ValueError(_user_field_names(str(error))) from None
+
 
 def _seed(seed) -> int:
     seed = v.integer(seed, "seed", minimum=0)
@@ -113,11 +228,21 @@ def _seed(seed) -> int:
     return seed
 
 
-def _vec3_list(t: torch.Tensor) -> List[float]:
-    return [float(x) for x in t.tolist()]
+def _backward_seed(seed: int) -> int:
+    """A seed for the gradient pass whose random numbers are independent of the image's."""
+    x = (seed ^ 0x9E3779B97F4A7C15) & (2**64 - 1)
+    x = ((x ^ (x >> 30)) * 0xBF58476D1CE4E5B9) & (2**64 - 1)
+    x = ((x ^ (x >> 27)) * 0x94D049BB133111EB) & (2**64 - 1)
+    return x ^ (x >> 31)
 
 
-def _flatten_camera(camera) -> dict:
+def _param(flat: FlatScene, slot: Slot, value: torch.Tensor) -> torch.Tensor:
+    """Records the attached value of a slot; returns the detached one the core reads."""
+    flat.params[slot] = value
+    return value.detach()
+
+
+def _flatten_camera(camera, flat: FlatScene) -> None:
     f = "camera"
     if not isinstance(camera, Camera):
         v.fail(f, f"expected an edgepath.Camera, got {type(camera).__name__}")
@@ -125,7 +250,7 @@ def _flatten_camera(camera) -> dict:
         if any(x is not None for x in (camera.position, camera.look_at, camera.up)):
             v.fail(f, "give either to_world or position/look_at/up, not both")
         m = v.float_tensor(camera.to_world, "camera.to_world", (4, 4))
-        if float(torch.linalg.det(m[:3, :3])) < 0:
+        if float(torch.linalg.det(m[:3, :3].detach())) < 0:
             v.fail("camera.to_world", "mirrors the image (negative determinant); not supported")
         position, look_at, up = frame_from_to_world(m)
     else:
@@ -138,18 +263,22 @@ def _flatten_camera(camera) -> dict:
         look_at = v.float_tensor(look_at, "camera.look_at", (3,))
         up = v.float_tensor(up, "camera.up", (3,))
 
+    params = torch.cat([position, look_at, up, v.scalar_tensor(camera.fov, "camera.fov"),
+                        v.scalar_tensor(camera.ortho_scale, "camera.ortho_scale")])
+    values = [float(x) for x in _param(flat, ("camera",), params).tolist()]
+
     resolution = camera.resolution
     if not isinstance(resolution, (tuple, list)) or len(resolution) != 2:
         v.fail("camera.resolution", f"expected (height, width), got {resolution!r}")
     height = v.integer(resolution[0], "camera.resolution", minimum=1)
     width = v.integer(resolution[1], "camera.resolution", minimum=1)
 
-    out = {
-        "position": _vec3_list(position),
-        "look_at": _vec3_list(look_at),
-        "up": _vec3_list(up),
-        "fov": v.number(camera.fov, "camera.fov"),
-        "ortho_scale": v.number(camera.ortho_scale, "camera.ortho_scale"),
+    flat.camera = {
+        "position": values[0:3],
+        "look_at": values[3:6],
+        "up": values[6:9],
+        "fov": values[9],
+        "ortho_scale": values[10],
         "type": v.choice(camera.camera_type, "camera.camera_type", CAMERA_TYPES),
         "height": height,
         "width": width,
@@ -163,31 +292,31 @@ def _flatten_camera(camera) -> dict:
             v.fail("camera.crop_window", f"expected (x, y, width, height), got {crop!r}")
         x, y = (v.integer(c, "camera.crop_window", minimum=0) for c in crop[:2])
         w, h = (v.integer(c, "camera.crop_window", minimum=1) for c in crop[2:])
-        out["crop_window"] = [x, y, w, h]  # fitting in the film: checked by the core
-    return out
+        flat.camera["crop_window"] = [x, y, w, h]  # fitting in the film: checked by the core
 
 
-def _flatten_material(material, f: str, emissive: bool) -> dict:
+def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict:
+    f = f"meshes[{i}].material"
     if material is None:
         material = Material(diffuse=0.0 if emissive else 0.5)
     if not isinstance(material, Material):
         v.fail(f, f"expected an edgepath.Material, got {type(material).__name__}")
-    return {
-        "diffuse": v.texture(material.diffuse, f + ".diffuse", 3),
-        "specular": v.texture(material.specular, f + ".specular", 3),
-        "roughness": v.texture(material.roughness, f + ".roughness", 1),
-        "two_sided": v.boolean(material.two_sided, f + ".two_sided"),
-    }
+    out = {"two_sided": v.boolean(material.two_sided, f + ".two_sided")}
+    for name, channels in (("diffuse", 3), ("specular", 3), ("roughness", 1)):
+        value = v.texture(getattr(material, name), f"{f}.{name}", channels)
+        out[name] = _param(flat, ("materials", i, name), value)
+    return out
 
 
-def _flatten_mesh(mesh, f: str) -> Tuple[dict, dict]:
+def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
+    f = f"meshes[{i}]"
     if not isinstance(mesh, Mesh):
         v.fail(f, f"expected an edgepath.Mesh, got {type(mesh).__name__}")
     vertices = v.float_tensor(mesh.vertices, f + ".vertices", ("N", 3))
     indices = v.index_tensor(mesh.indices, f + ".indices", ("M", 3))
     rows = indices.shape[0]
     out = {
-        "vertices": vertices,
+        "vertices": _param(flat, ("meshes", i, "vertices"), vertices),
         "indices": indices,
         "uvs": None,
         "uv_indices": None,
@@ -195,35 +324,145 @@ def _flatten_mesh(mesh, f: str) -> Tuple[dict, dict]:
         "normal_indices": None,
         "emission": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
+        "material": i,
     }
     if mesh.uvs is not None:
-        out["uvs"] = v.float_tensor(mesh.uvs, f + ".uvs", ("K", 2))
+        out["uvs"] = _param(flat, ("meshes", i, "uvs"), v.float_tensor(mesh.uvs, f + ".uvs", ("K", 2)))
     if mesh.uv_indices is not None:
         out["uv_indices"] = v.index_tensor(mesh.uv_indices, f + ".uv_indices", (rows, 3))
     if mesh.normals is not None:
-        out["normals"] = v.float_tensor(mesh.normals, f + ".normals", ("K", 3))
+        normals = v.float_tensor(mesh.normals, f + ".normals", ("K", 3))
+        out["normals"] = _param(flat, ("meshes", i, "normals"), normals)
     if mesh.normal_indices is not None:
         out["normal_indices"] = v.index_tensor(mesh.normal_indices, f + ".normal_indices", (rows, 3))
     if mesh.emission is not None:
-        out["emission"] = v.texture(mesh.emission, f + ".emission", 3)
-    material = _flatten_material(mesh.material, f + ".material", mesh.emission is not None)
-    return out, material
+        emission = v.texture(mesh.emission, f + ".emission", 3)
+        out["emission"] = _param(flat, ("meshes", i, "emission"), emission)
+    material = _flatten_material(mesh.material, i, mesh.emission is not None, flat)
+    flat.meshes.append(out)
+    flat.materials.append(material)
 
 
-def _flatten_envmap(envmap) -> dict:
+def _flatten_envmap(envmap, flat: FlatScene) -> None:
     f = "envmap"
     if not isinstance(envmap, EnvironmentMap):
         v.fail(f, f"expected an edgepath.EnvironmentMap, got {type(envmap).__name__}")
     values = v.float_tensor(envmap.values, f + ".values", ("H", "W", 3))
+    scale = v.number(envmap.scale, f + ".scale")  # checks the type
+    if isinstance(envmap.scale, torch.Tensor):
+        # A tensor scale multiplies the values here, so that it gets its gradient from theirs.
+        values = values * v.scalar_tensor(envmap.scale, f + ".scale")
+        scale = 1.0
     if envmap.to_world is None:
-        rotation = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+        rotation = torch.eye(3, dtype=torch.float32).reshape(9)
     else:
         m = v.tensor(envmap.to_world, f + ".to_world")
         if tuple(m.shape) not in ((3, 3), (4, 4)):
             v.fail(f + ".to_world", f"expected shape (3, 3) or (4, 4), got {tuple(m.shape)}")
         m = v.float_tensor(m, f + ".to_world", tuple(m.shape))
-        rotation = [float(x) for x in m[:3, :3].reshape(-1).tolist()]
-    return {"values": values, "to_world": rotation, "scale": v.number(envmap.scale, f + ".scale")}
+        rotation = m[:3, :3].reshape(9)
+    flat.envmap = {
+        "values": _param(flat, ("envmap",), values),
+        "to_world": [float(x) for x in _param(flat, ("envmap_rotation",), rotation).tolist()],
+        "scale": scale,
+    }
+
+
+# ---- derivatives along a direction -----------------------------------------------------------
+
+def _check_direction(param, direction) -> Tuple[torch.Tensor, torch.Tensor]:
+    if not isinstance(param, torch.Tensor) or not param.dtype.is_floating_point:
+        v.fail("param", "expected a floating-point tensor of the scene")
+    direction = v.tensor(direction, "direction")
+    if tuple(direction.shape) != tuple(param.shape):
+        v.fail("direction", f"expected the shape of param {tuple(param.shape)}, got {tuple(direction.shape)}")
+    if not direction.dtype.is_floating_point:
+        v.fail("direction", f"expected a floating-point tensor, got {direction.dtype}")
+    if not bool(torch.isfinite(direction).all()):
+        v.fail("direction", "contains NaN or Inf")
+    return param.detach().to(torch.float64), direction.detach().to(torch.float64)
+
+
+def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]:
+    """The directions on the core's slots that ``direction`` on ``param`` induces: by
+    forward-mode AD through the flattening if the scene holds ``param`` itself, else (for a
+    tensor the scene's tensors were computed from) by a Jacobian-vector product through the
+    autograd graph that connects them."""
+    _check_direction(param, direction)
+    direction = direction.detach().to(param.dtype)
+    if _holds(scene, param):
+        with fwad.dual_level():
+            flat = flatten_scene(_substitute(scene, param, fwad.make_dual(param.detach(), direction)))
+            tangents = {slot: fwad.unpack_dual(t).tangent for slot, t in flat.params.items()}
+        return {slot: t.detach().to(torch.float32).contiguous()
+                for slot, t in tangents.items() if t is not None}
+    if not param.requires_grad:
+        v.fail("param", "is not a tensor of this scene, nor does the scene depend on it through "
+                        "autograd (pass the tensor the scene holds, e.g. scene.meshes[0].vertices, "
+                        "or one with requires_grad that the scene's tensors were computed from)")
+    with torch.enable_grad():
+        flat = flatten_scene(scene)
+        attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
+        if not attached:
+            return {}
+        # J dir through two vector-Jacobian products: g(u) = u^T J is linear in u, and
+        # d(g(u) . dir)/du = J dir.
+        us = [torch.zeros_like(t, requires_grad=True) for _, t in attached]
+        try:
+            (g,) = torch.autograd.grad([t for _, t in attached], param, grad_outputs=us,
+                                       create_graph=True, allow_unused=True)
+            if g is None or not g.requires_grad:
+                return {}
+            jvps = torch.autograd.grad(g, us, grad_outputs=direction, allow_unused=True)
+        except RuntimeError as error:
+            v.fail("param", "the scene's tensors depend on it through an autograd graph that "
+                            f"cannot be differentiated twice or was freed by a backward pass "
+                            f"(compute them from param again): {error}")
+    return {slot: j.detach().to(torch.float32).contiguous()
+            for (slot, _), j in zip(attached, jvps) if j is not None}
+
+
+def _holds(scene: Scene, param: torch.Tensor) -> bool:
+    try:
+        _substitute(scene, param, param)
+        return True
+    except ValueError:
+        return False
+
+
+def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor) -> Scene:
+    """A shallow copy of ``scene`` with every reference to the tensor ``param`` replaced by
+    ``value``; an error if the scene does not hold ``param``."""
+    found = False
+
+    def swap(obj, names):
+        nonlocal found
+        if not isinstance(obj, (Camera, Mesh, Material, EnvironmentMap)):
+            return obj  # None, or a wrong type the flattening reports
+        copy = object.__new__(type(obj))
+        copy.__dict__.update(obj.__dict__)
+        for name in names:
+            if getattr(obj, name, None) is param:
+                setattr(copy, name, value)
+                found = True
+        return copy
+
+    if not isinstance(scene, Scene):
+        v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
+    camera = swap(scene.camera, ("position", "look_at", "up", "fov", "ortho_scale", "to_world"))
+    meshes = scene.meshes
+    if isinstance(meshes, (list, tuple)):
+        meshes = []
+        for mesh in scene.meshes:
+            m = swap(mesh, ("vertices", "uvs", "normals", "emission"))
+            if isinstance(mesh, Mesh):
+                m.material = swap(mesh.material, ("diffuse", "specular", "roughness"))
+            meshes.append(m)
+    envmap = swap(scene.envmap, ("values", "to_world", "scale"))
+    if not found:
+        v.fail("param", "is not a tensor of this scene (pass the very tensor the scene holds, "
+                        "e.g. scene.meshes[0].vertices)")
+    return Scene(camera=camera, meshes=meshes, envmap=envmap)
 
 
 _MATERIAL_FIELD = re.compile(r"\bmaterials\[(\d+)\]")
