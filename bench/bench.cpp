@@ -78,12 +78,14 @@ struct Options {
     std::string image_path;    // optional: writes the last rendered image
     std::string csv_path;      // optional: writes every record
     bool render_only = false;  // skip the Embree-only runs (for profilers)
+    bool backward_memory = false;  // only: peak RSS of one backward pass (--size, --spp)
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
     std::fprintf(status ? stderr : stdout,
                  "%s\nusage: edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]\n"
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
+                 "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
                  "                      [--render-only]\n",
                  msg);
     std::exit(status);
@@ -114,6 +116,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--teapot") o.teapot_subdivisions = parse_int(value(), "--teapot", 1, 1024);
         else if (a == "--no-all-cores") o.all_cores = false;
         else if (a == "--render-only") o.render_only = true;
+        else if (a == "--backward-memory") o.backward_memory = true;
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -515,8 +518,142 @@ struct ForwardResult {
 
 }  // namespace
 
+// Gradient buffers for every differentiable parameter of the scene (the worst case: a user
+// optimising everything at once).
+struct AllGradients {
+    std::deque<std::vector<float>> buffers;
+    SceneGradients slots;
+    size_t bytes = 0;
+
+    GradSlot slot(size_t n) {
+        if (n == 0) return {};
+        buffers.emplace_back(n, 0.f);
+        bytes += n * sizeof(float);
+        GradSlot s;
+        s.grad = buffers.back().data();
+        return s;
+    }
+    static size_t size(const TextureDesc& t) { return t.data ? size_t(t.height) * t.width * t.channels : 0; }
+
+    explicit AllGradients(const SceneDesc& d) {
+        for (const MeshDesc& m : d.meshes) {
+            SceneGradients::MeshSlots ms;
+            ms.vertices = slot(size_t(m.num_vertices) * 3);
+            ms.uvs = slot(m.uvs ? size_t(m.num_uvs) * 2 : 0);
+            ms.normals = slot(m.normals ? size_t(m.num_normals) * 3 : 0);
+            ms.emission = slot(size(m.emission));
+            slots.meshes.push_back(ms);
+        }
+        for (const MaterialDesc& m : d.materials)
+            slots.materials.push_back({slot(size(m.diffuse)), slot(size(m.specular)), slot(size(m.roughness))});
+        if (d.has_envmap) {
+            slots.envmap = slot(size(d.envmap.values));
+            slots.envmap_rotation = slot(9);
+        }
+        slots.camera = slot(kCameraParams);
+    }
+};
+
+// The single-triangle scene of the classic comparison (a triangle in front of a wall, a lamp
+// behind the camera), as the Python demo builds it.
+struct TriangleScene {
+    std::vector<float> tri_v = {-1.7f, 1, 0, 1, 1, 0, -0.5f, -1, 0}, wall_v = {-4, -4, 2, -4, 4, 2, 4, 4, 2, 4, -4, 2},
+                       lamp_v = {-2, -2, -7, 2, -2, -7, 2, 2, -7, -2, 2, -7};
+    std::vector<int32_t> tri_i = {0, 1, 2}, quad_i = {0, 1, 2, 0, 2, 3};
+    std::vector<float> red = {0.8f, 0.2f, 0.2f}, spec = {0.04f, 0.04f, 0.04f}, rough = {0.3f}, grey = {0.5f, 0.5f, 0.5f},
+                       zero = {0, 0, 0}, half = {0.5f}, le = {20, 20, 20};
+    SceneDesc desc;
+
+    explicit TriangleScene(int size) {
+        auto mat = [](std::vector<float>& kd, std::vector<float>& ks, std::vector<float>& r) {
+            MaterialDesc m;
+            m.diffuse = {kd.data(), 1, 1, 3};
+            m.specular = {ks.data(), 1, 1, 3};
+            m.roughness = {r.data(), 1, 1, 1};
+            return m;
+        };
+        desc.materials = {mat(red, spec, rough), mat(grey, zero, half), mat(zero, zero, half)};
+        auto mesh = [](std::vector<float>& v, std::vector<int32_t>& i, int material) {
+            MeshDesc m;
+            m.vertices = v.data();
+            m.num_vertices = int64_t(v.size() / 3);
+            m.indices = i.data();
+            m.num_triangles = int64_t(i.size() / 3);
+            m.material = material;
+            return m;
+        };
+        desc.meshes = {mesh(tri_v, tri_i, 0), mesh(wall_v, quad_i, 1), mesh(lamp_v, quad_i, 2)};
+        desc.meshes[2].emission = {le.data(), 1, 1, 3};
+        CameraDesc& c = desc.camera;
+        const float pos[3] = {0, 0, -5}, at[3] = {0, 0, 0}, up[3] = {0, 1, 0};
+        std::copy(pos, pos + 3, c.position);
+        std::copy(at, at + 3, c.look_at);
+        std::copy(up, up + 3, c.up);
+        c.fov = 45;
+        c.width = c.height = size;
+    }
+};
+
+struct BackwardResult {
+    std::string scene;
+    int bounces;
+    double forward_ms, backward_ms;
+};
+
+// Median forward and backward (every parameter wanted, adjoint = 1) times.
+BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int spp, int bounces, int threads,
+                             int runs) {
+    std::shared_ptr<const Scene> scene = build_scene(desc);
+    const size_t n = size_t(image_width(*scene)) * image_height(*scene) * 3;
+    std::vector<float> image(n), adjoint(n, 1.f);
+    AllGradients grads(desc);
+    RenderOptions ro;
+    ro.spp = spp;
+    ro.max_bounces = bounces;
+    ro.num_threads = threads;
+    ro.seed = 3;
+    BackwardResult r{name, bounces, 0, 0};
+    r.forward_ms = time_ms(runs, [&] { render(*scene, ro, image.data()); });
+    r.backward_ms = time_ms(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
+    return r;
+}
+
+// One backward pass at the requested size, alone in this process: its peak RSS against the
+// image-sized buffers (image, adjoint) and the gradient buffers it must hold.
+int backward_memory(const Options& o, BenchScene& bs) {
+    bs.desc.camera.width = bs.desc.camera.height = o.size;
+    const double before = peak_rss_mib();
+    std::shared_ptr<const Scene> scene = build_scene(bs.desc);
+    const double after_build = peak_rss_mib();
+    const size_t n = size_t(o.size) * o.size * 3;
+    std::vector<float> adjoint(n, 1.f);
+    AllGradients grads(bs.desc);
+    RenderOptions ro;
+    ro.spp = o.spp;
+    ro.max_bounces = 1;
+    ro.num_threads = o.threads;
+    auto t0 = Clock::now();
+    render_gradients(*scene, ro, adjoint.data(), grads.slots);
+    const double ms = std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    const double peak = peak_rss_mib();
+    const double image_mib = double(n) * sizeof(float) / (1 << 20);
+    const double grad_mib = double(grads.bytes) / (1 << 20);
+    std::printf("\nBackward pass memory, %dx%d, %d spp, 1 bounce, %d threads (%.0f ms)\n", o.size, o.size, o.spp,
+                o.threads, ms);
+    std::printf("  peak RSS %.0f MiB: process and scene description %.0f MiB, + built scene (BVH, tables) %.0f MiB,\n"
+                "  + adjoint image %.0f MiB + gradient buffers %.1f MiB + the pass itself %.0f MiB\n",
+                peak, before, after_build - before, image_mib, grad_mib,
+                std::max(0.0, peak - after_build - image_mib - grad_mib));
+    return 0;
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
+    if (o.backward_memory) {
+        BenchScene bs;
+        build_bench_scene(bs, o);
+        return backward_memory(o, bs);
+    }
     std::vector<Record> records;
     auto record = [&](const std::string& section, const std::string& config, const std::string& metric, double v,
                       const std::string& unit) { records.push_back({section, config, metric, v, unit}); };
@@ -675,6 +812,25 @@ int main(int argc, char** argv) {
                       "target >= 0.5)");
         if (!o.render_only)
             split.print("Embree-only time by ray kind, and the renderer's time outside Embree (per ray, per thread)");
+
+        // Backward: the gradient pass with every parameter wanted, against the forward pass.
+        Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward"});
+        std::vector<BackwardResult> back;
+        for (int bounces : o.bounces)
+            back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
+        TriangleScene tri(256);
+        back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs));
+        for (const BackwardResult& r : back) {
+            const std::string config = r.scene + " threads=" + std::to_string(o.threads) + " bounces=" + std::to_string(r.bounces);
+            record("backward", config, "forward_ms", r.forward_ms, "ms");
+            record("backward", config, "backward_ms", r.backward_ms, "ms");
+            record("backward", config, "backward_over_forward", r.backward_ms / r.forward_ms, "");
+            backward.add({r.scene, std::to_string(o.threads), std::to_string(r.bounces), fmt(r.forward_ms, 1),
+                          fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2)});
+        }
+        backward.print("Backward pass (interior term, every parameter wanted, adjoint 1), " + std::to_string(o.spp) +
+                       " spp (single triangle: 4 spp, the scene of the classic comparison: 95 ms forward, 940 ms "
+                       "backward)");
 
         record("memory", "", "peak_rss_mib", peak_rss_mib(), "MiB");
         std::printf("\nlast image mean %.4f; peak RSS %.0f MiB\n", mean, peak_rss_mib());

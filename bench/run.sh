@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Runs the forward-rendering benchmark.
+# Runs the benchmark (forward and backward passes), then the backward-pass memory measurement.
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
 # Without a path, looks for the binary in the usual build folders. Options go to the binary
 # (edgepath_bench --help lists them), e.g.  bench/run.sh --runs 9 --csv bench.csv
@@ -23,4 +23,6 @@ if [[ -z "$bin" || ! -x "$bin" ]]; then
     echo "edgepath_bench not found${bin:+ at $bin}; build it first (make build, or cmake --build <dir> --target edgepath_bench)" >&2
     exit 1
 fi
-exec "$bin" "$@"
+"$bin" "$@"
+# Memory of a large backward pass, in a process of its own (peak RSS is per process).
+"$bin" --backward-memory --size 1024 --spp 16
