@@ -1,0 +1,129 @@
+#include "edges/edges.h"
+
+#include <algorithm>
+#include <cstring>
+#include <unordered_map>
+#include "scene/desc.h"
+
+namespace edgepath {
+
+namespace {
+
+struct PositionKey {
+    uint32_t bits[3];
+    bool operator==(const PositionKey& o) const {
+        return bits[0] == o.bits[0] && bits[1] == o.bits[1] && bits[2] == o.bits[2];
+    }
+};
+
+struct PositionHash {
+    size_t operator()(const PositionKey& k) const {
+        uint64_t h = 0x9E3779B97F4A7C15ull;
+        for (uint32_t b : k.bits) h = (h ^ b) * 0xBF58476D1CE4E5B9ull;
+        return size_t(h ^ (h >> 31));
+    }
+};
+
+PositionKey key_of(const float* p) {
+    PositionKey k;
+    for (int i = 0; i < 3; ++i) {
+        float v = p[i] == 0.f ? 0.f : p[i];  // -0 and +0 are one position
+        std::memcpy(&k.bits[i], &v, sizeof v);
+    }
+    return k;
+}
+
+struct HalfEdge {
+    int64_t lo, hi;  // welded vertex ids, lo < hi
+    int64_t face;
+    int32_t a, b;    // the face's own vertex indices, in the face's order
+};
+
+Vec3f face_normal(const MeshDesc& m, int64_t f) {
+    const int32_t* t = m.indices + 3 * f;
+    Vec3f p0 = Vec3f::load(m.vertices + 3 * int64_t(t[0])), p1 = Vec3f::load(m.vertices + 3 * int64_t(t[1])),
+          p2 = Vec3f::load(m.vertices + 3 * int64_t(t[2]));
+    return normalize(cross(p1 - p0, p2 - p0));
+}
+
+// The shading normal a face uses at one of its vertices (vertex index v of face f).
+Vec3f shading_normal(const MeshDesc& m, int64_t f, int32_t v) {
+    const int32_t* t = m.indices + 3 * f;
+    const int32_t* n = m.normal_indices ? m.normal_indices + 3 * f : t;
+    for (int k = 0; k < 3; ++k)
+        if (t[k] == v) return Vec3f::load(m.normals + 3 * int64_t(n[k]));
+    return Vec3f(0.f);
+}
+
+}  // namespace
+
+void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
+    // Weld vertices by position.
+    std::vector<int64_t> weld(size_t(m.num_vertices));
+    {
+        std::unordered_map<PositionKey, int64_t, PositionHash> ids;
+        ids.reserve(size_t(m.num_vertices));
+        for (int64_t v = 0; v < m.num_vertices; ++v)
+            weld[size_t(v)] = ids.emplace(key_of(m.vertices + 3 * v), int64_t(ids.size())).first->second;
+    }
+    std::vector<HalfEdge> half;
+    half.reserve(size_t(m.num_triangles) * 3);
+    for (int64_t f = 0; f < m.num_triangles; ++f) {
+        const int32_t* t = m.indices + 3 * f;
+        for (int k = 0; k < 3; ++k) {
+            int32_t a = t[k], b = t[(k + 1) % 3];
+            int64_t wa = weld[size_t(a)], wb = weld[size_t(b)];
+            if (wa == wb) continue;  // degenerate edge
+            half.push_back({std::min(wa, wb), std::max(wa, wb), f, a, b});
+        }
+    }
+    std::sort(half.begin(), half.end(), [](const HalfEdge& x, const HalfEdge& y) {
+        return x.lo != y.lo ? x.lo < y.lo : (x.hi != y.hi ? x.hi < y.hi : x.face < y.face);
+    });
+    for (size_t i = 0; i < half.size();) {
+        size_t j = i + 1;
+        while (j < half.size() && half[j].lo == half[i].lo && half[j].hi == half[i].hi) ++j;
+        const size_t count = j - i;
+        if (count == 2) {
+            const HalfEdge &h0 = half[i], &h1 = half[i + 1];
+            const Vec3f n0 = face_normal(m, h0.face), n1 = face_normal(m, h1.face);
+            bool shading_jump = m.normals == nullptr;
+            if (!shading_jump) {
+                // Split normals along the edge: a shading discontinuity.
+                for (int32_t v : {h0.a, h0.b}) {
+                    // the same position in the other face
+                    int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
+                    if (length_squared(shading_normal(m, h0.face, v) - shading_normal(m, h1.face, w)) > 1e-12f)
+                        shading_jump = true;
+                }
+            }
+            const bool coplanar = dot(n0, n1) > 1.f - 1e-6f;
+            if (!coplanar || (shading_jump && m.normals != nullptr)) {
+                Edge e;
+                e.mesh = mesh_index;
+                e.v0 = h0.a;
+                e.v1 = h0.b;
+                e.f0 = h0.face;
+                e.f1 = h1.face;
+                e.kind = shading_jump ? EdgeKind::Crease : EdgeKind::Smooth;
+                out.push_back(e);
+            }
+        } else {
+            // A boundary (one face), or an edge shared by more than two faces: each face's side
+            // is a boundary of its own; sampling them all is conservative (where nothing jumps,
+            // the two sides agree and the sample adds zero).
+            for (size_t k = i; k < j; ++k) {
+                Edge e;
+                e.mesh = mesh_index;
+                e.v0 = half[k].a;
+                e.v1 = half[k].b;
+                e.f0 = half[k].face;
+                e.kind = EdgeKind::Boundary;
+                out.push_back(e);
+            }
+        }
+        i = j;
+    }
+}
+
+}  // namespace edgepath

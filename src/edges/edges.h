@@ -1,0 +1,45 @@
+// The edges where visibility can change: built once per render from the meshes, for the
+// boundary terms of the gradient (edge sampling, see the docs).
+//
+// Faces are made adjacent by welding vertices that share a POSITION (the exact float triple), not
+// an index, so uv seams, split normals and duplicated vertices do not create false boundaries.
+// Kinds of edges kept:
+//   boundary  - one face (open meshes): a silhouette from every point that sees it;
+//   crease    - two faces at an angle in a mesh without shading normals: the shading jumps
+//               across it, so it is a discontinuity seen from everywhere, and a silhouette where
+//               one face is front-facing and the other is not;
+//   smooth    - two faces at an angle in a mesh with shading normals: a silhouette only;
+//   shared    - more than two faces (non-manifold): kept once per pair of consecutive faces
+//               around it, each pair treated as a two-face edge (never assumed away).
+// Edges between two coplanar faces of the same orientation are dropped (never a silhouette,
+// never a shading discontinuity); degenerate edges (both ends at one position) too.
+#pragma once
+#include <cstdint>
+#include <vector>
+#include "math/vec.h"
+
+namespace edgepath {
+
+struct MeshDesc;
+
+enum class EdgeKind : uint8_t { Boundary, Crease, Smooth };
+
+struct Edge {
+    int32_t mesh = -1;
+    int32_t v0 = -1, v1 = -1;  // vertex indices in the mesh (of the first face that has the edge)
+    int64_t f0 = -1, f1 = -1;  // adjacent triangles; f1 = -1 on a boundary
+    EdgeKind kind = EdgeKind::Boundary;
+};
+
+// All the edges of one mesh (mesh index `mesh` is stored in each edge).
+void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
+
+// Whether the edge is a silhouette seen from point `p`: a boundary always; otherwise when p is
+// in front of exactly one of the two faces (planes through the edge).
+inline bool is_silhouette(const Vec3f& p, const Vec3f& e0, const Vec3f& n0, const Vec3f& n1, EdgeKind kind) {
+    if (kind == EdgeKind::Boundary) return true;
+    const float s0 = dot(p - e0, n0), s1 = dot(p - e0, n1);
+    return (s0 > 0.f) != (s1 > 0.f);
+}
+
+}  // namespace edgepath

@@ -1,0 +1,131 @@
+// Edge extraction: welding by position, kinds of edges, what is dropped.
+#include <gtest/gtest.h>
+
+#include <map>
+#include <vector>
+
+#include "edges/edges.h"
+#include "scene/shapes.h"
+
+namespace edgepath {
+namespace {
+
+std::map<EdgeKind, int> count_kinds(const std::vector<Edge>& edges) {
+    std::map<EdgeKind, int> c;
+    for (const Edge& e : edges) c[e.kind]++;
+    return c;
+}
+
+std::vector<Edge> edges_of(const MeshData& m) {
+    std::vector<Edge> out;
+    build_mesh_edges(m.desc(0), 0, out);
+    return out;
+}
+
+TEST(Edges, BoxWithDuplicatedCornersHasTwelveCreases) {
+    // 6 separate quads (24 vertices): welding by position joins them into a closed box; the 6
+    // face diagonals are flat and dropped.
+    MeshData box = make_box(Vec3f(0, 0, 0), Vec3f(1, 2, 3));
+    ASSERT_EQ(box.num_vertices(), 24);
+    auto edges = edges_of(box);
+    auto c = count_kinds(edges);
+    EXPECT_EQ(edges.size(), 12u);
+    EXPECT_EQ(c[EdgeKind::Crease], 12);
+    for (const Edge& e : edges) {
+        EXPECT_GE(e.f1, 0);
+        EXPECT_NE(e.f0, e.f1);
+    }
+}
+
+TEST(Edges, QuadHasFourBoundariesAndNoDiagonal) {
+    MeshData quad = make_quad(Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0));
+    auto edges = edges_of(quad);
+    EXPECT_EQ(edges.size(), 4u);
+    EXPECT_EQ(count_kinds(edges)[EdgeKind::Boundary], 4);
+}
+
+TEST(Edges, SmoothSphereWithSeamIsClosed) {
+    // The uv seam duplicates a column of vertices, the poles a row each: no false boundary, no
+    // crease (the normals agree along the seam), every edge a smooth-surface edge.
+    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 8, 12);
+    auto edges = edges_of(sphere);
+    auto c = count_kinds(edges);
+    EXPECT_EQ(c[EdgeKind::Boundary], 0);
+    EXPECT_EQ(c[EdgeKind::Crease], 0);
+    // Closed: 86 distinct positions, 168 faces, so E = V + F - 2 = 252 edges; the 72 diagonals
+    // of the planar quads of the 6 non-polar bands are flat and dropped.
+    EXPECT_EQ(int(edges.size()), 252 - 72);
+}
+
+TEST(Edges, WeldedAndUnweldedMeshesGiveTheSameEdges) {
+    // A folded strip, once with shared vertices and once with every face owning its vertices.
+    const std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0.5f, 0, 2, 0};
+    const std::vector<int32_t> tris = {0, 1, 2, 1, 3, 2, 2, 3, 4};
+    MeshData shared, split;
+    shared.vertices = p;
+    shared.indices = tris;
+    for (int32_t i : tris) {
+        split.vertices.insert(split.vertices.end(), p.begin() + 3 * i, p.begin() + 3 * i + 3);
+        split.indices.push_back(int32_t(split.indices.size()));
+    }
+    auto a = count_kinds(edges_of(shared)), b = count_kinds(edges_of(split));
+    EXPECT_EQ(a, b);
+    EXPECT_EQ(a[EdgeKind::Boundary], 5);
+    EXPECT_EQ(a[EdgeKind::Crease], 2);  // both inner edges fold (flat shading)
+}
+
+TEST(Edges, SplitNormalsMakeACreaseEvenWhenCoplanar) {
+    MeshData quad = make_quad(Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0));
+    // Smooth normals, equal along the diagonal: the diagonal is dropped.
+    quad.normals.assign(12, 0.f);
+    for (int v = 0; v < 4; ++v) quad.normals[3 * v + 2] = 1.f;
+    EXPECT_EQ(edges_of(quad).size(), 4u);
+    // Separate vertices per face with different normals along the diagonal: a crease.
+    MeshData split;
+    for (int f = 0; f < 2; ++f)
+        for (int k = 0; k < 3; ++k) {
+            int32_t v = quad.indices[3 * f + k];
+            split.vertices.insert(split.vertices.end(), quad.vertices.begin() + 3 * v, quad.vertices.begin() + 3 * v + 3);
+            split.normals.insert(split.normals.end(), {f == 0 ? 0.3f : -0.3f, 0.f, 0.95f});
+            split.indices.push_back(3 * f + k);
+        }
+    auto c = count_kinds(edges_of(split));
+    EXPECT_EQ(c[EdgeKind::Boundary], 4);
+    EXPECT_EQ(c[EdgeKind::Crease], 1);
+}
+
+TEST(Edges, EdgeSharedByThreeFacesIsKeptForEachFace) {
+    MeshData fan;
+    fan.vertices = {0, 0, 0, 0, 1, 0, 1, 0, 0, -1, 0, 0.2f, 0, 0, 1};
+    fan.indices = {0, 1, 2, 1, 0, 3, 0, 1, 4};  // three fins on the edge (0, 1)
+    auto edges = edges_of(fan);
+    int on_shared = 0;
+    for (const Edge& e : edges)
+        if ((e.v0 == 0 && e.v1 == 1) || (e.v0 == 1 && e.v1 == 0)) {
+            ++on_shared;
+            EXPECT_EQ(e.kind, EdgeKind::Boundary);
+        }
+    EXPECT_EQ(on_shared, 3);
+    EXPECT_EQ(edges.size(), 3u + 6u);
+}
+
+TEST(Edges, DegenerateEdgesAreSkipped) {
+    MeshData m;
+    m.vertices = {0, 0, 0, 1, 0, 0, 1, 0, 0, 0, 1, 0};  // vertices 1 and 2 coincide
+    m.indices = {0, 1, 3, 1, 2, 3};
+    for (const Edge& e : edges_of(m)) {
+        const bool degenerate = (e.v0 == 1 && e.v1 == 2) || (e.v0 == 2 && e.v1 == 1);
+        EXPECT_FALSE(degenerate);
+    }
+}
+
+TEST(Edges, SilhouettePredicate) {
+    const Vec3f e0(0, 0, 0), n0(0, 0, 1), n1(1, 0, 0);  // a convex corner
+    EXPECT_TRUE(is_silhouette(Vec3f(-1, 0, 1), e0, n0, n1, EdgeKind::Smooth));   // sees only face 0
+    EXPECT_FALSE(is_silhouette(Vec3f(1, 0, 1), e0, n0, n1, EdgeKind::Smooth));   // sees both
+    EXPECT_FALSE(is_silhouette(Vec3f(-1, 0, -1), e0, n0, n1, EdgeKind::Smooth)); // sees neither
+    EXPECT_TRUE(is_silhouette(Vec3f(1, 0, 1), e0, n0, n1, EdgeKind::Boundary));
+}
+
+}  // namespace
+}  // namespace edgepath
