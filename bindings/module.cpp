@@ -253,6 +253,18 @@ nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::lis
 // Each array must have exactly as many values as the parameter it stands for.
 using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
 
+template <class View>
+const View& checked(nb::handle obj, int64_t size, const std::string& name, const char* what,
+                    std::vector<View>& keep) {
+    View v;
+    if (!nb::try_cast(obj, v, false))
+        fail(name, std::string("expected ") + what + " C-contiguous float32 CPU array");
+    if (int64_t(v.size()) != size)
+        fail(name, "has " + std::to_string(v.size()) + " values, the parameter " + std::to_string(size));
+    keep.push_back(v);
+    return keep.back();
+}
+
 struct SlotViews {
     bool reverse;
     std::vector<GradOut> outs;
@@ -264,21 +276,10 @@ struct SlotViews {
         const std::string name = field + "." + key;
         if (size == 0) fail(name, "the scene has no such parameter");
         nb::handle obj = d[key];
-        if (reverse) {
-            GradOut g;
-            if (!nb::try_cast(obj, g, false)) fail(name, "expected a writable C-contiguous float32 CPU array");
-            if (int64_t(g.size()) != size)
-                fail(name, "has " + std::to_string(g.size()) + " values, the parameter " + std::to_string(size));
-            outs.push_back(g);
-            s.grad = g.data();
-        } else {
-            FloatView v;
-            if (!nb::try_cast(obj, v, false)) fail(name, "expected a C-contiguous float32 CPU array");
-            if (int64_t(v.size()) != size)
-                fail(name, "has " + std::to_string(v.size()) + " values, the parameter " + std::to_string(size));
-            dirs.push_back(v);
-            s.dir = v.data();
-        }
+        if (reverse)
+            s.grad = checked(obj, size, name, "a writable", outs).data();
+        else
+            s.dir = checked(obj, size, name, "a", dirs).data();
         return s;
     }
 };
