@@ -169,10 +169,11 @@ def assert_matches_finite_difference(scene, param, direction, eps, spp, error_me
 # else moves a visibility boundary (the floor's own waves shadowing grazing sky directions, an
 # area light's outline among the fixed light-sample directions): the boundary terms of issues 4
 # and 5. Roughness has the noisiest derivative (two independent derivative images at 32768 spp
-# differ by mean err 0.012), so its mean threshold is 0.03 (Mitsuba's own range: 0.003-0.1).
+# differ by mean err 0.012) and a noisy finite difference (mean err 0.023 at eps 0.05, 0.019 at
+# eps 0.12; the roughness is 0.35-0.59, so the step's second-order error stays small).
 FD_CASES = [
     # name, eps, spp, error_mean, slow
-    ("roughness texture", 5e-2, 32768, 0.03, True),
+    ("roughness texture", 0.12, 32768, ERROR_MEAN, True),
     ("specular colour", 0.2, 16384, ERROR_MEAN, False),
     ("diffuse texture", 0.2, 16384, ERROR_MEAN, False),
     ("envmap texels", 0.2, 16384, ERROR_MEAN, False),
