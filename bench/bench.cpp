@@ -470,27 +470,11 @@ uint64_t trace_rays(RTCScene rtc, const std::vector<Ray>& rays, bool occlusion, 
                 for (size_t i = c * chunk; i < end; ++i) {
                     const Ray& ray = rays[i];
                     if (occlusion) {
-                        RTCRay r;
-                        r.org_x = ray.origin.x, r.org_y = ray.origin.y, r.org_z = ray.origin.z;
-                        r.dir_x = ray.dir.x, r.dir_y = ray.dir.y, r.dir_z = ray.dir.z;
-                        r.tnear = ray.tmin;
-                        r.tfar = ray.tmax;
-                        r.mask = 0xFFFFFFFFu;
-                        r.flags = 0;
-                        r.time = 0.f;
+                        RTCRay r = to_rtc_ray(ray);
                         rtcOccluded1(rtc, &ctx, &r);
                         local += r.tfar < 0.f;
                     } else {
-                        RTCRayHit rh;
-                        rh.ray.org_x = ray.origin.x, rh.ray.org_y = ray.origin.y, rh.ray.org_z = ray.origin.z;
-                        rh.ray.dir_x = ray.dir.x, rh.ray.dir_y = ray.dir.y, rh.ray.dir_z = ray.dir.z;
-                        rh.ray.tnear = ray.tmin;
-                        rh.ray.tfar = ray.tmax;
-                        rh.ray.mask = 0xFFFFFFFFu;
-                        rh.ray.flags = 0;
-                        rh.ray.time = 0.f;
-                        rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-                        rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+                        RTCRayHit rh = to_rtc_ray_hit(ray);
                         rtcIntersect1(rtc, &ctx, &rh);
                         local += rh.hit.geomID != RTC_INVALID_GEOMETRY_ID;
                     }

@@ -226,20 +226,7 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
 bool Scene::intersect(const Ray& ray, Hit& hit) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    RTCRayHit rh;
-    rh.ray.org_x = ray.origin.x;
-    rh.ray.org_y = ray.origin.y;
-    rh.ray.org_z = ray.origin.z;
-    rh.ray.dir_x = ray.dir.x;
-    rh.ray.dir_y = ray.dir.y;
-    rh.ray.dir_z = ray.dir.z;
-    rh.ray.tnear = ray.tmin;
-    rh.ray.tfar = ray.tmax;
-    rh.ray.mask = 0xFFFFFFFFu;
-    rh.ray.flags = 0;
-    rh.ray.time = 0.f;
-    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
-    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    RTCRayHit rh = to_rtc_ray_hit(ray);
     rtcIntersect1(rtc_, &ctx, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
     hit.mesh = int(rh.hit.geomID);
@@ -253,18 +240,7 @@ bool Scene::intersect(const Ray& ray, Hit& hit) const {
 bool Scene::occluded(const Ray& ray) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
-    RTCRay r;
-    r.org_x = ray.origin.x;
-    r.org_y = ray.origin.y;
-    r.org_z = ray.origin.z;
-    r.dir_x = ray.dir.x;
-    r.dir_y = ray.dir.y;
-    r.dir_z = ray.dir.z;
-    r.tnear = ray.tmin;
-    r.tfar = ray.tmax;
-    r.mask = 0xFFFFFFFFu;
-    r.flags = 0;
-    r.time = 0.f;
+    RTCRay r = to_rtc_ray(ray);
     rtcOccluded1(rtc_, &ctx, &r);
     return r.tfar < 0.f;
 }

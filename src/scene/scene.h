@@ -17,6 +17,31 @@
 
 namespace edgepath {
 
+// Embree's ray for `ray`; for intersection queries, the RTCRayHit with no hit yet.
+inline RTCRay to_rtc_ray(const Ray& ray) {
+    RTCRay r;
+    r.org_x = ray.origin.x;
+    r.org_y = ray.origin.y;
+    r.org_z = ray.origin.z;
+    r.dir_x = ray.dir.x;
+    r.dir_y = ray.dir.y;
+    r.dir_z = ray.dir.z;
+    r.tnear = ray.tmin;
+    r.tfar = ray.tmax;
+    r.mask = 0xFFFFFFFFu;
+    r.flags = 0;
+    r.time = 0.f;
+    r.id = 0;
+    return r;
+}
+inline RTCRayHit to_rtc_ray_hit(const Ray& ray) {
+    RTCRayHit rh;
+    rh.ray = to_rtc_ray(ray);
+    rh.hit.geomID = RTC_INVALID_GEOMETRY_ID;
+    rh.hit.instID[0] = RTC_INVALID_GEOMETRY_ID;
+    return rh;
+}
+
 struct Mesh {
     const float* vertices = nullptr;
     int64_t num_vertices = 0;
