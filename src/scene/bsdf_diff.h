@@ -62,6 +62,32 @@ template <class T> void d_smith_g1(T c, T ch, T a, T dG, T& dc, T& da) {
     // t2 = 1 / c^2 - 1
     dc += dt2 * (-2 / (c * c * c));
 }
+
+// The specular lobe's value F * S at (wo, wi) and its intermediates (the adjoint reuses them).
+// False where the half vector vanishes (the lobe is then zero).
+template <class T>
+struct GgxTerms {
+    TVec3<T> h, F;
+    T hl, ch, oh, D, Go, Gi, m, m5, S;
+};
+template <class T>
+bool ggx_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci,
+               GgxTerms<T>& g) {
+    TVec3<T> H = wo + wi;
+    g.hl = length(H);
+    if (!(g.hl > 0)) return false;
+    g.h = H / g.hl;
+    g.ch = dot(n, g.h);
+    g.oh = dot(wo, g.h);
+    g.D = ggx_d(g.ch, p.alpha);
+    g.Go = smith_g1(co, g.oh, p.alpha);
+    g.Gi = smith_g1(ci, g.oh, p.alpha);
+    g.m = std::clamp(1 - g.oh, T(0), T(1));
+    g.m5 = g.m * g.m * g.m * g.m * g.m;
+    g.F = p.specular + (TVec3<T>(T(1)) - p.specular) * g.m5;
+    g.S = g.D * g.Go * g.Gi / (4 * co);
+    return true;
+}
 }  // namespace detail
 
 // f(wo, wi) * cos(theta_i), world space; n unit shading normal, wo/wi unit.
@@ -75,19 +101,8 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
     T ci = dot(n, wi);
     if (co <= 0 || ci <= 0) return TVec3<T>(T(0));
     TVec3<T> result = p.diffuse * (ci / detail::pi<T>());
-    if (!is_black(p.specular)) {
-        TVec3<T> H = wo + wi;
-        T hl = length(H);
-        if (!(hl > 0)) return result;
-        TVec3<T> h = H / hl;
-        T ch = dot(n, h), oh = dot(wo, h);
-        T D = detail::ggx_d(ch, p.alpha);
-        T Go = detail::smith_g1(co, oh, p.alpha), Gi = detail::smith_g1(ci, oh, p.alpha);
-        T m = std::clamp(1 - oh, T(0), T(1));
-        T m5 = m * m * m * m * m;
-        TVec3<T> F = p.specular + (TVec3<T>(T(1)) - p.specular) * m5;
-        result += F * (D * Go * Gi / (4 * co));
-    }
+    detail::GgxTerms<T> g;
+    if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) result += g.F * g.S;
     return result;
 }
 
@@ -108,43 +123,33 @@ void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, 
     // result = diffuse * ci / pi
     d.diffuse += dr * (ci / detail::pi<T>());
     dci += dot(dr, p.diffuse) / detail::pi<T>();
-    if (!is_black(p.specular)) {
-        TVec3<T> H = wo + wi;
-        T hl = length(H);
-        if (hl > 0) {
-            TVec3<T> h = H / hl;
-            T ch = dot(n, h), oh = dot(wo, h);
-            T D = detail::ggx_d(ch, p.alpha);
-            T Go = detail::smith_g1(co, oh, p.alpha), Gi = detail::smith_g1(ci, oh, p.alpha);
-            T m = std::clamp(1 - oh, T(0), T(1));
-            T m5 = m * m * m * m * m;
-            TVec3<T> F = p.specular + (TVec3<T>(T(1)) - p.specular) * m5;
-            T S = D * Go * Gi / (4 * co);
-            // result += F * S
-            TVec3<T> dF = dr * S;
-            T dS = dot(dr, F);
-            // F = ks + (1 - ks) m^5
-            d.specular += dF * (1 - m5);
-            T dm = (1 - oh > 0 && 1 - oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m * m * m * m : T(0);
-            T doh = -dm;
-            // S = D Go Gi / (4 co)
-            T dD = dS * Go * Gi / (4 * co);
-            T dGo = dS * D * Gi / (4 * co);
-            T dGi = dS * D * Go / (4 * co);
-            dco += -dS * S / co;
-            T dch = 0;
-            detail::d_ggx_d(ch, p.alpha, dD, dch, d.alpha);
-            detail::d_smith_g1(co, oh, p.alpha, dGo, dco, d.alpha);
-            detail::d_smith_g1(ci, oh, p.alpha, dGi, dci, d.alpha);
-            // ch = n.h, oh = wo.h
-            TVec3<T> dh = n * dch + wo * doh;
-            dn += h * dch;
-            d.wo += h * doh;
-            // h = H / |H|
-            TVec3<T> dH = (dh - h * dot(h, dh)) / hl;
-            d.wo += dH;
-            d.wi += dH;
-        }
+    detail::GgxTerms<T> g;
+    if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) {
+        // result += F * S
+        TVec3<T> dF = dr * g.S;
+        T dS = dot(dr, g.F);
+        // F = ks + (1 - ks) m^5, m = clamp(1 - oh)
+        d.specular += dF * (1 - g.m5);
+        T m4 = g.m * g.m * g.m * g.m;
+        T dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : T(0);
+        T doh = -dm;
+        // S = D Go Gi / (4 co)
+        T dD = dS * g.Go * g.Gi / (4 * co);
+        T dGo = dS * g.D * g.Gi / (4 * co);
+        T dGi = dS * g.D * g.Go / (4 * co);
+        dco += -dS * g.S / co;
+        T dch = 0;
+        detail::d_ggx_d(g.ch, p.alpha, dD, dch, d.alpha);
+        detail::d_smith_g1(co, g.oh, p.alpha, dGo, dco, d.alpha);
+        detail::d_smith_g1(ci, g.oh, p.alpha, dGi, dci, d.alpha);
+        // ch = n.h, oh = wo.h
+        TVec3<T> dh = n * dch + wo * doh;
+        dn += g.h * dch;
+        d.wo += g.h * doh;
+        // h = H / |H|, H = wo + wi
+        TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
+        d.wo += dH;
+        d.wi += dH;
     }
     // co = n.wo, ci = n.wi
     dn += wo * dco + wi * dci;
