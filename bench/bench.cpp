@@ -509,29 +509,28 @@ struct AllGradients {
     SceneGradients slots;
     size_t bytes = 0;
 
-    GradSlot slot(size_t n) {
+    GradSlot slot(int64_t n) {
         if (n == 0) return {};
-        buffers.emplace_back(n, 0.f);
-        bytes += n * sizeof(float);
+        buffers.emplace_back(size_t(n), 0.f);
+        bytes += size_t(n) * sizeof(float);
         GradSlot s;
         s.grad = buffers.back().data();
         return s;
     }
-    static size_t size(const TextureDesc& t) { return t.data ? size_t(t.height) * t.width * t.channels : 0; }
 
     explicit AllGradients(const SceneDesc& d) {
         for (const MeshDesc& m : d.meshes) {
             SceneGradients::MeshSlots ms;
-            ms.vertices = slot(size_t(m.num_vertices) * 3);
-            ms.uvs = slot(m.uvs ? size_t(m.num_uvs) * 2 : 0);
-            ms.normals = slot(m.normals ? size_t(m.num_normals) * 3 : 0);
-            ms.emission = slot(size(m.emission));
+            ms.vertices = slot(m.num_vertices * 3);
+            ms.uvs = slot(m.uvs ? m.num_uvs * 2 : 0);
+            ms.normals = slot(m.normals ? m.num_normals * 3 : 0);
+            ms.emission = slot(m.emission.num_values());
             slots.meshes.push_back(ms);
         }
         for (const MaterialDesc& m : d.materials)
-            slots.materials.push_back({slot(size(m.diffuse)), slot(size(m.specular)), slot(size(m.roughness))});
+            slots.materials.push_back({slot(m.diffuse.num_values()), slot(m.specular.num_values()), slot(m.roughness.num_values())});
         if (d.has_envmap) {
-            slots.envmap = slot(size(d.envmap.values));
+            slots.envmap = slot(d.envmap.values.num_values());
             slots.envmap_rotation = slot(9);
         }
         slots.camera = slot(kCameraParams);

@@ -284,14 +284,10 @@ struct SlotViews {
     }
 };
 
-int64_t texture_size(const edgepath::TextureDesc& t) {
-    return t.data ? int64_t(t.height) * t.width * t.channels : 0;
-}
-
 edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, const edgepath::SceneDesc& desc) {
     edgepath::SceneGradients g;
     g.camera = views.slot(d, "camera", edgepath::kCameraParams, "gradients");
-    g.envmap = views.slot(d, "envmap", desc.has_envmap ? texture_size(desc.envmap.values) : 0, "gradients");
+    g.envmap = views.slot(d, "envmap", desc.has_envmap ? desc.envmap.values.num_values() : 0, "gradients");
     g.envmap_rotation = views.slot(d, "envmap_rotation", desc.has_envmap ? 9 : 0, "gradients");
     if (has(d, "meshes")) {
         nb::list meshes = nb::cast<nb::list>(d["meshes"]);
@@ -305,7 +301,7 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.meshes[i].vertices = views.slot(m, "vertices", md.num_vertices * 3, f);
             g.meshes[i].uvs = views.slot(m, "uvs", md.uvs ? md.num_uvs * 2 : 0, f);
             g.meshes[i].normals = views.slot(m, "normals", md.normals ? md.num_normals * 3 : 0, f);
-            g.meshes[i].emission = views.slot(m, "emission", texture_size(md.emission), f);
+            g.meshes[i].emission = views.slot(m, "emission", md.emission.num_values(), f);
         }
     }
     if (has(d, "materials")) {
@@ -318,9 +314,9 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             const nb::dict m = nb::cast<nb::dict>(materials[i]);
             const edgepath::MaterialDesc& md = desc.materials[i];
             const std::string f = "gradients.materials[" + std::to_string(i) + "]";
-            g.materials[i].diffuse = views.slot(m, "diffuse", texture_size(md.diffuse), f);
-            g.materials[i].specular = views.slot(m, "specular", texture_size(md.specular), f);
-            g.materials[i].roughness = views.slot(m, "roughness", texture_size(md.roughness), f);
+            g.materials[i].diffuse = views.slot(m, "diffuse", md.diffuse.num_values(), f);
+            g.materials[i].specular = views.slot(m, "specular", md.specular.num_values(), f);
+            g.materials[i].roughness = views.slot(m, "roughness", md.roughness.num_values(), f);
         }
     }
     return g;

@@ -15,6 +15,7 @@ struct TextureDesc {
     const float* data = nullptr;
     int height = 0, width = 0, channels = 0;
     bool empty() const { return data == nullptr; }
+    int64_t num_values() const { return data ? int64_t(height) * width * channels : 0; }
 };
 
 struct MaterialDesc {

@@ -47,7 +47,7 @@ void check_texture(const TextureDesc& t, int channels, const std::string& field,
     if (t.height < 1 || t.width < 1) fail(field, "empty texture of size " + str(t.height) + "x" + str(t.width));
     if (t.channels != channels)
         fail(field, "expected " + str(channels) + " channels, got " + str(t.channels));
-    int64_t n = int64_t(t.height) * t.width * t.channels;
+    const int64_t n = t.num_values();
     check_finite(t.data, n, field);
     if (non_negative) check_non_negative(t.data, n, field);
 }
