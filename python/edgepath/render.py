@@ -390,10 +390,11 @@ def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]
     autograd graph that connects them."""
     _check_direction(param, direction)
     direction = direction.detach().to(param.dtype)
-    if _holds(scene, param):
-        with fwad.dual_level():
-            flat = flatten_scene(_substitute(scene, param, fwad.make_dual(param.detach(), direction)))
-            tangents = {slot: fwad.unpack_dual(t).tangent for slot, t in flat.params.items()}
+    with fwad.dual_level():
+        moved = _substitute(scene, param, fwad.make_dual(param.detach(), direction), required=False)
+        tangents = None if moved is None else {
+            slot: fwad.unpack_dual(t).tangent for slot, t in flatten_scene(moved).params.items()}
+    if tangents is not None:
         return {slot: t.detach().to(torch.float32).contiguous()
                 for slot, t in tangents.items() if t is not None}
     if not param.requires_grad:
@@ -422,17 +423,10 @@ def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]
             for (slot, _), j in zip(attached, jvps) if j is not None}
 
 
-def _holds(scene: Scene, param: torch.Tensor) -> bool:
-    try:
-        _substitute(scene, param, param)
-        return True
-    except ValueError:
-        return False
-
-
-def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor) -> Scene:
+def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
+                required: bool = True) -> Optional[Scene]:
     """A shallow copy of ``scene`` with every reference to the tensor ``param`` replaced by
-    ``value``; an error if the scene does not hold ``param``."""
+    ``value``. If the scene does not hold ``param``: an error, or None if not ``required``."""
     found = False
 
     def swap(obj, names):
@@ -460,6 +454,8 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor) -> Scene
             meshes.append(m)
     envmap = swap(scene.envmap, ("values", "to_world", "scale"))
     if not found:
+        if not required:
+            return None
         v.fail("param", "is not a tensor of this scene (pass the very tensor the scene holds, "
                         "e.g. scene.meshes[0].vertices)")
     return Scene(camera=camera, meshes=meshes, envmap=envmap)
