@@ -149,9 +149,10 @@ TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp)
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
                    GradSink& sink) {
     const auto& V = rec.vertices;
+    const bool env_wanted = slots.envmap.wanted() || slots.envmap_rotation.wanted();
     if (rec.camera_missed) {
         // L = env(d0), d0 = the camera ray's direction.
-        if (!scene.has_envmap) return;
+        if (!scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
         Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y);
         Vec3f d_dir = d_envmap(scene.envmap, slots, r.dir, a, sink);
         if (slots.camera.wanted()) {
@@ -168,10 +169,12 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         const PathVertexRecord& last = V[K - 1];
         Vec3f Le = scene.envmap.eval(last.next_dir);
         A_next = a * Le * rec.escape_weight;
-        // beta after the last vertex = beta_last * T_last
-        VertexGeometry g(scene, last.hit, last.origin, last.dir);
-        Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), g.sp.ns, -last.dir, last.next_dir) * last.next_inv_pdf;
-        d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+        if (env_wanted) {
+            // beta after the last vertex = beta_last * T_last
+            VertexGeometry g(scene, last.hit, last.origin, last.dir);
+            Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), g.sp.ns, -last.dir, last.next_dir) * last.next_inv_pdf;
+            d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+        }
     }
     for (int k = K - 1; k >= 0; --k) {
         const PathVertexRecord& r = V[k];
@@ -208,7 +211,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             Vec3f Le;
             if (r.nee_env) {
                 Le = scene.envmap.eval(r.nee_dir);
-                d_envmap(scene.envmap, slots, r.nee_dir, ab * f * r.nee_scale, sink);
+                if (env_wanted) d_envmap(scene.envmap, slots, r.nee_dir, ab * f * r.nee_scale, sink);
             } else {
                 const Mesh& lm = scene.meshes[r.nee_hit.mesh];
                 const SceneGradients::MeshSlots* lms = mesh_slots(slots, r.nee_hit.mesh);
