@@ -65,7 +65,9 @@ TEST(Bsdf, PdfIntegratesToOneAndSamplerMatchesIntegral) {
         // The density integrates to the probability that sampling succeeds (GGX samples that
         // fall below the horizon are discarded).
         EXPECT_NEAR(pdf_int.mean(), success.mean(), 5 * std::hypot(pdf_int.se(), success.se())) << "material " << idx;
-        if (is_black(p.specular)) EXPECT_EQ(success.mean(), 1.0);
+        if (is_black(p.specular)) {
+            EXPECT_EQ(success.mean(), 1.0);
+        }
         for (int c = 0; c < 3; ++c) {
             double se = std::hypot(f_uniform[c].se(), f_sampled[c].se());
             EXPECT_NEAR(f_uniform[c].mean(), f_sampled[c].mean(), 5 * se + 1e-6) << "material " << idx;
@@ -135,7 +137,9 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
         // The density is exact; near the poles its float round trip through the rotation loses
         // digits (1 / sin(theta)), so compare away from them.
         float sin_theta = std::sin(env.position(ws).y / float(env.rows) * kPi);
-        if (sin_theta > 0.1f) EXPECT_NEAR(env.pdf(ws), pdf, 2e-3f * pdf);
+        if (sin_theta > 0.1f) {
+            EXPECT_NEAR(env.pdf(ws), pdf, 2e-3f * pdf);
+        }
         L_sampled.add(luminance(env.eval(ws)) / pdf);
     }
     EXPECT_NEAR(pdf_int.mean(), 1.0, 5 * pdf_int.se());
