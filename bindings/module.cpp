@@ -205,6 +205,9 @@ edgepath::RenderOptions render_options(const nb::dict& d) {
     o.seed = scalar<uint64_t>(d, "seed", f);
     o.num_threads = scalar<int>(d, "num_threads", f);
     o.sampling = static_cast<edgepath::LightSampling>(scalar<int>(d, "sampling", f));
+    o.primary_edges = scalar<bool>(d, "primary_edges", f);
+    o.secondary_edges = scalar<bool>(d, "secondary_edges", f);
+    o.edge_samples = scalar<int64_t>(d, "edge_samples", f);
     return o;
 }
 

@@ -73,16 +73,22 @@ class RenderOptions:
     seed: int = 0
     num_threads: int = 0  # 0: all cores
     sampling: int = 0
+    primary_edges: bool = True
+    secondary_edges: bool = True
+    edge_samples: int = 0  # 0: one per output pixel per spp
 
     def core(self) -> dict:
         return {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
-                "num_threads": self.num_threads, "sampling": self.sampling}
+                "num_threads": self.num_threads, "sampling": self.sampling,
+                "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
+                "edge_samples": self.edge_samples}
 
 
 def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
            num_threads: Optional[int] = None, sampling: str = "mis",
            backward_spp: Optional[int] = None,
-           backward_seed: Optional[int] = None) -> torch.Tensor:
+           backward_seed: Optional[int] = None, primary_edges: bool = True,
+           secondary_edges: bool = True, edge_samples: Optional[int] = None) -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
 
@@ -94,8 +100,13 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     Differentiable: if a scene tensor requires grad, ``loss.backward()`` runs the gradient pass
     with ``backward_spp`` samples per pixel (default: ``spp``). Its random numbers are
     independent of the image's by default (an unbiased gradient of the expected image);
-    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image."""
-    options = render_options(spp, max_bounces, seed, num_threads, sampling)
+    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image.
+    The gradient includes the boundary terms of edges that move (edge sampling):
+    ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
+    shading points) switch them off for speed or comparison; ``edge_samples`` is the number of
+    primary edge samples (default: one per output pixel per backward sample)."""
+    options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
+                             secondary_edges, edge_samples)
     flat = flatten_scene(scene)
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     if not attached or not torch.is_grad_enabled():
@@ -103,7 +114,8 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
         return image
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
-                                  num_threads, sampling)
+                                  num_threads, sampling, primary_edges, secondary_edges,
+                                  edge_samples)
     slots = [slot for slot, _ in attached]
     return _RenderFunction.apply(flat, options, grad_options, slots, *[t for _, t in attached])
 
@@ -133,15 +145,19 @@ class _RenderFunction(torch.autograd.Function):
 
 def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
                      spp: int = 16, max_bounces: int = 1, seed: int = 0,
-                     num_threads: Optional[int] = None, sampling: str = "mis") -> torch.Tensor:
+                     num_threads: Optional[int] = None, sampling: str = "mis",
+                     primary_edges: bool = True, secondary_edges: bool = True,
+                     edge_samples: Optional[int] = None) -> torch.Tensor:
     """The derivative of the image along ``direction`` in the space of ``param`` (forward mode):
     (H, W, 3) float32, dI/dt of the image of the scene with ``param + t * direction``.
 
     ``param`` is any tensor the scene holds (vertices, a texture, ``camera.to_world``, the
     envmap's ``scale``, ...), or a tensor with ``requires_grad`` that the scene's tensors were
     computed from (a pose, a scalar offset); ``direction`` has its shape. Computed by the gradient pass's own
-    code, per camera sample, with the same random numbers as ``render`` for the same seed."""
-    options = render_options(spp, max_bounces, seed, num_threads, sampling)
+    code, per camera sample, with the same random numbers as ``render`` for the same seed, plus
+    the edges' boundary terms (options as for ``render``)."""
+    options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
+                             secondary_edges, edge_samples)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
@@ -173,8 +189,12 @@ def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.
     return (images[0] - images[1]) / eps
 
 
-def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis") -> RenderOptions:
+def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis",
+                   primary_edges=True, secondary_edges=True, edge_samples=None) -> RenderOptions:
     return RenderOptions(
+        primary_edges=v.boolean(primary_edges, "primary_edges"),
+        secondary_edges=v.boolean(secondary_edges, "secondary_edges"),
+        edge_samples=0 if edge_samples is None else v.integer(edge_samples, "edge_samples", minimum=1),
         spp=v.integer(spp, "spp", minimum=1),
         max_bounces=v.integer(max_bounces, "max_bounces", minimum=0),
         seed=_seed(seed),

@@ -172,7 +172,9 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         if (env_wanted) {
             // beta after the last vertex = beta_last * T_last
             VertexGeometry g(scene, last.hit, last.origin, last.dir);
-            Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), g.sp.ns, -last.dir, last.next_dir) * last.next_inv_pdf;
+            Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), bend_normal(g.sp.ns, g.sp.ng, -last.dir), -last.dir,
+                                      last.next_dir) *
+                      last.next_inv_pdf;
             d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
         }
     }
@@ -204,10 +206,11 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
 
         TBsdfParams<float> bp = bsdf_params_world(scene, sp);
+        const Vec3f ns = bend_normal(sp.ns, sp.ng, wo);
         DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
         // Next-event estimation: N = f(wo, w_l) Le_l scale
         if (r.nee) {
-            Vec3f f = bsdf_eval_world(bp, sp.ns, wo, r.nee_dir);
+            Vec3f f = bsdf_eval_world(bp, ns, wo, r.nee_dir);
             Vec3f Le;
             if (r.nee_env) {
                 Le = scene.envmap.eval(r.nee_dir);
@@ -228,13 +231,13 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
                 }
             }
             A_k += a * f * Le * r.nee_scale;
-            d_bsdf_eval_world(bp, sp.ns, wo, r.nee_dir, ab * Le * r.nee_scale, db);
+            d_bsdf_eval_world(bp, ns, wo, r.nee_dir, ab * Le * r.nee_scale, db);
         }
         // Continuation: beta_next = beta T, T = f(wo, w_next) / pdf
         if (r.next && (k + 1 < K || rec.escaped)) {
-            Vec3f T = bsdf_eval_world(bp, sp.ns, wo, r.next_dir) * r.next_inv_pdf;
+            Vec3f T = bsdf_eval_world(bp, ns, wo, r.next_dir) * r.next_inv_pdf;
             A_k += T * A_next;
-            d_bsdf_eval_world(bp, sp.ns, wo, r.next_dir, r.beta * A_next * r.next_inv_pdf, db);
+            d_bsdf_eval_world(bp, ns, wo, r.next_dir, r.beta * A_next * r.next_inv_pdf, db);
         }
         // Material parameters at uv.
         {
@@ -245,7 +248,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
         }
-        ha.dn += db.n;
+        d_bend_normal(sp.ns, sp.ng, wo, db.n, ha.dn, dwo);
         dwo += db.wo;
 
         Vec3f d_origin(0.f), d_dir(0.f);

@@ -42,4 +42,22 @@ inline bool is_silhouette(const Vec3f& p, const Vec3f& e0, const Vec3f& n0, cons
     return (s0 > 0.f) != (s1 > 0.f);
 }
 
+// The side of the edge (e0, e1) a ray (o, d) passes on: the sign of
+//   g = dot(cross(e0 - o, e1 - o), d),
+// zero when the ray meets the edge's line. The boundary term of an edge is a line integral of
+// (dg/dparameter) / |dg/dsample| (f+ - f-) over the points where g = 0; any positive scaling of g
+// leaves that ratio unchanged, so d need not be normalised. The partial derivatives of g:
+struct EdgeSideGradient {
+    Vec3f d_e0, d_e1, d_o, d_d;
+};
+inline EdgeSideGradient edge_side_gradient(const Vec3f& e0, const Vec3f& e1, const Vec3f& o, const Vec3f& d) {
+    const Vec3f a = e0 - o, b = e1 - o;
+    EdgeSideGradient g;
+    g.d_e0 = cross(b, d);
+    g.d_e1 = cross(d, a);
+    g.d_o = -(g.d_e0 + g.d_e1);
+    g.d_d = cross(a, b);
+    return g;
+}
+
 }  // namespace edgepath

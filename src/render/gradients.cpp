@@ -1,7 +1,9 @@
 // The gradient pass: every camera sample is re-traced with the random numbers of the forward
-// pass (same seed: same paths), recorded, and swept in reverse.
+// pass (same seed: same paths), recorded, and swept in reverse (the interior term); then the
+// boundary terms of the edges are added by their own passes.
 #include "diff/backprop.h"
 #include "edgepath.h"
+#include "edges/primary.h"
 #include "render/path.h"
 #include "render/tiles.h"
 #include <tbb/enumerable_thread_specific.h>
@@ -46,6 +48,7 @@ void render_gradients(const Scene& scene, const RenderOptions& opt, const float*
             backprop_path(scene, grads, rec, av, sinks.local());
         },
         [&] { sinks.local().flush(); });
+    primary_edge_pass(scene, opt, grads, adjoint, nullptr);
 }
 
 void derivative_image(const Scene& scene, const RenderOptions& opt, const SceneGradients& dirs, float* out) {
@@ -67,6 +70,7 @@ void derivative_image(const Scene& scene, const RenderOptions& opt, const SceneG
             }
         },
         [] {});
+    primary_edge_pass(scene, opt, dirs, nullptr, out);
 }
 
 }  // namespace edgepath

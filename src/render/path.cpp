@@ -1,5 +1,7 @@
 #include "render/path.h"
 
+#include "scene/bsdf_diff.h"
+
 namespace edgepath {
 
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
@@ -37,6 +39,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
 
     for (int bounce = 0; bounce < opt.max_bounces; ++bounce) {
         BsdfParams bp = scene.bsdf_params(sp);
+        sp.ns = bend_normal(sp.ns, sp.ng, -ray.dir);
         Frame frame(sp.ns);
         Vec3f wo = frame.to_local(-ray.dir);
 

@@ -14,8 +14,14 @@ namespace edgepath {
 
 inline void check_options(const RenderOptions& opt) {
     if (opt.spp < 1) throw std::invalid_argument("spp: must be at least 1, got " + std::to_string(opt.spp));
+    if (opt.edge_samples < 0)
+        throw std::invalid_argument("edge_samples: must be non-negative, got " + std::to_string(opt.edge_samples));
     if (opt.max_bounces < 0)
         throw std::invalid_argument("max_bounces: must be non-negative, got " + std::to_string(opt.max_bounces));
+}
+
+inline int thread_count(const RenderOptions& opt) {
+    return opt.num_threads > 0 ? opt.num_threads : tbb::this_task_arena::max_concurrency();
 }
 
 // Calls tile_fn(x0, y0, x1, y1) for tiles of the output image, in parallel on opt.num_threads.
@@ -24,8 +30,7 @@ void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_f
     constexpr int kTileSize = 16;
     const int W = scene.out_width, H = scene.out_height;
     const int tiles_x = (W + kTileSize - 1) / kTileSize, tiles_y = (H + kTileSize - 1) / kTileSize;
-    int threads = opt.num_threads > 0 ? opt.num_threads : tbb::this_task_arena::max_concurrency();
-    tbb::task_arena arena(threads);
+    tbb::task_arena arena(thread_count(opt));
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
             for (int tile = range.begin(); tile < range.end(); ++tile) {
@@ -33,6 +38,19 @@ void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_f
                 tile_fn(x0, y0, std::min(x0 + kTileSize, W), std::min(y0 + kTileSize, H));
             }
         });
+    });
+}
+
+// Calls fn(begin, end) over [0, n) in chunks, in parallel on opt.num_threads.
+template <class ChunkFn>
+void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&& fn) {
+    tbb::task_arena arena(thread_count(opt));
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<int64_t>(0, (n + chunk - 1) / chunk, 1),
+                          [&](const tbb::blocked_range<int64_t>& range) {
+                              for (int64_t c = range.begin(); c < range.end(); ++c)
+                                  fn(c * chunk, std::min(n, (c + 1) * chunk));
+                          });
     });
 }
 

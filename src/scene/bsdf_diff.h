@@ -90,6 +90,38 @@ bool ggx_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, c
 }
 }  // namespace detail
 
+// The shading normal the BSDF uses, bent towards the viewer where the interpolated normal
+// disagrees with the geometric side: with s = sign(wo . ng), any ns with s (wo . ns) < c is
+// replaced by normalize(ns + (s c - wo . ns) wo), so that the viewer is never behind the shading
+// normal while in front of the face (or the reverse). Without it, one-sided BSDFs would go
+// black along curves inside triangles near silhouettes; those curves move with the geometry but
+// lie on no edge, so edge sampling cannot account for them. Continuous in ns and wo.
+constexpr float kMinShadingCosine = 0.01f;
+
+template <class T>
+TVec3<T> bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo) {
+    const T s = dot(wo, ng) < 0 ? T(-1) : T(1), d = dot(wo, ns);
+    if (s * d >= T(kMinShadingCosine)) return ns;
+    return normalize(ns + wo * (s * T(kMinShadingCosine) - d));
+}
+
+// Adds the adjoint of bend_normal for the output adjoint `dout` to (dns, dwo); ng is a constant.
+template <class T>
+void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, const TVec3<T>& dout, TVec3<T>& dns,
+                   TVec3<T>& dwo) {
+    const T s = dot(wo, ng) < 0 ? T(-1) : T(1), d = dot(wo, ns);
+    if (s * d >= T(kMinShadingCosine)) {
+        dns += dout;
+        return;
+    }
+    // N = ns + k wo, k = s c - wo . ns
+    const T k = s * T(kMinShadingCosine) - d;
+    const TVec3<T> dN = d_normalize(ns + wo * k, dout);
+    const T dk = dot(dN, wo);
+    dns += dN - wo * dk;
+    dwo += dN * k - ns * dk;
+}
+
 // f(wo, wi) * cos(theta_i), world space; n unit shading normal, wo/wi unit.
 template <class T>
 TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi) {

@@ -89,6 +89,11 @@ struct RenderOptions {
     uint64_t seed = 0;
     int num_threads = 0;    // 0: all cores
     LightSampling sampling = LightSampling::MIS;
+    // Boundary terms of the gradient (edge sampling). Switching them off leaves the interior
+    // term only: faster, and wrong wherever visibility moves (for comparison and debugging).
+    bool primary_edges = true;     // silhouettes seen by the camera
+    bool secondary_edges = true;   // silhouettes seen from shading points
+    int64_t edge_samples = 0;      // primary edge samples; 0: one per output pixel per spp
 };
 
 // Counters a render reports (for benchmarks).

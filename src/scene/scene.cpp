@@ -128,6 +128,23 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
 
 }  // namespace
 
+const std::vector<Edge>& Scene::edges() const {
+    std::call_once(edges_once_, [this] {
+        for (size_t i = 0; i < meshes.size(); ++i) {
+            const Mesh& m = meshes[i];
+            MeshDesc d;
+            d.vertices = m.vertices;
+            d.num_vertices = m.num_vertices;
+            d.indices = m.indices;
+            d.num_triangles = m.num_triangles;
+            d.normals = m.normals;
+            d.normal_indices = m.normal_indices;
+            build_mesh_edges(d, int32_t(i), edges_);
+        }
+    });
+    return edges_;
+}
+
 Scene::~Scene() {
     if (rtc_) rtcReleaseScene(rtc_);
 }
@@ -289,7 +306,10 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
 Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
     const Mesh& m = meshes[sp.mesh];
     if (!m.is_emitter()) return Vec3f(0.f);
-    if (!m.two_sided_emission && dot(sp.ns, w) <= 0.f) return Vec3f(0.f);
+    // The emitting side is that of the face normal: deciding it by the interpolated shading
+    // normal would switch emission off along curves inside triangles near silhouettes, which
+    // move with the geometry but lie on no edge.
+    if (!m.two_sided_emission && dot(sp.ng, w) <= 0.f) return Vec3f(0.f);
     return eval_texture3(m.emission, sp.uv);
 }
 

@@ -3,10 +3,12 @@
 #pragma once
 #include <cstdint>
 #include <memory>
+#include <mutex>
 #include <vector>
 #include <embree3/rtcore.h>
 #include "math/frame.h"
 #include "math/ray.h"
+#include "edges/edges.h"
 #include "render/filter.h"
 #include "sampling/distribution.h"
 #include "scene/bsdf.h"
@@ -136,9 +138,15 @@ public:
 
     RTCScene rtc_scene() const { return rtc_; }
 
+    // The edges of all meshes (see edges/edges.h), built on first use: only gradient passes
+    // that want geometry or camera derivatives pay for them.
+    const std::vector<Edge>& edges() const;
+
 private:
     Scene() = default;
     RTCScene rtc_ = nullptr;
+    mutable std::once_flag edges_once_;
+    mutable std::vector<Edge> edges_;
 };
 
 }  // namespace edgepath

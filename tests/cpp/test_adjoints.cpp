@@ -102,6 +102,38 @@ TEST(Adjoint, BsdfWorldMatchesLocalModel) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(a[c], b[c], 1e-5f * (1 + a[c]));
 }
 
+// Inputs: ns[3], wo[3]; ng fixed. Cases: unbent, bent on the front, bent on the back.
+TEST(Adjoint, BendNormal) {
+    const Vec3d ng(0, 0, 1);
+    struct Case {
+        Vec3d ns, wo;
+        bool bent;
+    };
+    for (const Case& c : {Case{normalize(Vec3d(0.2, 0.1, 1)), normalize(Vec3d(0.3, -0.2, 1)), false},
+                          Case{normalize(Vec3d(0.6, 0, 0.8)), normalize(Vec3d(-0.9, 0.1, 0.2)), true},
+                          Case{normalize(Vec3d(0.6, 0, 0.8)), normalize(Vec3d(0.9, 0.1, -0.2)), true}}) {
+        const Vec3d b = bend_normal(c.ns, ng, c.wo);
+        EXPECT_EQ(c.bent, length(b - c.ns) > 1e-12);
+        // the viewer is on the face's side of the bent normal, by at least about the margin
+        const double s = dot(c.wo, ng) < 0 ? -1 : 1;
+        EXPECT_GE(s * dot(c.wo, b), 0.9 * kMinShadingCosine);
+        std::vector<double> x = {c.ns.x, c.ns.y, c.ns.z, c.wo.x, c.wo.y, c.wo.z};
+        Fn f = [&](const std::vector<double>& x) {
+            Vec3d o = bend_normal(v3(x, 0), ng, v3(x, 3));
+            return std::vector<double>{o.x, o.y, o.z};
+        };
+        auto adj = [&](const std::vector<double>& x, const std::vector<double>& ybar) {
+            Vec3d dns(0.0), dwo(0.0);
+            d_bend_normal(v3(x, 0), ng, v3(x, 3), v3(ybar, 0), dns, dwo);
+            std::vector<double> out(6);
+            put(out, 0, dns);
+            put(out, 3, dwo);
+            return out;
+        };
+        check_adjoint(f, adj, x, "bend_normal");
+    }
+}
+
 TEST(Adjoint, IntersectTriangle) {
     std::vector<double> x = {0.1, 0.2, -3, 0.05, -0.02, 1, -1, -1, 0.2, 1.2, -0.8, 0.1, 0.1, 1.1, -0.3};
     auto unpack = [](const std::vector<double>& x, Vec3d* a) { for (int k = 0; k < 5; ++k) a[k] = v3(x, 3 * k); };

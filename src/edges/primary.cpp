@@ -1,0 +1,233 @@
+#include "edges/primary.h"
+
+#include <algorithm>
+#include <cmath>
+#include <tbb/enumerable_thread_specific.h>
+#include "render/path.h"
+#include "render/tiles.h"
+
+namespace edgepath {
+
+namespace {
+
+// A silhouette edge's part on the film: the mesh vertices that receive its gradient and the
+// clipped segment (full-film pixels).
+struct FilmEdge {
+    int32_t mesh, v0, v1;
+    double ax, ay, bx, by;
+};
+
+Vec3f face_normal(const Mesh& m, int64_t f) {
+    const int32_t* t = m.indices + 3 * f;
+    const Vec3f p0 = m.vertex(t[0]);
+    return cross(m.vertex(t[1]) - p0, m.vertex(t[2]) - p0);
+}
+
+// Whether the camera sees the edge as a silhouette (or a crease, where shading jumps).
+bool camera_silhouette(const Camera& cam, const Mesh& m, const Edge& e) {
+    if (e.kind != EdgeKind::Smooth) return true;
+    const Vec3f n0 = face_normal(m, e.f0), n1 = face_normal(m, e.f1);
+    if (cam.type == CameraType::Orthographic) return (dot(cam.forward, n0) < 0.f) != (dot(cam.forward, n1) < 0.f);
+    return is_silhouette(cam.position, m.vertex(e.v0), n0, n1, e.kind);
+}
+
+// Clips the segment p(t) = a + t (b - a), t in [t0, t1], to lo <= p <= hi along one axis.
+bool clip_axis(double a, double b, double lo, double hi, double& t0, double& t1) {
+    const double d = b - a;
+    if (d == 0.0) return a >= lo && a <= hi;
+    double s0 = (lo - a) / d, s1 = (hi - a) / d;
+    if (s0 > s1) std::swap(s0, s1);
+    t0 = std::max(t0, s0);
+    t1 = std::min(t1, s1);
+    return t0 < t1;
+}
+
+// Projects the edge (p0, p1) onto the film and clips it to the window [x0, x1] x [y0, y1]
+// (full-film pixels). False when nothing is left.
+bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0, double y0, double x1, double y1,
+                  FilmEdge& fe) {
+    auto to_cam = [&](const Vec3f& p) {
+        const Vec3f q = p - cam.position;
+        return Vec3d(dot(q, cam.right), dot(q, cam.up), dot(q, cam.forward));
+    };
+    Vec3d q0 = to_cam(p0), q1 = to_cam(p1);
+    if (cam.type == CameraType::Perspective) {
+        // Keep the part in front of the camera.
+        const double near = 1e-5 * std::max(length(q0), length(q1));
+        if (q0.z < near && q1.z < near) return false;
+        if (q0.z < near) q0 = q1 + (q0 - q1) * ((q1.z - near) / (q1.z - q0.z));
+        if (q1.z < near) q1 = q0 + (q1 - q0) * ((q0.z - near) / (q0.z - q1.z));
+        q0.x /= q0.z;
+        q0.y /= q0.z;
+        q1.x /= q1.z;
+        q1.y /= q1.z;
+    }
+    // Inverse of Camera::screen.
+    const double w = cam.width, h = cam.height, tx = cam.tx;
+    auto film_x = [&](double sx) { return (sx / tx + 1.0) * 0.5 * w; };
+    auto film_y = [&](double sy) { return (1.0 - sy * w / (tx * h)) * 0.5 * h; };
+    const double ax = film_x(q0.x), ay = film_y(q0.y), bx = film_x(q1.x), by = film_y(q1.y);
+    double t0 = 0.0, t1 = 1.0;
+    if (!clip_axis(ax, bx, x0, x1, t0, t1) || !clip_axis(ay, by, y0, y1, t0, t1)) return false;
+    fe.ax = ax + (bx - ax) * t0;
+    fe.ay = ay + (by - ay) * t0;
+    fe.bx = ax + (bx - ax) * t1;
+    fe.by = ay + (by - ay) * t1;
+    return std::isfinite(fe.ax) && std::isfinite(fe.ay) && std::isfinite(fe.bx) && std::isfinite(fe.by);
+}
+
+bool vertices_wanted(const SceneGradients& slots, int mesh) {
+    return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
+}
+
+}  // namespace
+
+bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots) {
+    if (!opt.primary_edges) return false;
+    if (slots.camera.wanted()) return true;
+    for (size_t i = 0; i < scene.meshes.size(); ++i)
+        if (vertices_wanted(slots, int(i))) return true;
+    return false;
+}
+
+void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
+                       const float* adjoint, float* out) {
+    if (!primary_edges_wanted(scene, opt, slots)) return;
+    const Camera& cam = scene.camera;
+    const bool camera_wanted = slots.camera.wanted();
+
+    // The film window whose pixels the filter reaches: the output, widened by the filter's
+    // reach beyond a pixel.
+    const double margin = double(scene.filter.radius()) - 0.5;
+    const double wx0 = scene.crop_x - margin, wy0 = scene.crop_y - margin;
+    const double wx1 = scene.crop_x + scene.out_width + margin, wy1 = scene.crop_y + scene.out_height + margin;
+
+    std::vector<FilmEdge> film_edges;
+    std::vector<double> lengths;
+    for (const Edge& e : scene.edges()) {
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
+        const Mesh& m = scene.meshes[size_t(e.mesh)];
+        if (!camera_silhouette(cam, m, e)) continue;
+        FilmEdge fe;
+        if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
+        fe.mesh = e.mesh;
+        fe.v0 = e.v0;
+        fe.v1 = e.v1;
+        const double len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
+        if (!(len > 0.0)) continue;
+        film_edges.push_back(fe);
+        lengths.push_back(len);
+    }
+    if (film_edges.empty()) return;
+    // Cumulative film length: sample i takes the point at length (i + u) / n * total, so the
+    // samples are stratified along all the edges together.
+    std::vector<double> cumulative(lengths.size() + 1, 0.0);
+    for (size_t k = 0; k < lengths.size(); ++k) cumulative[k + 1] = cumulative[k] + lengths[k];
+    const double total = cumulative.back();
+    const int64_t n = opt.edge_samples > 0 ? opt.edge_samples
+                                           : int64_t(scene.out_width) * scene.out_height * int64_t(opt.spp);
+    // Every point of every edge is drawn with density 1 / total (per unit film length).
+    const double sample_weight = total / double(n);
+    // The step to each side: an angle of about 1e-5 (float rays resolve it at any distance),
+    // never below a thousandth of a pixel.
+    const double step = std::max(1e-3, 1e-5 * cam.width / (2.0 * cam.tx));
+    const double px_scale = 2.0 * cam.tx / cam.width;  // d(screen offset) / d(film pixel)
+
+    const float radius = scene.filter.radius();
+    const uint64_t seed = mix64(opt.seed ^ 0x70726d6564676573ull);
+    tbb::enumerable_thread_specific<GradSink> sinks([&] { return GradSink(adjoint == nullptr); });
+    for_each_chunk(opt, n, 4096, [&](int64_t begin, int64_t end) {
+        GradSink& sink = sinks.local();
+        RayCounters counters;
+        for (int64_t i = begin; i < end; ++i) {
+            Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
+            const double at = (double(i) + rng.next_double()) / double(n) * total;
+            const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
+                                             cumulative.begin()) - 1,
+                                      film_edges.size() - 1);
+            const FilmEdge& fe = film_edges[k];
+            const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
+            const float x = float(fe.ax + (fe.bx - fe.ax) * t), y = float(fe.ay + (fe.by - fe.ay) * t);
+
+            // The side function at the sample and its film-space gradient.
+            const Mesh& m = scene.meshes[size_t(fe.mesh)];
+            const Vec3f p0 = m.vertex(fe.v0), p1 = m.vertex(fe.v1);
+            Vec3f o, d;
+            camera_ray(scene.camera_params, x, y, o, d);
+            const EdgeSideGradient g = edge_side_gradient(p0, p1, o, d);
+            double gx, gy;
+            if (cam.type == CameraType::Perspective) {
+                // d = normalize(w), w = forward + sx right + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
+                const Vec3f w = cam.forward + cam.right * cam.screen(x, y).x + cam.up * cam.screen(x, y).y;
+                const double inv_w = 1.0 / length(w);
+                const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
+                gx = dot(g.d_d, dr) * px_scale * inv_w;
+                gy = -dot(g.d_d, du) * px_scale * inv_w;
+            } else {
+                gx = dot(g.d_o, cam.right) * px_scale;
+                gy = -dot(g.d_o, cam.up) * px_scale;
+            }
+            const double glen = std::hypot(gx, gy);
+            if (!(glen > 0.0) || !std::isfinite(glen)) continue;
+
+            // Both sides: g > 0 (upper) and g < 0 (lower).
+            const float sx = float(gx / glen * step), sy = float(gy / glen * step);
+            const Ray ray_u = cam.generate_ray(x + sx, y + sy), ray_l = cam.generate_ray(x - sx, y - sy);
+            Hit hit_u, hit_l;
+            const bool any_u = scene.intersect(ray_u, hit_u), any_l = scene.intersect(ray_l, hit_l);
+            // The same surface (or the sky) on both sides: the edge is hidden here.
+            if (any_u == any_l && (!any_u || (hit_u.mesh == hit_l.mesh && hit_u.prim == hit_l.prim))) continue;
+            Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
+            const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters) -
+                                trace_path(scene, opt, ray_l, path_l, counters);
+            if (is_black(delta)) continue;
+            const float weight = float(sample_weight / glen);
+
+            // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
+            const float ox = x - float(scene.crop_x) - 0.5f, oy = y - float(scene.crop_y) - 0.5f;
+            const int px0 = std::max(0, int(std::ceil(ox - radius))), px1 = std::min(scene.out_width - 1, int(std::floor(ox + radius)));
+            const int py0 = std::max(0, int(std::ceil(oy - radius))), py1 = std::min(scene.out_height - 1, int(std::floor(oy + radius)));
+            auto for_each_pixel = [&](auto&& fn) {
+                for (int py = py0; py <= py1; ++py) {
+                    const float ky = scene.filter.eval(oy - float(py));
+                    if (ky == 0.f) continue;
+                    for (int px = px0; px <= px1; ++px) {
+                        const float k = ky * scene.filter.eval(ox - float(px));
+                        if (k != 0.f) fn(int64_t(py) * scene.out_width + px, k);
+                    }
+                }
+            };
+            // Adds s * dg/d(parameter) to the sink.
+            auto add_side_gradient = [&](float s) {
+                if (vertices_wanted(slots, fe.mesh)) {
+                    const GradSlot& vs = slots.meshes[size_t(fe.mesh)].vertices;
+                    sink.add3(vs, fe.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
+                    sink.add3(vs, fe.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
+                }
+                if (camera_wanted) {
+                    float cg[kCameraParams] = {};
+                    d_camera_ray(scene.camera_params, x, y, g.d_o * s, g.d_d * s, cg);
+                    for (int k = 0; k < kCameraParams; ++k) sink.add(slots.camera, k, cg[k]);
+                }
+            };
+            if (adjoint) {
+                double s = 0.0;
+                for_each_pixel([&](int64_t p, float k) {
+                    const float* a = adjoint + 3 * p;
+                    s += double(k) * (a[0] * delta.x + a[1] * delta.y + a[2] * delta.z);
+                });
+                if (s != 0.0) add_side_gradient(float(s * weight));
+            } else {
+                add_side_gradient(1.f);
+                const float dg = float(sink.take_projection()) * weight;
+                if (dg == 0.f) continue;
+                for_each_pixel([&](int64_t p, float k) {
+                    for (int c = 0; c < 3; ++c) atomic_add(out + 3 * p + c, k * dg * delta[c]);
+                });
+            }
+        }
+    });
+    for (GradSink& s : sinks) s.flush();
+}
+
+}  // namespace edgepath

@@ -1,0 +1,23 @@
+// The boundary term of primary visibility: edges seen by the camera (edge sampling, section 3 of
+// the docs). Silhouette edges are projected to the film, clipped to the output (widened by the
+// pixel filter), and sampled in proportion to their clipped film length; at each sample a full
+// camera path is traced a tiny step to each side of the edge, and the difference, weighted by
+// the pixel filter (and by the adjoint image in reverse mode), moves the edge's two vertices and
+// the camera through the derivative of the side function (edges/edges.h).
+#pragma once
+#include "diff/gradients.h"
+#include "scene/desc.h"
+#include "scene/scene.h"
+
+namespace edgepath {
+
+// Whether the pass has anything to do: it is switched on and some vertex or the camera is wanted.
+bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots);
+
+// Reverse mode: adds d(adjoint . image)/d(parameter) to the slots' gradient buffers
+// (adjoint: the output image's (H, W, 3) adjoint). Forward mode (adjoint == nullptr): adds the
+// term's share of the derivative image along the slots' directions to `out` (H, W, 3).
+void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
+                       const float* adjoint, float* out);
+
+}  // namespace edgepath
