@@ -580,7 +580,7 @@ struct TriangleScene {
 struct BackwardResult {
     std::string scene;
     int bounces;
-    double forward_ms, backward_ms;
+    double forward_ms, backward_ms, interior_ms;  // interior_ms: primary edges off
 };
 
 // Median forward and backward (every parameter wanted, adjoint = 1) times.
@@ -595,10 +595,52 @@ BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int
     ro.max_bounces = bounces;
     ro.num_threads = threads;
     ro.seed = 3;
-    BackwardResult r{name, bounces, 0, 0};
+    BackwardResult r{name, bounces, 0, 0, 0};
     r.forward_ms = time_ms(runs, [&] { render(*scene, ro, image.data()); });
     r.backward_ms = time_ms(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
+    ro.primary_edges = false;
+    r.interior_ms = time_ms(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
     return r;
+}
+
+// Variance of the triangle's vertex gradients (image-sum loss) over seeds, for one edge sampling
+// strategy, and the mean backward time: their product is the cost of a given accuracy, so the
+// ratio of products compares the strategies at equal time.
+struct EdgeVariance {
+    double variance, ms;
+};
+EdgeVariance edge_variance(const SceneDesc& desc, EdgeSampling sampling, int threads, int seeds) {
+    std::shared_ptr<const Scene> scene = build_scene(desc);
+    const size_t n = size_t(image_width(*scene)) * image_height(*scene) * 3;
+    std::vector<float> adjoint(n, 1.f);
+    RenderOptions ro;
+    ro.spp = 4;
+    ro.max_bounces = 1;
+    ro.num_threads = threads;
+    ro.edge_sampling = sampling;
+    const size_t nv = size_t(desc.meshes[0].num_vertices) * 3;
+    std::vector<std::vector<double>> samples;
+    double total_ms = 0;
+    for (int s = 0; s < seeds; ++s) {
+        std::vector<float> g(nv, 0.f);
+        SceneGradients slots;
+        slots.meshes.resize(desc.meshes.size());
+        slots.meshes[0].vertices.grad = g.data();
+        ro.seed = uint64_t(100 + s);
+        auto t0 = std::chrono::steady_clock::now();
+        render_gradients(*scene, ro, adjoint.data(), slots);
+        total_ms += std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+        samples.emplace_back(g.begin(), g.end());
+    }
+    double var = 0;
+    for (size_t k = 0; k < nv; ++k) {
+        double mean = 0, sq = 0;
+        for (const auto& x : samples) mean += x[k];
+        mean /= seeds;
+        for (const auto& x : samples) sq += (x[k] - mean) * (x[k] - mean);
+        var += sq / (seeds - 1);
+    }
+    return {var / double(nv), total_ms / seeds};
 }
 
 // One backward pass at the requested size, alone in this process: its peak RSS against the
@@ -797,7 +839,8 @@ int main(int argc, char** argv) {
             split.print("Embree-only time by ray kind, and the renderer's time outside Embree (per ray, per thread)");
 
         // Backward: the gradient pass with every parameter wanted, against the forward pass.
-        Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward"});
+        Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward",
+                        "no primary edges ms"});
         std::vector<BackwardResult> back;
         for (int bounces : o.bounces)
             back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
@@ -808,12 +851,27 @@ int main(int argc, char** argv) {
             record("backward", config, "forward_ms", r.forward_ms, "ms");
             record("backward", config, "backward_ms", r.backward_ms, "ms");
             record("backward", config, "backward_over_forward", r.backward_ms / r.forward_ms, "");
+            record("backward", config, "backward_no_primary_edges_ms", r.interior_ms, "ms");
             backward.add({r.scene, std::to_string(o.threads), std::to_string(r.bounces), fmt(r.forward_ms, 1),
-                          fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2)});
+                          fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2), fmt(r.interior_ms, 1)});
         }
-        backward.print("Backward pass (interior term, every parameter wanted, adjoint 1), " + std::to_string(o.spp) +
+        backward.print("Backward pass (interior term and primary edges, one edge sample per pixel per spp; every "
+                       "parameter wanted, adjoint 1), " + std::to_string(o.spp) +
                        " spp (single triangle: 4 spp, the scene of the classic comparison: 95 ms forward, 940 ms "
                        "backward)");
+
+        // Edge sampling against the baseline: the triangle's vertex gradients over 16 seeds.
+        const EdgeVariance imp = edge_variance(tri.desc, EdgeSampling::Importance, o.threads, 16),
+                           uni = edge_variance(tri.desc, EdgeSampling::Uniform, o.threads, 16);
+        const double ratio = (uni.variance * uni.ms) / (imp.variance * imp.ms);
+        Table variance({"edge sampling", "backward ms", "vertex gradient variance", "variance x time"});
+        variance.add({"silhouettes, film length, stratified", fmt(imp.ms, 1), fmt(imp.variance, 2), fmt(imp.variance * imp.ms, 1)});
+        variance.add({"uniform over all edges (baseline)", fmt(uni.ms, 1), fmt(uni.variance, 2), fmt(uni.variance * uni.ms, 1)});
+        variance.print("Single triangle 256x256, 4 spp, 1 bounce: variance of the triangle's vertex gradients over 16 "
+                       "seeds; at equal time the baseline's variance is " + fmt(ratio, 0) + "x ours");
+        record("edge_variance", "single triangle importance", "variance", imp.variance, "");
+        record("edge_variance", "single triangle uniform", "variance", uni.variance, "");
+        record("edge_variance", "single triangle", "equal_time_ratio", ratio, "");
 
         record("memory", "", "peak_rss_mib", peak_rss_mib(), "MiB");
         std::printf("\nlast image mean %.4f; peak RSS %.0f MiB\n", mean, peak_rss_mib());

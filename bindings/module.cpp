@@ -208,6 +208,7 @@ edgepath::RenderOptions render_options(const nb::dict& d) {
     o.primary_edges = scalar<bool>(d, "primary_edges", f);
     o.secondary_edges = scalar<bool>(d, "secondary_edges", f);
     o.edge_samples = scalar<int64_t>(d, "edge_samples", f);
+    o.edge_sampling = static_cast<edgepath::EdgeSampling>(scalar<int>(d, "edge_sampling", f));
     return o;
 }
 

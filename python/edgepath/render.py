@@ -25,6 +25,7 @@ from . import _validate as v
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene, frame_from_to_world
 
 SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
+EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1}
 
@@ -76,19 +77,21 @@ class RenderOptions:
     primary_edges: bool = True
     secondary_edges: bool = True
     edge_samples: int = 0  # 0: one per output pixel per spp
+    edge_sampling: int = 0
 
     def core(self) -> dict:
         return {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
                 "num_threads": self.num_threads, "sampling": self.sampling,
                 "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
-                "edge_samples": self.edge_samples}
+                "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling}
 
 
 def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
            num_threads: Optional[int] = None, sampling: str = "mis",
            backward_spp: Optional[int] = None,
            backward_seed: Optional[int] = None, primary_edges: bool = True,
-           secondary_edges: bool = True, edge_samples: Optional[int] = None) -> torch.Tensor:
+           secondary_edges: bool = True, edge_samples: Optional[int] = None,
+           edge_sampling: str = "importance") -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
 
@@ -104,9 +107,11 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
     shading points) switch them off for speed or comparison; ``edge_samples`` is the number of
-    primary edge samples (default: one per output pixel per backward sample)."""
+    primary edge samples (default: one per output pixel per backward sample);
+    ``edge_sampling``: "importance" (silhouettes only, by clipped film length, stratified) or
+    "uniform" (every edge by world length: the baseline, for comparison)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples)
+                             secondary_edges, edge_samples, edge_sampling)
     flat = flatten_scene(scene)
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     if not attached or not torch.is_grad_enabled():
@@ -115,7 +120,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                   num_threads, sampling, primary_edges, secondary_edges,
-                                  edge_samples)
+                                  edge_samples, edge_sampling)
     slots = [slot for slot, _ in attached]
     return _RenderFunction.apply(flat, options, grad_options, slots, *[t for _, t in attached])
 
@@ -147,7 +152,8 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
                      spp: int = 16, max_bounces: int = 1, seed: int = 0,
                      num_threads: Optional[int] = None, sampling: str = "mis",
                      primary_edges: bool = True, secondary_edges: bool = True,
-                     edge_samples: Optional[int] = None) -> torch.Tensor:
+                     edge_samples: Optional[int] = None,
+                     edge_sampling: str = "importance") -> torch.Tensor:
     """The derivative of the image along ``direction`` in the space of ``param`` (forward mode):
     (H, W, 3) float32, dI/dt of the image of the scene with ``param + t * direction``.
 
@@ -157,7 +163,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     code, per camera sample, with the same random numbers as ``render`` for the same seed, plus
     the edges' boundary terms (options as for ``render``)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples)
+                             secondary_edges, edge_samples, edge_sampling)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
@@ -190,8 +196,10 @@ def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.
 
 
 def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis",
-                   primary_edges=True, secondary_edges=True, edge_samples=None) -> RenderOptions:
+                   primary_edges=True, secondary_edges=True, edge_samples=None,
+                   edge_sampling="importance") -> RenderOptions:
     return RenderOptions(
+        edge_sampling=v.choice(edge_sampling, "edge_sampling", EDGE_SAMPLING),
         primary_edges=v.boolean(primary_edges, "primary_edges"),
         secondary_edges=v.boolean(secondary_edges, "secondary_edges"),
         edge_samples=0 if edge_samples is None else v.integer(edge_samples, "edge_samples", minimum=1),

@@ -55,6 +55,15 @@ Vec3f shading_normal(const MeshDesc& m, int64_t f, int32_t v) {
     return Vec3f(0.f);
 }
 
+// The uv a face uses at one of its vertices (vertex index v of face f).
+Vec2f face_uv(const MeshDesc& m, int64_t f, int32_t v) {
+    const int32_t* t = m.indices + 3 * f;
+    const int32_t* u = m.uv_indices ? m.uv_indices + 3 * f : t;
+    for (int k = 0; k < 3; ++k)
+        if (t[k] == v) return Vec2f(m.uvs[2 * int64_t(u[k])], m.uvs[2 * int64_t(u[k]) + 1]);
+    return Vec2f(0.f, 0.f);
+}
+
 }  // namespace
 
 void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
@@ -97,8 +106,18 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                         shading_jump = true;
                 }
             }
+            // uvs that differ across the edge (a seam, a pole's fan): textures may jump there.
+            bool uv_jump = false;
+            if (m.uvs) {
+                for (int32_t v : {h0.a, h0.b}) {
+                    int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
+                    const Vec2f a = face_uv(m, h0.face, v), b = face_uv(m, h1.face, w);
+                    if (a.x != b.x || a.y != b.y) uv_jump = true;
+                }
+            }
+            shading_jump = shading_jump || uv_jump;
             const bool coplanar = dot(n0, n1) > 1.f - 1e-6f;
-            if (!coplanar || (shading_jump && m.normals != nullptr)) {
+            if (!coplanar || uv_jump || (shading_jump && m.normals != nullptr)) {
                 Edge e;
                 e.mesh = mesh_index;
                 e.v0 = h0.a;

@@ -14,6 +14,8 @@ namespace {
 // clipped segment (full-film pixels).
 struct FilmEdge {
     int32_t mesh, v0, v1;
+    int64_t f0, f1;  // adjacent faces (f1 = -1 on a boundary)
+    bool fold;       // a boundary, or one face turned to the camera and the other away
     double ax, ay, bx, by;
 };
 
@@ -23,9 +25,10 @@ Vec3f face_normal(const Mesh& m, int64_t f) {
     return cross(m.vertex(t[1]) - p0, m.vertex(t[2]) - p0);
 }
 
-// Whether the camera sees the edge as a silhouette (or a crease, where shading jumps).
-bool camera_silhouette(const Camera& cam, const Mesh& m, const Edge& e) {
-    if (e.kind != EdgeKind::Smooth) return true;
+// Whether the camera sees the edge as a fold: a boundary, or one face turned to the camera and
+// the other away (the outline of the surface can run along it).
+bool camera_fold(const Camera& cam, const Mesh& m, const Edge& e) {
+    if (e.kind == EdgeKind::Boundary) return true;
     const Vec3f n0 = face_normal(m, e.f0), n1 = face_normal(m, e.f1);
     if (cam.type == CameraType::Orthographic) return (dot(cam.forward, n0) < 0.f) != (dot(cam.forward, n1) < 0.f);
     return is_silhouette(cam.position, m.vertex(e.v0), n0, n1, e.kind);
@@ -76,6 +79,36 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
     return std::isfinite(fe.ax) && std::isfinite(fe.ay) && std::isfinite(fe.bx) && std::isfinite(fe.by);
 }
 
+// Film point of world point p and the film length per unit world length along direction `dir`
+// (unit). False behind the camera.
+bool film_point(const Camera& cam, const Vec3f& p, const Vec3f& dir, double& x, double& y, double& jacobian) {
+    const Vec3f q = p - cam.position;
+    const double X = dot(q, cam.right), Y = dot(q, cam.up), Z = dot(q, cam.forward);
+    const double dX = dot(dir, cam.right), dY = dot(dir, cam.up), dZ = dot(dir, cam.forward);
+    const double k = cam.width / (2.0 * cam.tx);  // film pixels per unit screen offset
+    double sx = X, sy = Y, dsx = dX, dsy = dY;
+    if (cam.type == CameraType::Perspective) {
+        if (!(Z > 0.0)) return false;
+        sx = X / Z;
+        sy = Y / Z;
+        dsx = (dX * Z - X * dZ) / (Z * Z);
+        dsy = (dY * Z - Y * dZ) / (Z * Z);
+    }
+    x = (sx + cam.tx) * k;
+    y = cam.height * 0.5 - sy * k;
+    jacobian = k * std::hypot(dsx, dsy);
+    return std::isfinite(x) && std::isfinite(y);
+}
+
+// The point of segment (p0, p1) nearest to the line o + s d (d unit).
+Vec3f closest_on_segment(const Vec3f& p0, const Vec3f& p1, const Vec3f& o, const Vec3f& d) {
+    const Vec3f e = p1 - p0, w = p0 - o;
+    const float a = dot(e, e), b = dot(e, d), c = dot(e, w), f = dot(d, w);
+    const float den = a - b * b;  // |d| = 1
+    const float t = den > 0.f ? std::clamp((b * f - c) / den, 0.f, 1.f) : 0.f;
+    return p0 + e * t;
+}
+
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
     return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
 }
@@ -95,6 +128,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     if (!primary_edges_wanted(scene, opt, slots)) return;
     const Camera& cam = scene.camera;
     const bool camera_wanted = slots.camera.wanted();
+    // The baseline: every edge, silhouette or not, by world length, points not stratified.
+    const bool uniform = opt.edge_sampling == EdgeSampling::Uniform;
 
     // The film window whose pixels the filter reaches: the output, widened by the filter's
     // reach beyond a pixel.
@@ -107,26 +142,37 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     for (const Edge& e : scene.edges()) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
         const Mesh& m = scene.meshes[size_t(e.mesh)];
-        if (!camera_silhouette(cam, m, e)) continue;
         FilmEdge fe;
-        if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
+        fe.fold = camera_fold(cam, m, e);
+        double len;
+        if (uniform) {
+            len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
+        } else {
+            // Folds and creases (shading or texture jumps); smooth edges that do not fold never
+            // separate different values.
+            if (!fe.fold && e.kind == EdgeKind::Smooth) continue;
+            if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
+            len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
+        }
         fe.mesh = e.mesh;
         fe.v0 = e.v0;
         fe.v1 = e.v1;
-        const double len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
+        fe.f0 = e.f0;
+        fe.f1 = e.f1;
         if (!(len > 0.0)) continue;
         film_edges.push_back(fe);
         lengths.push_back(len);
     }
     if (film_edges.empty()) return;
     // Cumulative film length: sample i takes the point at length (i + u) / n * total, so the
-    // samples are stratified along all the edges together.
+    // samples are stratified along all the edges together. (Uniform: world length, u alone.)
     std::vector<double> cumulative(lengths.size() + 1, 0.0);
     for (size_t k = 0; k < lengths.size(); ++k) cumulative[k + 1] = cumulative[k] + lengths[k];
     const double total = cumulative.back();
     const int64_t n = opt.edge_samples > 0 ? opt.edge_samples
                                            : int64_t(scene.out_width) * scene.out_height * int64_t(opt.spp);
-    // Every point of every edge is drawn with density 1 / total (per unit film length).
+    // Every point of every edge is drawn with density 1 / total (per unit film length; per unit
+    // world length for uniform sampling, converted to film length per sample).
     const double sample_weight = total / double(n);
     // The step to each side: an angle of about 1e-5 (float rays resolve it at any distance),
     // never below a thousandth of a pixel.
@@ -141,17 +187,29 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         RayCounters counters;
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
-            const double at = (double(i) + rng.next_double()) / double(n) * total;
+            const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
             const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
                                              cumulative.begin()) - 1,
                                       film_edges.size() - 1);
             const FilmEdge& fe = film_edges[k];
             const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
-            const float x = float(fe.ax + (fe.bx - fe.ax) * t), y = float(fe.ay + (fe.by - fe.ay) * t);
-
-            // The side function at the sample and its film-space gradient.
             const Mesh& m = scene.meshes[size_t(fe.mesh)];
             const Vec3f p0 = m.vertex(fe.v0), p1 = m.vertex(fe.v1);
+            float x, y;
+            double point_weight = sample_weight;
+            if (uniform) {
+                double fx, fy, jacobian;
+                if (!film_point(cam, p0 + (p1 - p0) * float(t), normalize(p1 - p0), fx, fy, jacobian)) continue;
+                if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
+                x = float(fx);
+                y = float(fy);
+                point_weight *= jacobian;
+            } else {
+                x = float(fe.ax + (fe.bx - fe.ax) * t);
+                y = float(fe.ay + (fe.by - fe.ay) * t);
+            }
+
+            // The side function at the sample and its film-space gradient.
             Vec3f o, d;
             camera_ray(scene.camera_params, x, y, o, d);
             const EdgeSideGradient g = edge_side_gradient(p0, p1, o, d);
@@ -177,11 +235,26 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const bool any_u = scene.intersect(ray_u, hit_u), any_l = scene.intersect(ray_l, hit_l);
             // The same surface (or the sky) on both sides: the edge is hidden here.
             if (any_u == any_l && (!any_u || (hit_u.mesh == hit_l.mesh && hit_u.prim == hit_l.prim))) continue;
+            // A crease (both faces turned the same way) separates its two faces: both sides must
+            // show them (or a point next to the edge). Where thin faces converge on a vertex (a
+            // sphere's pole fan seen edge-on) the step can leap over a whole face, and the crease
+            // must not take what lies beyond (the sky past the outline) for its other side. A
+            // fold's outer side sees whatever lies behind, by definition: no such test.
+            if (!fe.fold) {
+                const Vec3f on_edge = closest_on_segment(p0, p1, o, d);
+                const float tolerance = 1e-3f * std::max(length(on_edge - o), length(p1 - p0));
+                auto at_edge = [&](bool any, const Hit& h, const Ray& r) {
+                    if (!any) return false;
+                    if (h.mesh == fe.mesh && (h.prim == fe.f0 || h.prim == fe.f1)) return true;
+                    return length(r.origin + r.dir * h.t - on_edge) < tolerance;
+                };
+                if (!(at_edge(any_u, hit_u, ray_u) && at_edge(any_l, hit_l, ray_l))) continue;
+            }
             Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
             const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters) -
                                 trace_path(scene, opt, ray_l, path_l, counters);
             if (is_black(delta)) continue;
-            const float weight = float(sample_weight / glen);
+            const float weight = float(point_weight / glen);
 
             // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
             const float ox = x - float(scene.crop_x) - 0.5f, oy = y - float(scene.crop_y) - 0.5f;

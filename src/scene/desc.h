@@ -82,6 +82,9 @@ struct SceneDesc {
 };
 
 enum class LightSampling { MIS = 0, LightOnly = 1, BSDFOnly = 2 };
+// How edge samples are distributed. Importance: silhouettes only, by clipped film length,
+// stratified. Uniform: every edge by world length, independent samples (the baseline).
+enum class EdgeSampling { Importance = 0, Uniform = 1 };
 
 struct RenderOptions {
     int spp = 16;
@@ -94,6 +97,7 @@ struct RenderOptions {
     bool primary_edges = true;     // silhouettes seen by the camera
     bool secondary_edges = true;   // silhouettes seen from shading points
     int64_t edge_samples = 0;      // primary edge samples; 0: one per output pixel per spp
+    EdgeSampling edge_sampling = EdgeSampling::Importance;
 };
 
 // Counters a render reports (for benchmarks).

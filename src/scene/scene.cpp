@@ -139,6 +139,8 @@ const std::vector<Edge>& Scene::edges() const {
             d.num_triangles = m.num_triangles;
             d.normals = m.normals;
             d.normal_indices = m.normal_indices;
+            d.uvs = m.uvs;
+            d.uv_indices = m.uv_indices;
             build_mesh_edges(d, int32_t(i), edges_);
         }
     });

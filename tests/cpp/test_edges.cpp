@@ -57,6 +57,31 @@ TEST(Edges, SmoothSphereWithSeamIsClosed) {
     EXPECT_EQ(int(edges.size()), 252 - 72);
 }
 
+TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
+    // Two coplanar triangles: their shared diagonal is dropped while the uvs agree along it, and
+    // kept as a crease (textures may jump there) when each face has its own uvs for it.
+    MeshData quad = make_quad(Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0));
+    ASSERT_EQ(quad.num_triangles(), 2);
+    auto with_uvs = [&](const std::vector<float>& uvs, const std::vector<int32_t>& uv_indices) {
+        MeshDesc d = quad.desc(0);
+        d.uvs = uvs.data();
+        d.num_uvs = int64_t(uvs.size() / 2);
+        d.uv_indices = uv_indices.data();
+        std::vector<Edge> out;
+        build_mesh_edges(d, 0, out);
+        return count_kinds(out);
+    };
+    // One uv per vertex (continuous) against the second face's corners shifted in u (a seam).
+    std::vector<float> uvs = {0, 0, 1, 0, 1, 1, 0, 1, 0.5f, 0, 0.5f, 1, 0.5f, 0.5f, 0.25f, 0.75f};
+    std::vector<int32_t> same(quad.indices.begin(), quad.indices.end()), seam = same;
+    for (int k = 3; k < 6; ++k) seam[size_t(k)] = 4 + k - 3;
+    auto a = with_uvs(uvs, same), b = with_uvs(uvs, seam);
+    EXPECT_EQ(a[EdgeKind::Boundary], 4);
+    EXPECT_EQ(a[EdgeKind::Crease], 0);
+    EXPECT_EQ(b[EdgeKind::Boundary], 4);
+    EXPECT_EQ(b[EdgeKind::Crease], 1);
+}
+
 TEST(Edges, WeldedAndUnweldedMeshesGiveTheSameEdges) {
     // A folded strip, once with shared vertices and once with every face owning its vertices.
     const std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0.5f, 0, 2, 0};
