@@ -231,8 +231,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // Both sides: g > 0 (upper) and g < 0 (lower).
             const float sx = float(gx / glen * step), sy = float(gy / glen * step);
             const Ray ray_u = cam.generate_ray(x + sx, y + sy), ray_l = cam.generate_ray(x - sx, y - sy);
-            Hit hit_u, hit_l;
-            const bool any_u = scene.intersect(ray_u, hit_u), any_l = scene.intersect(ray_l, hit_l);
+            FirstHit first_u, first_l;
+            first_u.found = scene.intersect(ray_u, first_u.hit);
+            first_l.found = scene.intersect(ray_l, first_l.hit);
+            const bool any_u = first_u.found, any_l = first_l.found;
+            const Hit &hit_u = first_u.hit, &hit_l = first_l.hit;
             // The same surface (or the sky) on both sides: the edge is hidden here.
             if (any_u == any_l && (!any_u || (hit_u.mesh == hit_l.mesh && hit_u.prim == hit_l.prim))) continue;
             // A crease (both faces turned the same way) separates its two faces: both sides must
@@ -251,8 +254,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 if (!(at_edge(any_u, hit_u, ray_u) && at_edge(any_l, hit_l, ray_l))) continue;
             }
             Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
-            const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters) -
-                                trace_path(scene, opt, ray_l, path_l, counters);
+            const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters, nullptr, &first_u) -
+                                trace_path(scene, opt, ray_l, path_l, counters, nullptr, &first_l);
             if (is_black(delta)) continue;
             const float weight = float(point_weight / glen);
 

@@ -5,7 +5,7 @@
 namespace edgepath {
 
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
-                 PathRecord* record) {
+                 PathRecord* record, const FirstHit* first) {
     const bool use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
     const bool use_hits = opt.sampling != LightSampling::LightOnly;
     const bool mis = opt.sampling == LightSampling::MIS;
@@ -17,7 +17,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         record->vertices.clear();
         record->camera_missed = record->escaped = false;
     }
-    if (!scene.intersect(ray, hit)) {
+    const bool found = first ? first->found : scene.intersect(ray, hit);
+    if (first) hit = first->hit;
+    if (!found) {
         if (scene.has_envmap) L += scene.envmap.eval(ray.dir);
         if (record) record->camera_missed = true;
         return L;

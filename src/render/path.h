@@ -37,10 +37,17 @@ struct PathRecord {
     std::vector<PathVertexRecord> vertices;
 };
 
+// The camera ray's first intersection, when the caller has it already.
+struct FirstHit {
+    bool found = false;
+    Hit hit;
+};
+
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
-// `record` is given, also records the path for the gradient pass.
+// `record` is given, also records the path for the gradient pass; when `first` is given, it is
+// the ray's intersection (not traced again).
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
-                 PathRecord* record = nullptr);
+                 PathRecord* record = nullptr, const FirstHit* first = nullptr);
 
 // Film point of sample `s` of film pixel (x, y), and its random stream.
 inline Vec2f sample_film_point(const Scene& scene, int x, int y, Rng& rng) {

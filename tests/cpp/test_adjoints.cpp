@@ -6,6 +6,7 @@
 #include <random>
 #include <vector>
 
+#include "edges/edges.h"
 #include "math/frame.h"
 #include "scene/bsdf.h"
 #include "scene/bsdf_diff.h"
@@ -132,6 +133,24 @@ TEST(Adjoint, BendNormal) {
         };
         check_adjoint(f, adj, x, "bend_normal");
     }
+}
+
+// The side function of an edge, g = dot(cross(e0 - o, e1 - o), d): inputs e0, e1, o, d.
+TEST(Adjoint, EdgeSideFunction) {
+    std::vector<double> x = {0.3, -0.2, 2.0, -0.4, 0.5, 2.5, 0.1, 0.2, -1.0, 0.05, 0.1, 1.0};
+    Fn f = [](const std::vector<double>& x) {
+        return std::vector<double>{dot(cross(v3(x, 0) - v3(x, 6), v3(x, 3) - v3(x, 6)), v3(x, 9))};
+    };
+    auto adj = [](const std::vector<double>& x, const std::vector<double>& ybar) {
+        const EdgeSideGradient g = edge_side_gradient(Vec3f(v3(x, 0)), Vec3f(v3(x, 3)), Vec3f(v3(x, 6)), Vec3f(v3(x, 9)));
+        std::vector<double> out(12);
+        put(out, 0, Vec3d(g.d_e0) * ybar[0]);
+        put(out, 3, Vec3d(g.d_e1) * ybar[0]);
+        put(out, 6, Vec3d(g.d_o) * ybar[0]);
+        put(out, 9, Vec3d(g.d_d) * ybar[0]);
+        return out;
+    };
+    check_adjoint(f, adj, x, "edge side function", 1e-6, 1e-5);
 }
 
 TEST(Adjoint, IntersectTriangle) {
