@@ -106,7 +106,8 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image.
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
-    shading points) switch them off for speed or comparison; ``edge_samples`` is the number of
+    shading points; not implemented yet, so it changes nothing today) switch them off for speed
+    or comparison; ``edge_samples`` is the number of
     primary edge samples (default: one per output pixel per backward sample);
     ``edge_sampling``: "importance" (silhouettes only, by clipped film length, stratified) or
     "uniform" (every edge by world length: the baseline, for comparison)."""
