@@ -1,6 +1,7 @@
 #include "diff/backprop.h"
 
 #include "math/vec_diff.h"
+#include "edges/secondary.h"
 #include "scene/bsdf_diff.h"
 #include "scene/geometry.h"
 
@@ -147,7 +148,7 @@ TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp)
 }  // namespace
 
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
-                   GradSink& sink) {
+                   GradSink& sink, const SecondaryEdges* secondary) {
     const auto& V = rec.vertices;
     const bool env_wanted = slots.envmap.wanted() || slots.envmap_rotation.wanted();
     if (rec.camera_missed) {
@@ -249,6 +250,14 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
         }
         d_bend_normal(sp.ns, sp.ng, wo, db.n, ha.dn, dwo);
+        // Edges seen from this vertex (it scatters: k < max_bounces), with the vertex's own
+        // random stream, the same for every call on this record.
+        if (secondary && k < secondary->max_bounces()) {
+            SurfacePoint bent = sp;
+            bent.ns = ns;
+            ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab,
+                                    Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0), sink);
+        }
         dwo += db.wo;
 
         Vec3f d_origin(0.f), d_dir(0.f);

@@ -7,8 +7,11 @@
 
 namespace edgepath {
 
-// Adds d(adjoint . L)/d(parameters) for the path in `rec` to `sink`.
+class SecondaryEdges;
+
+// Adds d(adjoint . L)/d(parameters) for the path in `rec` to `sink`; with `secondary`, also the
+// boundary term of the edges seen from each scattering vertex (edges/secondary.h).
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& adjoint,
-                   GradSink& sink);
+                   GradSink& sink, const SecondaryEdges* secondary = nullptr);
 
 }  // namespace edgepath

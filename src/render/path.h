@@ -31,6 +31,7 @@ struct PathVertexRecord {
 
 struct PathRecord {
     Vec2f film;
+    uint64_t stream = 0;         // seeds the random numbers the gradient pass adds to this path
     bool camera_missed = false;  // the camera ray left the scene
     bool escaped = false;        // the last continuation left the scene
     float escape_weight = 0.f;   // MIS weight of the environment seen by that continuation

@@ -1,0 +1,92 @@
+#include "edges/secondary.h"
+
+#include <algorithm>
+#include <cmath>
+#include "render/path.h"
+
+namespace edgepath {
+
+SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots)
+    : scene_(scene), opt_(opt), slots_(slots) {
+    if (!opt.secondary_edges || opt.max_bounces < 1) return;
+    bool wanted = slots.camera.wanted();
+    for (const auto& m : slots.meshes) wanted = wanted || m.vertices.wanted();
+    if (!wanted) return;
+    // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
+    // shading point that moves (with the camera or its own surface).
+    const std::vector<Edge>& all = scene.edges();
+    cumulative_.push_back(0.0);
+    for (size_t i = 0; i < all.size(); ++i) {
+        const Mesh& m = scene.meshes[size_t(all[i].mesh)];
+        const double len = length(m.vertex(all[i].v1) - m.vertex(all[i].v0));
+        if (!(len > 0.0)) continue;
+        edges_.push_back(int32_t(i));
+        cumulative_.push_back(cumulative_.back() + len);
+    }
+    total_ = cumulative_.back();
+}
+
+Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
+                          const Vec3f& weight, Rng rng, GradSink& sink) const {
+    Vec3f d_p(0.f);
+    if (!active()) return d_p;
+    // An edge by length, a point on it uniformly: density 1 / total per unit length.
+    const double at = rng.next_double() * total_;
+    const size_t k = std::min(size_t(std::upper_bound(cumulative_.begin(), cumulative_.end(), at) - cumulative_.begin()) - 1,
+                              edges_.size() - 1);
+    const Edge& e = scene_.edges()[size_t(edges_[k])];
+    const Mesh& m = scene_.meshes[size_t(e.mesh)];
+    const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1), p = sp.p;
+    const Vec3f x = v0 + (v1 - v0) * rng.next_float();
+    const float dist = length(x - p);
+    if (!(dist > 0.f)) return d_p;
+    const Vec3f w = (x - p) / dist;
+    if (e.kind == EdgeKind::Smooth) {
+        const int32_t* t0 = m.indices + 3 * e.f0;
+        const int32_t* t1 = m.indices + 3 * e.f1;
+        const Vec3f n0 = cross(m.vertex(t0[1]) - m.vertex(t0[0]), m.vertex(t0[2]) - m.vertex(t0[0]));
+        const Vec3f n1 = cross(m.vertex(t1[1]) - m.vertex(t1[0]), m.vertex(t1[2]) - m.vertex(t1[0]));
+        if (!is_silhouette(p, v0, n0, n1, e.kind)) return d_p;
+    }
+    // The plane through p and the edge; degenerate when p lies on the edge's line.
+    const Vec3f N = cross(v0 - p, v1 - p);
+    const float n_len = length(N);
+    if (!(n_len > 1e-6f * length(v0 - p) * length(v1 - p))) return d_p;
+    const Vec3f side = N / n_len;
+
+    // Both sides of the arc, a small angle away: w_u with w_u . N > 0. (At 3e-5 rad and below,
+    // rays passing that close outside a triangle's edge were still reported as hitting it.)
+    constexpr float kStep = 1e-4f;
+    const Vec3f w_u = normalize(w + side * kStep), w_l = normalize(w - side * kStep);
+    const Vec3f f_u = bsdf_eval_world(bsdf, sp.ns, wo, w_u), f_l = bsdf_eval_world(bsdf, sp.ns, wo, w_l);
+    if (is_black(f_u) && is_black(f_l)) return d_p;
+    const Ray ray_u = spawn_ray(p, sp.ng, w_u), ray_l = spawn_ray(p, sp.ng, w_l);
+    FirstHit first_u, first_l;
+    first_u.found = scene_.intersect(ray_u, first_u.hit);
+    first_l.found = scene_.intersect(ray_l, first_l.hit);
+    if (first_u.found == first_l.found &&
+        (!first_u.found || (first_u.hit.mesh == first_l.hit.mesh && first_u.hit.prim == first_l.hit.prim)))
+        return d_p;  // the same surface (or the sky) on both sides: the edge is hidden from p
+    RenderOptions rest = opt_;
+    rest.max_bounces = bounces_left;
+    RayCounters counters;
+    Rng rng_u = rng, rng_l = rng;
+    const Vec3f F_u = is_black(f_u) ? Vec3f(0.f) : f_u * trace_path(scene_, rest, ray_u, rng_u, counters, nullptr, &first_u);
+    const Vec3f F_l = is_black(f_l) ? Vec3f(0.f) : f_l * trace_path(scene_, rest, ray_l, rng_l, counters, nullptr, &first_l);
+    const Vec3f delta = F_u - F_l;
+    // Arc length per unit edge length, over |N| (the side function's rate across the arc), over
+    // the sample's density.
+    const Vec3f edge = v1 - v0;
+    const float arc = length(edge - w * dot(w, edge)) / (dist * length(edge));
+    const float s = dot(weight, delta) * float(total_) * arc / n_len;
+    if (s == 0.f || !std::isfinite(s)) return d_p;
+    const EdgeSideGradient g = edge_side_gradient(v0, v1, p, w);
+    if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {
+        const GradSlot& vs = slots_.meshes[size_t(e.mesh)].vertices;
+        sink.add3(vs, e.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
+        sink.add3(vs, e.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
+    }
+    return g.d_o * s;
+}
+
+}  // namespace edgepath

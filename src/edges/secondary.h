@@ -1,0 +1,47 @@
+// The boundary term of secondary visibility: edges seen from path vertices (shadows, reflections,
+// indirect light; section 4 of the docs), in direction space. At a vertex p with fixed outgoing
+// direction wo, the reflected radiance is the integral over directions w of
+//   F(w) = f(wo, w) |cos| L_in(w);
+// an edge (v0, v1) puts a step into F along the great-circle arc w . N = 0,
+// N = (v0 - p) x (v1 - p), and contributes
+//   integral over the arc of (w . dN/dparameter) / |N| (F_u - F_l) dl,
+//   dl = |(I - w w^T)(v1 - v0)| / |x - p| dt,   x = v0 + t (v1 - v0).
+// F_u, F_l are estimated by tracing the rest of the path from p a tiny angle to each side.
+// Gradients go to v0 and v1 and to p (and through p back along the path to the camera).
+//
+// This first version samples edges uniformly by world length (the baseline of the docs); the
+// edge hierarchy and its importance sampling are the next step.
+#pragma once
+#include <vector>
+#include "diff/gradients.h"
+#include "sampling/rng.h"
+#include "scene/bsdf_diff.h"
+#include "scene/desc.h"
+#include "scene/scene.h"
+
+namespace edgepath {
+
+class SecondaryEdges {
+public:
+    // Empty (nothing to do) unless the option is on and vertices or the camera are wanted.
+    SecondaryEdges(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots);
+    bool active() const { return total_ > 0.0; }
+    int max_bounces() const { return opt_.max_bounces; }
+
+    // The boundary term at path vertex `sp` (shading normal already bent for wo), which scatters
+    // with `bounces_left` scattering events after it. `weight`: the adjoint times the path
+    // throughput up to the vertex. Adds the edge vertices' gradients to `sink` and returns the
+    // adjoint of the vertex position p.
+    Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
+              const Vec3f& weight, Rng rng, GradSink& sink) const;
+
+private:
+    const Scene& scene_;
+    const RenderOptions& opt_;
+    const SceneGradients& slots_;
+    std::vector<int32_t> edges_;   // indices into scene.edges()
+    std::vector<double> cumulative_;
+    double total_ = 0.0;
+};
+
+}  // namespace edgepath
