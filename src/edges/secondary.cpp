@@ -24,20 +24,80 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         cumulative_.push_back(cumulative_.back() + len);
     }
     total_ = cumulative_.back();
+    uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
+    if (!uniform_) hierarchy_.build(scene, edges_);
+    for (const Scene::EmissiveTriangle& l : scene.lights) {
+        const Mesh& m = scene.meshes[size_t(l.mesh)];
+        const int32_t* t = m.indices + 3 * l.prim;
+        for (int k = 0; k < 3; ++k) {
+            const Vec3f v = m.vertex(t[k]);
+            lights_lo_ = has_lights_ ? min(lights_lo_, v) : v;
+            lights_hi_ = has_lights_ ? max(lights_hi_, v) : v;
+            has_lights_ = true;
+        }
+    }
 }
 
 Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
                           const Vec3f& weight, Rng rng, GradSink& sink) const {
     Vec3f d_p(0.f);
     if (!active()) return d_p;
-    // An edge by length, a point on it uniformly: density 1 / total per unit length.
-    const double at = rng.next_double() * total_;
-    const size_t k = std::min(size_t(std::upper_bound(cumulative_.begin(), cumulative_.end(), at) - cumulative_.begin()) - 1,
-                              edges_.size() - 1);
-    const Edge& e = scene_.edges()[size_t(edges_[k])];
+    if (uniform_) {
+        // An edge by length, a point on it uniformly: density 1 / total per unit length.
+        const double at = rng.next_double() * total_;
+        const size_t k = std::min(size_t(std::upper_bound(cumulative_.begin(), cumulative_.end(), at) -
+                                         cumulative_.begin()) - 1,
+                                  edges_.size() - 1);
+        const float t = rng.next_float();
+        return evaluate(edges_[k], t, float(total_), sp, wo, bsdf, bounces_left, weight, rng, sink);
+    }
+    EdgeHierarchy::Query all;
+    all.p = sp.p;
+    all.n = sp.ns;
+    all.two_sided = bsdf.two_sided;
+    BoundsCone cone;
+    EdgeHierarchy::Query towards = all;
+    bool lights = false;
+    if (has_lights_) {
+        const Vec3f c = (lights_lo_ + lights_hi_) * 0.5f;
+        const float r = length(lights_hi_ - lights_lo_) * 0.5f, d = length(c - sp.p);
+        if (d > r) {  // inside the lights' bounding sphere the cone is everything: no second strategy
+            cone.axis = (c - sp.p) / d;
+            cone.cos_half = std::cos(std::asin(std::min(1.f, r / d)));
+            towards.cone = &cone;
+            lights = true;
+        }
+    }
+    // Strategy 1: all edges; strategy 2: edges towards the lights. Power heuristic.
+    const float u1 = rng.next_float(), t1 = rng.next_float(), u2 = rng.next_float(), t2 = rng.next_float();
+    const Edge* edges = scene_.edges().data();
+    auto edge_length = [&](int32_t i) {
+        const Mesh& m = scene_.meshes[size_t(edges[i].mesh)];
+        return length(m.vertex(edges[i].v1) - m.vertex(edges[i].v0));
+    };
+    int32_t e;
+    float prob;
+    if (hierarchy_.sample(all, u1, e, prob)) {
+        const float other = lights ? hierarchy_.pdf(towards, e) : 0.f;
+        const float w = prob * prob / (prob * prob + other * other);
+        d_p += evaluate(e, t1, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
+    }
+    if (lights && hierarchy_.sample(towards, u2, e, prob)) {
+        const float other = hierarchy_.pdf(all, e);
+        const float w = prob * prob / (prob * prob + other * other);
+        d_p += evaluate(e, t2, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
+    }
+    return d_p;
+}
+
+Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const SurfacePoint& sp, const Vec3f& wo,
+                               const TBsdfParams<float>& bsdf, int bounces_left, const Vec3f& weight, Rng& rng,
+                               GradSink& sink) const {
+    Vec3f d_p(0.f);
+    const Edge& e = scene_.edges()[size_t(edge)];
     const Mesh& m = scene_.meshes[size_t(e.mesh)];
     const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1), p = sp.p;
-    const Vec3f x = v0 + (v1 - v0) * rng.next_float();
+    const Vec3f x = v0 + (v1 - v0) * t;
     const float dist = length(x - p);
     if (!(dist > 0.f)) return d_p;
     const Vec3f w = (x - p) / dist;
@@ -71,14 +131,15 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     rest.max_bounces = bounces_left;
     RayCounters counters;
     Rng rng_u = rng, rng_l = rng;
+    rng.next_u32();  // another stream for the next sample's paths
     const Vec3f F_u = is_black(f_u) ? Vec3f(0.f) : f_u * trace_path(scene_, rest, ray_u, rng_u, counters, nullptr, &first_u);
     const Vec3f F_l = is_black(f_l) ? Vec3f(0.f) : f_l * trace_path(scene_, rest, ray_l, rng_l, counters, nullptr, &first_l);
     const Vec3f delta = F_u - F_l;
-    // Arc length per unit edge length, over |N| (the side function's rate across the arc), over
-    // the sample's density.
-    const Vec3f edge = v1 - v0;
-    const float arc = length(edge - w * dot(w, edge)) / (dist * length(edge));
-    const float s = dot(weight, delta) * float(total_) * arc / n_len;
+    // Arc length per unit edge length, over |N| (the side function's rate across the arc),
+    // times `scale` (the inverse of the density per unit edge length, and the MIS weight).
+    const Vec3f along = v1 - v0;
+    const float arc = length(along - w * dot(w, along)) / (dist * length(along));
+    const float s = dot(weight, delta) * scale * arc / n_len;
     if (s == 0.f || !std::isfinite(s)) return d_p;
     const EdgeSideGradient g = edge_side_gradient(v0, v1, p, w);
     if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {

@@ -6,14 +6,18 @@
 // N = (v0 - p) x (v1 - p), and contributes
 //   integral over the arc of (w . dN/dparameter) / |N| (F_u - F_l) dl,
 //   dl = |(I - w w^T)(v1 - v0)| / |x - p| dt,   x = v0 + t (v1 - v0).
-// F_u, F_l are estimated by tracing the rest of the path from p a tiny angle to each side.
+// F_u, F_l are estimated by tracing the rest of the path from p a small angle to each side.
 // Gradients go to v0 and v1 and to p (and through p back along the path to the camera).
 //
-// This first version samples edges uniformly by world length (the baseline of the docs); the
-// edge hierarchy and its importance sampling are the next step.
+// Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one sample over all
+// edges and, when the scene has area lights, one restricted to the cone towards them (the
+// edges that cast shadows), combined by multiple importance sampling (power heuristic). The
+// point on the edge is uniform by length. opt.edge_sampling == Uniform: one edge by length over
+// all edges instead (the baseline).
 #pragma once
 #include <vector>
 #include "diff/gradients.h"
+#include "edges/hierarchy.h"
 #include "sampling/rng.h"
 #include "scene/bsdf_diff.h"
 #include "scene/desc.h"
@@ -36,12 +40,22 @@ public:
               const Vec3f& weight, Rng rng, GradSink& sink) const;
 
 private:
+    // One edge sample: edge `edge` (index into scene.edges()) at parameter t, the estimate
+    // scaled by `scale` (MIS weight x edge length / probability of the edge).
+    Vec3f evaluate(int32_t edge, float t, float scale, const SurfacePoint& sp, const Vec3f& wo,
+                   const TBsdfParams<float>& bsdf, int bounces_left, const Vec3f& weight, Rng& rng,
+                   GradSink& sink) const;
+
     const Scene& scene_;
     const RenderOptions& opt_;
     const SceneGradients& slots_;
+    bool uniform_ = false;
     std::vector<int32_t> edges_;   // indices into scene.edges()
     std::vector<double> cumulative_;
     double total_ = 0.0;
+    EdgeHierarchy hierarchy_;
+    bool has_lights_ = false;
+    Vec3f lights_lo_, lights_hi_;  // bounds of the area lights
 };
 
 }  // namespace edgepath

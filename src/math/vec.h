@@ -62,6 +62,12 @@ template <class T> inline TVec3<T> normalize(const TVec3<T>& a) {
     return l > T(0) ? a / l : a;
 }
 template <class T> inline T max_component(const TVec3<T>& a) { return std::max(a.x, std::max(a.y, a.z)); }
+template <class T> inline TVec3<T> min(const TVec3<T>& a, const TVec3<T>& b) {
+    return {std::min(a.x, b.x), std::min(a.y, b.y), std::min(a.z, b.z)};
+}
+template <class T> inline TVec3<T> max(const TVec3<T>& a, const TVec3<T>& b) {
+    return {std::max(a.x, b.x), std::max(a.y, b.y), std::max(a.z, b.z)};
+}
 template <class T> inline T max_abs_component(const TVec3<T>& a) {
     return std::max(std::abs(a.x), std::max(std::abs(a.y), std::abs(a.z)));
 }
