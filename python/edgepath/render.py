@@ -106,11 +106,12 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image.
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
-    shading points; not implemented yet, so it changes nothing today) switch them off for speed
-    or comparison; ``edge_samples`` is the number of
+    shading points: shadows, reflections, indirect light) switch them off for speed or
+    comparison; ``edge_samples`` is the number of
     primary edge samples (default: one per output pixel per backward sample);
-    ``edge_sampling``: "importance" (silhouettes only, by clipped film length, stratified) or
-    "uniform" (every edge by world length: the baseline, for comparison)."""
+    ``edge_sampling``: "importance" (primary: silhouettes by clipped film length, stratified;
+    secondary: the edge hierarchy, with a second sample towards the lights) or "uniform" (every
+    edge by world length: the baseline, for comparison)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
                              secondary_edges, edge_samples, edge_sampling)
     flat = flatten_scene(scene)
