@@ -179,6 +179,15 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
         }
     }
+    // Whether anything wanted moves vertex k: the camera, or a mesh the path met up to k.
+    uint64_t moves = 0;
+    if (secondary) {
+        bool m = secondary->camera_wanted();
+        for (int k = 0; k < K && k < 64; ++k) {
+            m = m || secondary->mesh_wanted(V[k].hit.mesh);
+            if (m) moves |= uint64_t(1) << k;
+        }
+    }
     for (int k = K - 1; k >= 0; --k) {
         const PathVertexRecord& r = V[k];
         VertexGeometry g(scene, r.hit, r.origin, r.dir);
@@ -256,7 +265,8 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             SurfacePoint bent = sp;
             bent.ns = ns;
             ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab,
-                                    Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0), sink);
+                                    k >= 64 || ((moves >> k) & 1) != 0, Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0),
+                                    sink);
         }
         dwo += db.wo;
 

@@ -6,26 +6,40 @@
 
 namespace edgepath {
 
+void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&)) {
+    const std::vector<Edge>& all = scene_.edges();
+    set.cumulative.assign(1, 0.0);
+    for (size_t i = 0; i < all.size(); ++i) {
+        if (!keep(*this, all[i])) continue;
+        const Mesh& m = scene_.meshes[size_t(all[i].mesh)];
+        const double len = length(m.vertex(all[i].v1) - m.vertex(all[i].v0));
+        if (!(len > 0.0)) continue;
+        set.edges.push_back(int32_t(i));
+        set.cumulative.push_back(set.cumulative.back() + len);
+    }
+    set.total = set.cumulative.back();
+    if (!uniform_ && !set.edges.empty()) set.hierarchy.build(scene_, set.edges);
+}
+
 SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots)
     : scene_(scene), opt_(opt), slots_(slots) {
     if (!opt.secondary_edges || opt.max_bounces < 1) return;
-    bool wanted = slots.camera.wanted();
-    for (const auto& m : slots.meshes) wanted = wanted || m.vertices.wanted();
-    if (!wanted) return;
+    bool any = slots.camera.wanted(), every = slots.camera.wanted();
+    for (size_t i = 0; i < scene.meshes.size(); ++i) {
+        any = any || mesh_wanted(int(i));
+        every = every && mesh_wanted(int(i));
+    }
+    if (!any) return;
+    uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
-    const std::vector<Edge>& all = scene.edges();
-    cumulative_.push_back(0.0);
-    for (size_t i = 0; i < all.size(); ++i) {
-        const Mesh& m = scene.meshes[size_t(all[i].mesh)];
-        const double len = length(m.vertex(all[i].v1) - m.vertex(all[i].v0));
-        if (!(len > 0.0)) continue;
-        edges_.push_back(int32_t(i));
-        cumulative_.push_back(cumulative_.back() + len);
+    build_set(all_, [](const SecondaryEdges&, const Edge&) { return true; });
+    total_ = all_.total;
+    // Where nothing wanted moves the shading point, only the wanted meshes' edges matter.
+    if (!every) {
+        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
+        has_wanted_set_ = true;
     }
-    total_ = cumulative_.back();
-    uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
-    if (!uniform_) hierarchy_.build(scene, edges_);
     for (const Scene::EmissiveTriangle& l : scene.lights) {
         const Mesh& m = scene.meshes[size_t(l.mesh)];
         const int32_t* t = m.indices + 3 * l.prim;
@@ -39,18 +53,21 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
 }
 
 Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
-                          const Vec3f& weight, Rng rng, GradSink& sink) const {
+                          const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink) const {
     Vec3f d_p(0.f);
     if (!active()) return d_p;
+    const EdgeSet& set = (position_matters || !has_wanted_set_) ? all_ : wanted_;
+    if (set.edges.empty()) return d_p;
     if (uniform_) {
         // An edge by length, a point on it uniformly: density 1 / total per unit length.
-        const double at = rng.next_double() * total_;
-        const size_t k = std::min(size_t(std::upper_bound(cumulative_.begin(), cumulative_.end(), at) -
-                                         cumulative_.begin()) - 1,
-                                  edges_.size() - 1);
+        const double at = rng.next_double() * set.total;
+        const size_t k = std::min(size_t(std::upper_bound(set.cumulative.begin(), set.cumulative.end(), at) -
+                                         set.cumulative.begin()) - 1,
+                                  set.edges.size() - 1);
         const float t = rng.next_float();
-        return evaluate(edges_[k], t, float(total_), sp, wo, bsdf, bounces_left, weight, rng, sink);
+        return evaluate(set.edges[k], t, float(set.total), sp, wo, bsdf, bounces_left, weight, rng, sink);
     }
+    const EdgeHierarchy& hierarchy = set.hierarchy;
     EdgeHierarchy::Query all;
     all.p = sp.p;
     all.n = sp.ns;
@@ -77,13 +94,13 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     };
     int32_t e;
     float prob;
-    if (hierarchy_.sample(all, u1, e, prob)) {
-        const float other = lights ? hierarchy_.pdf(towards, e) : 0.f;
+    if (hierarchy.sample(all, u1, e, prob)) {
+        const float other = lights ? hierarchy.pdf(towards, e) : 0.f;
         const float w = prob * prob / (prob * prob + other * other);
         d_p += evaluate(e, t1, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
     }
-    if (lights && hierarchy_.sample(towards, u2, e, prob)) {
-        const float other = hierarchy_.pdf(all, e);
+    if (lights && hierarchy.sample(towards, u2, e, prob)) {
+        const float other = hierarchy.pdf(all, e);
         const float w = prob * prob / (prob * prob + other * other);
         d_p += evaluate(e, t2, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
     }

@@ -32,12 +32,18 @@ public:
     bool active() const { return total_ > 0.0; }
     int max_bounces() const { return opt_.max_bounces; }
 
+    // Whether a mesh's vertices are wanted (their motion moves the path vertices on them).
+    bool mesh_wanted(int mesh) const { return size_t(mesh) < slots_.meshes.size() && slots_.meshes[size_t(mesh)].vertices.wanted(); }
+    bool camera_wanted() const { return slots_.camera.wanted(); }
+
     // The boundary term at path vertex `sp` (shading normal already bent for wo), which scatters
     // with `bounces_left` scattering events after it. `weight`: the adjoint times the path
-    // throughput up to the vertex. Adds the edge vertices' gradients to `sink` and returns the
-    // adjoint of the vertex position p.
+    // throughput up to the vertex. `position_matters`: whether anything wanted moves the vertex
+    // (the camera, or a mesh the path has met so far); if not, only edges of meshes whose
+    // vertices are wanted can contribute, and only those are sampled. Adds the edge vertices'
+    // gradients to `sink` and returns the adjoint of the vertex position p.
     Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
-              const Vec3f& weight, Rng rng, GradSink& sink) const;
+              const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink) const;
 
 private:
     // One edge sample: edge `edge` (index into scene.edges()) at parameter t, the estimate
@@ -46,14 +52,22 @@ private:
                    const TBsdfParams<float>& bsdf, int bounces_left, const Vec3f& weight, Rng& rng,
                    GradSink& sink) const;
 
+    // A set of edges with its samplers: by length (uniform) or the hierarchy.
+    struct EdgeSet {
+        std::vector<int32_t> edges;  // indices into scene.edges()
+        std::vector<double> cumulative;
+        double total = 0.0;
+        EdgeHierarchy hierarchy;
+    };
+    void build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&));
+
     const Scene& scene_;
     const RenderOptions& opt_;
     const SceneGradients& slots_;
     bool uniform_ = false;
-    std::vector<int32_t> edges_;   // indices into scene.edges()
-    std::vector<double> cumulative_;
+    EdgeSet all_, wanted_;  // every edge; the edges of meshes whose vertices are wanted
+    bool has_wanted_set_ = false;
     double total_ = 0.0;
-    EdgeHierarchy hierarchy_;
     bool has_lights_ = false;
     Vec3f lights_lo_, lights_hi_;  // bounds of the area lights
 };
