@@ -63,3 +63,42 @@ def test_penumbra_derivative_matches_finite_difference(part):
     assert abs(fd) > 0.05
     assert d == pytest.approx(fd, rel=tolerance)
     assert abs(interior - fd) > 3 * tolerance * abs(fd)  # the check sees the boundary term
+
+
+@pytest.mark.parametrize("edge_sampling", ["importance", "uniform"])
+def test_awkward_geometry_gives_finite_gradients(edge_sampling):
+    """Edges shared by three faces (a fin), a box standing on the floor (edges through the
+    shading points along its base), a wall seen edge-on by the camera and grazing light: every
+    gradient finite, with both boundary terms on, in reverse and forward mode."""
+    fv, fi = shapes.quad([[-2, 0, -2], [-2, 0, 2], [2, 0, 2], [2, 0, -2]])
+    # three triangles sharing the edge (0,0,0)-(0,1,0)
+    fin_v = torch.tensor([[0.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.8, 0.5, 0.0], [-0.6, 0.5, 0.5], [-0.3, 0.5, -0.7]])
+    fin_i = torch.tensor([[0, 1, 2], [1, 0, 3], [0, 1, 4]], dtype=torch.int32)
+    # a box on the floor; a wall in the plane x = 1.5 that the camera sees edge-on
+    bv = torch.tensor([[x, y, z] for x in (-1.2, -0.6) for y in (0.0, 0.6) for z in (-0.3, 0.3)])
+    bi = torch.tensor([[0, 1, 3], [0, 3, 2], [4, 6, 7], [4, 7, 5], [0, 4, 5], [0, 5, 1], [2, 3, 7], [2, 7, 6],
+                       [0, 2, 6], [0, 6, 4], [1, 5, 7], [1, 7, 3]], dtype=torch.int32)
+    wv, wi = shapes.quad([[1.5, 0, -1], [1.5, 1, -1], [1.5, 1, 1], [1.5, 0, 1]])
+    lv, li = shapes.quad([[-3, 0.05, -0.5], [-3, 0.05, 0.5], [-3, 1.0, 0.5], [-3, 1.0, -0.5]])  # grazing light
+    grey = ep.Material(diffuse=torch.tensor([0.6, 0.6, 0.6]), specular=torch.tensor([0.2, 0.2, 0.2]),
+                       roughness=0.2, two_sided=True)
+    params = [t.clone().requires_grad_(True) for t in (fv, fin_v, bv, wv, lv)]
+    meshes = [ep.Mesh(vertices=params[0], indices=fi, material=grey),
+              ep.Mesh(vertices=params[1], indices=fin_i, material=grey),
+              ep.Mesh(vertices=params[2], indices=bi, material=grey),
+              ep.Mesh(vertices=params[3], indices=wi, material=grey),
+              ep.Mesh(vertices=params[4], indices=li, emission=torch.tensor([20.0, 20.0, 20.0]),
+                      two_sided_emission=True)]
+    position = torch.tensor([1.5, 0.5, 4.0], requires_grad=True)
+    camera = ep.Camera(position=position, look_at=torch.tensor([1.5, 0.5, 0.0]), up=torch.tensor([0.0, 1.0, 0.0]),
+                       fov=60.0, resolution=(16, 16))
+    scene = ep.Scene(camera=camera, meshes=meshes, envmap=ep.EnvironmentMap(values=torch.full((4, 8, 3), 0.3)))
+    image = ep.render(scene, spp=8, max_bounces=2, seed=3, edge_sampling=edge_sampling)
+    assert torch.isfinite(image).all()
+    image.sum().backward()
+    for t in params + [position]:
+        assert t.grad is not None and torch.isfinite(t.grad).all()
+    assert float(params[1].grad.abs().sum()) > 0  # the fin's edges were sampled
+    d = ep.derivative_image(scene, params[2], torch.ones_like(params[2]), spp=8, max_bounces=2, seed=3,
+                            edge_sampling=edge_sampling)
+    assert torch.isfinite(d).all() and float(d.abs().sum()) > 0
