@@ -13,12 +13,6 @@ constexpr float kHalfPi = 1.57079632679f;
 
 float angle_between(const Vec3f& a, const Vec3f& b) { return std::acos(std::clamp(dot(a, b), -1.f, 1.f)); }
 
-Vec3f face_normal_of(const Mesh& m, int64_t f) {
-    const int32_t* t = m.indices + 3 * f;
-    const Vec3f p0 = m.vertex(t[0]);
-    return normalize(cross(m.vertex(t[1]) - p0, m.vertex(t[2]) - p0));
-}
-
 }  // namespace
 
 int32_t EdgeHierarchy::build_node(std::vector<int32_t>& items, int begin, int end, int32_t parent,
@@ -105,8 +99,8 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
         p1[i] = m.vertex(e.v1);
         always[i] = e.kind != EdgeKind::Smooth;
         if (!always[i]) {
-            n0[i] = face_normal_of(m, e.f0);
-            n1[i] = face_normal_of(m, e.f1);
+            n0[i] = normalize(m.face_normal(e.f0));
+            n1[i] = normalize(m.face_normal(e.f1));
         }
         items[i] = int32_t(i);
     }

@@ -19,17 +19,11 @@ struct FilmEdge {
     double ax, ay, bx, by;
 };
 
-Vec3f face_normal(const Mesh& m, int64_t f) {
-    const int32_t* t = m.indices + 3 * f;
-    const Vec3f p0 = m.vertex(t[0]);
-    return cross(m.vertex(t[1]) - p0, m.vertex(t[2]) - p0);
-}
-
 // Whether the camera sees the edge as a fold: a boundary, or one face turned to the camera and
 // the other away (the outline of the surface can run along it).
 bool camera_fold(const Camera& cam, const Mesh& m, const Edge& e) {
     if (e.kind == EdgeKind::Boundary) return true;
-    const Vec3f n0 = face_normal(m, e.f0), n1 = face_normal(m, e.f1);
+    const Vec3f n0 = m.face_normal(e.f0), n1 = m.face_normal(e.f1);
     if (cam.type == CameraType::Orthographic) return (dot(cam.forward, n0) < 0.f) != (dot(cam.forward, n1) < 0.f);
     return is_silhouette(cam.position, m.vertex(e.v0), n0, n1, e.kind);
 }
@@ -45,15 +39,22 @@ bool clip_axis(double a, double b, double lo, double hi, double& t0, double& t1)
     return t0 < t1;
 }
 
+// A world vector in the camera's axes (right, up, forward).
+Vec3d camera_axes(const Camera& cam, const Vec3f& v) {
+    return Vec3d(dot(v, cam.right), dot(v, cam.up), dot(v, cam.forward));
+}
+
+// Film pixels per unit screen offset, and the film point of screen offset (sx, sy): the inverse
+// of Camera::screen.
+double film_scale(const Camera& cam) { return cam.width / (2.0 * cam.tx); }
+double film_x(const Camera& cam, double sx) { return (sx + cam.tx) * film_scale(cam); }
+double film_y(const Camera& cam, double sy) { return cam.height * 0.5 - sy * film_scale(cam); }
+
 // Projects the edge (p0, p1) onto the film and clips it to the window [x0, x1] x [y0, y1]
 // (full-film pixels). False when nothing is left.
 bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0, double y0, double x1, double y1,
                   FilmEdge& fe) {
-    auto to_cam = [&](const Vec3f& p) {
-        const Vec3f q = p - cam.position;
-        return Vec3d(dot(q, cam.right), dot(q, cam.up), dot(q, cam.forward));
-    };
-    Vec3d q0 = to_cam(p0), q1 = to_cam(p1);
+    Vec3d q0 = camera_axes(cam, p0 - cam.position), q1 = camera_axes(cam, p1 - cam.position);
     if (cam.type == CameraType::Perspective) {
         // Keep the part in front of the camera.
         const double near = 1e-5 * std::max(length(q0), length(q1));
@@ -65,11 +66,7 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
         q1.x /= q1.z;
         q1.y /= q1.z;
     }
-    // Inverse of Camera::screen.
-    const double w = cam.width, h = cam.height, tx = cam.tx;
-    auto film_x = [&](double sx) { return (sx / tx + 1.0) * 0.5 * w; };
-    auto film_y = [&](double sy) { return (1.0 - sy * w / (tx * h)) * 0.5 * h; };
-    const double ax = film_x(q0.x), ay = film_y(q0.y), bx = film_x(q1.x), by = film_y(q1.y);
+    const double ax = film_x(cam, q0.x), ay = film_y(cam, q0.y), bx = film_x(cam, q1.x), by = film_y(cam, q1.y);
     double t0 = 0.0, t1 = 1.0;
     if (!clip_axis(ax, bx, x0, x1, t0, t1) || !clip_axis(ay, by, y0, y1, t0, t1)) return false;
     fe.ax = ax + (bx - ax) * t0;
@@ -82,21 +79,18 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
 // Film point of world point p and the film length per unit world length along direction `dir`
 // (unit). False behind the camera.
 bool film_point(const Camera& cam, const Vec3f& p, const Vec3f& dir, double& x, double& y, double& jacobian) {
-    const Vec3f q = p - cam.position;
-    const double X = dot(q, cam.right), Y = dot(q, cam.up), Z = dot(q, cam.forward);
-    const double dX = dot(dir, cam.right), dY = dot(dir, cam.up), dZ = dot(dir, cam.forward);
-    const double k = cam.width / (2.0 * cam.tx);  // film pixels per unit screen offset
-    double sx = X, sy = Y, dsx = dX, dsy = dY;
+    const Vec3d q = camera_axes(cam, p - cam.position), dq = camera_axes(cam, dir);
+    double sx = q.x, sy = q.y, dsx = dq.x, dsy = dq.y;
     if (cam.type == CameraType::Perspective) {
-        if (!(Z > 0.0)) return false;
-        sx = X / Z;
-        sy = Y / Z;
-        dsx = (dX * Z - X * dZ) / (Z * Z);
-        dsy = (dY * Z - Y * dZ) / (Z * Z);
+        if (!(q.z > 0.0)) return false;
+        sx = q.x / q.z;
+        sy = q.y / q.z;
+        dsx = (dq.x * q.z - q.x * dq.z) / (q.z * q.z);
+        dsy = (dq.y * q.z - q.y * dq.z) / (q.z * q.z);
     }
-    x = (sx + cam.tx) * k;
-    y = cam.height * 0.5 - sy * k;
-    jacobian = k * std::hypot(dsx, dsy);
+    x = film_x(cam, sx);
+    y = film_y(cam, sy);
+    jacobian = film_scale(cam) * std::hypot(dsx, dsy);
     return std::isfinite(x) && std::isfinite(y);
 }
 
@@ -216,7 +210,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double gx, gy;
             if (cam.type == CameraType::Perspective) {
                 // d = normalize(w), w = forward + sx right + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
-                const Vec3f w = cam.forward + cam.right * cam.screen(x, y).x + cam.up * cam.screen(x, y).y;
+                const Vec2f sc = cam.screen(x, y);
+                const Vec3f w = cam.forward + cam.right * sc.x + cam.up * sc.y;
                 const double inv_w = 1.0 / length(w);
                 const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
                 gx = dot(g.d_d, dr) * px_scale * inv_w;
@@ -231,13 +226,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // Both sides: g > 0 (upper) and g < 0 (lower).
             const float sx = float(gx / glen * step), sy = float(gy / glen * step);
             const Ray ray_u = cam.generate_ray(x + sx, y + sy), ray_l = cam.generate_ray(x - sx, y - sy);
-            FirstHit first_u, first_l;
-            first_u.found = scene.intersect(ray_u, first_u.hit);
-            first_l.found = scene.intersect(ray_l, first_l.hit);
-            const bool any_u = first_u.found, any_l = first_l.found;
-            const Hit &hit_u = first_u.hit, &hit_l = first_l.hit;
+            const FirstHit first_u = first_hit(scene, ray_u), first_l = first_hit(scene, ray_l);
             // The same surface (or the sky) on both sides: the edge is hidden here.
-            if (any_u == any_l && (!any_u || (hit_u.mesh == hit_l.mesh && hit_u.prim == hit_l.prim))) continue;
+            if (same_surface(first_u, first_l)) continue;
             // A crease (both faces turned the same way) separates its two faces: both sides must
             // show them (or a point next to the edge). Where thin faces converge on a vertex (a
             // sphere's pole fan seen edge-on) the step can leap over a whole face, and the crease
@@ -246,12 +237,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (!fe.fold) {
                 const Vec3f on_edge = closest_on_segment(p0, p1, o, d);
                 const float tolerance = 1e-3f * std::max(length(on_edge - o), length(p1 - p0));
-                auto at_edge = [&](bool any, const Hit& h, const Ray& r) {
-                    if (!any) return false;
-                    if (h.mesh == fe.mesh && (h.prim == fe.f0 || h.prim == fe.f1)) return true;
-                    return length(r.origin + r.dir * h.t - on_edge) < tolerance;
+                auto at_edge = [&](const FirstHit& f, const Ray& r) {
+                    if (!f.found) return false;
+                    if (f.hit.mesh == fe.mesh && (f.hit.prim == fe.f0 || f.hit.prim == fe.f1)) return true;
+                    return length(r.origin + r.dir * f.hit.t - on_edge) < tolerance;
                 };
-                if (!(at_edge(any_u, hit_u, ray_u) && at_edge(any_l, hit_l, ray_l))) continue;
+                if (!(at_edge(first_u, ray_u) && at_edge(first_l, ray_l))) continue;
             }
             Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
             const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters, nullptr, &first_u) -

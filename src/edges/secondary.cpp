@@ -118,13 +118,8 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     const float dist = length(x - p);
     if (!(dist > 0.f)) return d_p;
     const Vec3f w = (x - p) / dist;
-    if (e.kind == EdgeKind::Smooth) {
-        const int32_t* t0 = m.indices + 3 * e.f0;
-        const int32_t* t1 = m.indices + 3 * e.f1;
-        const Vec3f n0 = cross(m.vertex(t0[1]) - m.vertex(t0[0]), m.vertex(t0[2]) - m.vertex(t0[0]));
-        const Vec3f n1 = cross(m.vertex(t1[1]) - m.vertex(t1[0]), m.vertex(t1[2]) - m.vertex(t1[0]));
-        if (!is_silhouette(p, v0, n0, n1, e.kind)) return d_p;
-    }
+    if (e.kind == EdgeKind::Smooth && !is_silhouette(p, v0, m.face_normal(e.f0), m.face_normal(e.f1), e.kind))
+        return d_p;
     // The plane through p and the edge; degenerate when p lies on the edge's line.
     const Vec3f N = cross(v0 - p, v1 - p);
     const float n_len = length(N);
@@ -138,12 +133,8 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     const Vec3f f_u = bsdf_eval_world(bsdf, sp.ns, wo, w_u), f_l = bsdf_eval_world(bsdf, sp.ns, wo, w_l);
     if (is_black(f_u) && is_black(f_l)) return d_p;
     const Ray ray_u = spawn_ray(p, sp.ng, w_u), ray_l = spawn_ray(p, sp.ng, w_l);
-    FirstHit first_u, first_l;
-    first_u.found = scene_.intersect(ray_u, first_u.hit);
-    first_l.found = scene_.intersect(ray_l, first_l.hit);
-    if (first_u.found == first_l.found &&
-        (!first_u.found || (first_u.hit.mesh == first_l.hit.mesh && first_u.hit.prim == first_l.hit.prim)))
-        return d_p;  // the same surface (or the sky) on both sides: the edge is hidden from p
+    const FirstHit first_u = first_hit(scene_, ray_u), first_l = first_hit(scene_, ray_l);
+    if (same_surface(first_u, first_l)) return d_p;  // the edge is hidden from p
     RenderOptions rest = opt_;
     rest.max_bounces = bounces_left;
     RayCounters counters;

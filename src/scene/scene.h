@@ -59,6 +59,12 @@ struct Mesh {
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
 
     Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
+    // cross(v1 - v0, v2 - v0) of triangle f: the face normal (by the winding), not normalised.
+    Vec3f face_normal(int64_t f) const {
+        const int32_t* t = indices + 3 * f;
+        const Vec3f p0 = vertex(t[0]);
+        return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
+    }
     bool is_emitter() const { return !emission.empty(); }
 };
 

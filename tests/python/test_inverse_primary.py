@@ -23,6 +23,7 @@ import pytest
 import torch
 
 import edgepath as ep
+from test_primary_edges import project as project_points
 
 # ---- shared helpers --------------------------------------------------------------------------
 
@@ -33,18 +34,11 @@ def make_camera(position, fov, resolution):
 
 
 def project(points, camera):
-    """Film coordinates (pixels, y down) of points (N, 3) seen by a perspective ``camera``:
-    px = (X/Z / tan(fov/2) + 1) W/2, py = (1 - Y/Z W / (tan(fov/2) H)) H/2, with X, Y, Z the
-    camera-space coordinates along right = normalize(cross(forward, up)), up and forward."""
+    """Film coordinates (pixels, y down) of points (N, 3) seen by a perspective ``camera``, in
+    float64 (the camera model of test_primary_edges)."""
     position, look_at, up = (t.double() for t in camera.frame())
-    forward = torch.nn.functional.normalize(look_at - position, dim=0)
-    right = torch.nn.functional.normalize(torch.linalg.cross(forward, up), dim=0)
-    true_up = torch.linalg.cross(right, forward)
-    q = points.double() - position
-    x, y, z = q @ right, q @ true_up, q @ forward
-    h, w = camera.resolution
-    tan_half = math.tan(math.radians(camera.fov) / 2)
-    return torch.stack([(x / z / tan_half + 1) * w / 2, (1 - y / z * w / (tan_half * h)) * h / 2], -1)
+    cam = dict(position=position, look_at=look_at, up=up, fov=float(camera.fov))
+    return project_points(points.double(), cam, "perspective", camera.resolution)
 
 
 def rodrigues(rotvec):

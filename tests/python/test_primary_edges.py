@@ -30,17 +30,19 @@ def camera_frame(position, look_at, up):
     return f, r, torch.linalg.cross(r, f)
 
 
-def project(v, cam, kind):
-    """Film coordinates (pixels of the full film, y down) of points v (N, 3)."""
+def project(v, cam, kind, resolution=(H, W)):
+    """Film coordinates (pixels of the full film, y down) of points v (N, 3), for a camera given
+    as a dict of position, look_at, up and fov (perspective) or ortho_scale (orthographic)."""
     f, r, u = camera_frame(cam["position"], cam["look_at"], cam["up"])
     q = v - cam["position"]
     x, y, z = q @ r, q @ u, q @ f
     if kind == "perspective":
-        tx = torch.tan(torch.deg2rad(cam["fov"]) / 2)
+        tx = torch.tan(torch.deg2rad(torch.as_tensor(cam["fov"], dtype=v.dtype)) / 2)
         x, y = x / z, y / z
     else:
         tx = cam["ortho_scale"]
-    return torch.stack([(x / tx + 1) * W / 2, (1 - y * W / (tx * H)) * H / 2], -1)
+    h, w = resolution
+    return torch.stack([(x / tx + 1) * w / 2, (1 - y * w / (tx * h)) * h / 2], -1)
 
 
 def _clip(poly, axis, value, keep_below):
