@@ -8,12 +8,12 @@
 """
 
 from .io import imread, imwrite, load_obj
-from .render import (derivative_channels, derivative_image, finite_difference_channels,
+from .render import (CHANNELS, ID_CHANNELS, derivative_channels, derivative_image, finite_difference_channels,
                      finite_difference_image, render, render_channels)
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 __version__ = "0.1.0"
 
-__all__ = ["Camera", "EnvironmentMap", "Material", "Mesh", "Scene", "render", "render_channels",
+__all__ = ["CHANNELS", "ID_CHANNELS", "Camera", "EnvironmentMap", "Material", "Mesh", "Scene", "render", "render_channels",
            "derivative_image", "derivative_channels", "finite_difference_image",
            "finite_difference_channels", "imread", "imwrite", "load_obj", "__version__"]
