@@ -70,7 +70,5 @@ void eval_hit_ids(const ChannelLayout& layout, bool found, const Hit& hit, int32
 void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots, const Vec2f& film,
                     const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink);
 
-// Whether d_hit_channels has anything to do for these slots.
-bool hit_channels_wanted(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots);
 
 }  // namespace edgepath
