@@ -283,6 +283,9 @@ def save_obj(meshes: Union[Mesh, Sequence[Mesh]], path: PathLike, materials: boo
     if not isinstance(meshes, (list, tuple)) or not meshes:
         raise ValueError("meshes: expected an edgepath.Mesh or a non-empty list of them")
     path = os.fspath(path)
+    directory = os.path.dirname(path)
+    if directory:
+        os.makedirs(directory, exist_ok=True)
     base = os.path.splitext(path)[0]
     stem = os.path.basename(base)
     lines = ["# written by edgepath"]
@@ -341,9 +344,6 @@ def save_obj(meshes: Union[Mesh, Sequence[Mesh]], path: PathLike, materials: boo
                     s += "/" + str(ni[r, k])
                 parts.append(s)
             lines.append("f " + " ".join(parts))
-    directory = os.path.dirname(path)
-    if directory:
-        os.makedirs(directory, exist_ok=True)
     with open(path, "w") as out:
         out.write("\n".join(lines) + "\n")
     if materials:
