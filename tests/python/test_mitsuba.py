@@ -201,3 +201,206 @@ def test_substitution_defaults_and_keyword_overrides(tmp_path):
     with pytest.raises(ep.MitsubaError, match=r"u\.xml:\d+: <scale>: undefined parameter \$size"):
         ep.load_mitsuba(undefined)
     assert float(ep.load_mitsuba(undefined, size=0.5).scene.meshes[0].vertices.abs().max()) == 0.5
+
+
+# ---- elements of the subset ---------------------------------------------------------------------
+
+def _face_normals(mesh):
+    v, i = mesh.vertices.double(), mesh.indices.long()
+    return torch.linalg.cross(v[i[:, 1]] - v[i[:, 0]], v[i[:, 2]] - v[i[:, 0]])
+
+
+def test_analytic_shapes(tmp_path):
+    body = """
+    <shape type="sphere" id="ball"><point name="center" x="1" y="2" z="3"/><float name="radius" value="0.5"/></shape>
+    <shape type="disk" id="disk"><transform name="to_world"><scale value="2"/><translate z="-1"/></transform></shape>
+    <shape type="cube" id="box"/>
+    <shape type="cube" id="inside"><boolean name="flip_normals" value="true"/></shape>
+    <shape type="rectangle" id="rect"><transform name="to_world"><rotate x="1" angle="90"/></transform></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    ball = s.shapes["ball"]
+    centre = torch.tensor([1.0, 2.0, 3.0])
+    assert torch.allclose((ball.vertices - centre).norm(dim=1), torch.tensor(0.5), atol=1e-6)
+    fn = _face_normals(ball)
+    corners = ball.vertices[ball.indices.long()].double().mean(1) - centre.double()
+    assert bool(((fn * corners).sum(1) > 0).all())  # counter-clockwise seen from outside
+    assert torch.allclose(ball.normals, (ball.vertices - centre) / 0.5, atol=1e-5)
+    assert ball.uvs.min() >= 0 and ball.uvs.max() <= 1
+    disk = s.shapes["disk"]
+    assert torch.allclose(disk.vertices[:, 2], torch.tensor(-1.0))
+    assert float(disk.vertices[:, :2].norm(dim=1).max()) == pytest.approx(2.0)
+    assert bool((_face_normals(disk)[:, 2] > 0).all()) and disk.normals is None
+    box, inside = s.shapes["box"], s.shapes["inside"]
+    assert box.indices.shape == (12, 3) and float(box.vertices.abs().max()) == 1.0
+    out = (_face_normals(box) * box.vertices[box.indices.long()].double().mean(1)).sum(1)
+    assert bool((out > 0).all())
+    assert torch.equal(_face_normals(inside), -_face_normals(box))
+    rect = s.shapes["rect"]  # rotated +90 degrees about x: +z turns into -y
+    assert torch.allclose(_face_normals(rect)[:, 1], torch.tensor(-4.0, dtype=torch.float64))
+
+
+def test_transforms_compose_in_order(tmp_path):
+    body = """
+    <shape type="rectangle" id="a"><transform name="to_world">
+        <scale x="2" y="3"/><rotate value="0 0 1" angle="90"/><translate value="10 0 0"/>
+    </transform></shape>
+    <shape type="rectangle" id="b"><transform name="to_world">
+        <matrix value="0 -3 0 10  2 0 0 0  0 0 1 0  0 0 0 1"/></transform></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    # (x, y) -> scale (2x, 3y) -> rotate (-3y, 2x) -> translate (10 - 3y, 2x)
+    v = torch.tensor([[-1.0, -1, 0], [1, -1, 0], [-1, 1, 0], [1, 1, 0]])
+    expected = torch.stack([10 - 3 * v[:, 1], 2 * v[:, 0], v[:, 2]], 1)
+    assert torch.allclose(s.shapes["a"].vertices, expected, atol=1e-6)
+    assert torch.allclose(s.shapes["b"].vertices, expected, atol=1e-6)
+
+
+@pytest.mark.parametrize("axis, tan_x", [
+    ("x", math.tan(math.radians(30))),
+    ("y", math.tan(math.radians(30)) * 12 / 8),
+    ("diagonal", math.tan(math.radians(30)) * 12 / math.hypot(12, 8)),
+    ("smaller", math.tan(math.radians(30)) * 12 / 8),   # the 8 px height is the smaller side
+    ("larger", math.tan(math.radians(30))),
+])
+def test_fov_axes(tmp_path, axis, tan_x):
+    sensor = SENSOR.replace('value="40"/>', f'value="60"/><string name="fov_axis" value="{axis}"/>')
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    assert math.tan(math.radians(float(s.scene.camera.fov)) / 2) == pytest.approx(tan_x, rel=1e-6)
+
+
+def test_default_focal_length_and_film(tmp_path):
+    sensor = '<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="64"/>' \
+             '<integer name="height" value="64"/></film></sensor>'
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = s.scene.camera
+    assert float(c.fov) == pytest.approx(34.02205717235932, abs=1e-4)  # 50 mm, diagonal
+    assert c.pixel_filter == "gaussian" and c.filter_stddev == 0.5  # Mitsuba's default filter
+    assert s.max_bounces is None and s.spp == 4  # no integrator; the default sampler
+    bare = _write(tmp_path, '<shape type="rectangle"/>', sensor='<sensor type="perspective"/>',
+                  name="bare.xml")
+    assert ep.load_mitsuba(bare).scene.camera.resolution == (576, 768)
+
+
+def test_orthographic_sensor(tmp_path):
+    sensor = """<sensor type="orthographic">
+        <transform name="to_world"><scale value="2.5"/><lookat origin="0 0 5" target="0 0 0" up="0 1 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
+            <rfilter type="gaussian"><float name="stddev" value="0.3"/></rfilter></film>
+        <sampler type="stratified"><integer name="sample_count" value="9"/><integer name="seed" value="3"/></sampler>
+    </sensor>"""
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = s.scene.camera
+    assert c.camera_type == "orthographic" and c.ortho_scale == pytest.approx(2.5)
+    assert c.pixel_filter == "gaussian" and c.filter_stddev == pytest.approx(0.3)
+    assert (s.spp, s.seed) == (9, 3)
+    position, look_at, up = c.frame()
+    assert torch.allclose(position, torch.tensor([0.0, 0, 5]))
+    assert torch.allclose((look_at - position) / 2.5, torch.tensor([0.0, 0, -1]))
+    bad = sensor.replace('<scale value="2.5"/>', '<scale x="2" y="1"/>')
+    with pytest.raises(ep.MitsubaError, match="scales x and y differently"):
+        ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=bad, name="b.xml"))
+
+
+def test_bsdfs(tmp_path):
+    texture = tmp_path / "albedo.png"
+    ep.imwrite(torch.rand(4, 6, 3, generator=torch.Generator().manual_seed(0)), texture)
+    body = f"""
+    <texture type="bitmap" id="tex"><string name="filename" value="albedo.png"/></texture>
+    <bsdf type="twosided" id="shared"><bsdf type="diffuse"><ref name="reflectance" id="tex"/></bsdf></bsdf>
+    <shape type="rectangle" id="a"><ref id="shared"/></shape>
+    <shape type="rectangle" id="b"><ref name="bsdf" id="shared"/></shape>
+    <shape type="rectangle" id="gold"><bsdf type="roughconductor">
+        <string name="material" value="Au"/><string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.2"/><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>
+    <shape type="rectangle" id="metal"><bsdf type="roughconductor" id="ek">
+        <string name="distribution" value="ggx"/>
+        <rgb name="eta" value="0.2, 0.9, 1.1"/><rgb name="k" value="3.9, 2.4, 2.2"/></bsdf></shape>
+    <shape type="rectangle" id="plastic"><bsdf type="roughplastic" id="pl">
+        <string name="distribution" value="ggx"/><float name="alpha" value="0.3"/>
+        <string name="int_ior" value="bk7"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/></bsdf></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shapes["a"].material is s.shapes["b"].material is s.bsdfs["shared"]
+    shared = s.bsdfs["shared"]
+    assert shared.two_sided and torch.equal(shared.diffuse, ep.imread(texture))
+    assert s.textures["tex"] is shared.diffuse
+    gold = s.shapes["gold"].material
+    assert torch.allclose(gold.specular, 0.5 * torch.tensor([1.000, 0.782, 0.344]))
+    assert gold.roughness == pytest.approx(0.2) and torch.equal(gold.diffuse, torch.zeros(3))
+    eta, k = torch.tensor([0.2, 0.9, 1.1]), torch.tensor([3.9, 2.4, 2.2])
+    f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
+    assert torch.allclose(s.bsdfs["ek"].specular, f0) and s.bsdfs["ek"].roughness == 0.1
+    pl = s.bsdfs["pl"]
+    r = ((1.5046 - 1.000277) / (1.5046 + 1.000277)) ** 2
+    assert torch.allclose(pl.specular, torch.full((3,), r)) and pl.roughness == pytest.approx(0.3)
+    assert torch.allclose(pl.diffuse, torch.tensor([0.1, 0.2, 0.3])) and not pl.two_sided
+    names = s.parameters()
+    assert names["shared.diffuse"] is shared.diffuse and names["ek.specular"] is s.bsdfs["ek"].specular
+    assert names["gold.bsdf.specular"] is gold.specular
+
+
+def test_beckmann_is_rendered_as_ggx_with_a_warning(tmp_path):
+    path = _write(tmp_path, '<shape type="rectangle"><bsdf type="roughconductor"/></shape>')
+    with pytest.warns(UserWarning, match="Beckmann distribution .* rendered as GGX"):
+        s = ep.load_mitsuba(path)
+    assert s.scene.meshes[0].material.roughness == 0.1  # Mitsuba's default alpha; copper
+    assert torch.allclose(s.scene.meshes[0].material.specular, torch.tensor([0.955, 0.638, 0.538]))
+
+
+def test_mesh_files_and_emitters(tmp_path):
+    v, f = torch.tensor([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]), torch.tensor([[0, 1, 2], [0, 2, 3]])
+    uv = torch.tensor([[0.0, 0.1], [1, 0.1], [1, 0.9], [0, 0.9]])
+    ep.save_obj(ep.Mesh(vertices=v, indices=f, uvs=uv), tmp_path / "quad.obj", materials=False)
+    (tmp_path / "quad.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n")
+    env = torch.rand(4, 8, 3, generator=torch.Generator().manual_seed(2))
+    ep.imwrite(env, tmp_path / "sky.exr")
+    body = """
+    <shape type="obj" id="flat"><string name="filename" value="quad.obj"/>
+        <boolean name="face_normals" value="true"/></shape>
+    <shape type="obj" id="smooth"><string name="filename" value="quad.obj"/>
+        <boolean name="flip_tex_coords" value="false"/>
+        <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter></shape>
+    <shape type="ply" id="ply"><string name="filename" value="quad.ply"/></shape>
+    <emitter type="envmap"><string name="filename" value="sky.exr"/><float name="scale" value="2"/>
+        <transform name="to_world"><rotate y="1" angle="90"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    flat, smooth, ply = (s.shapes[k] for k in ("flat", "smooth", "ply"))
+    assert flat.normals is None
+    assert torch.allclose(flat.uvs[flat.uv_indices.long()], uv[f], atol=1e-6)  # as written
+    assert torch.allclose(smooth.uvs[smooth.uv_indices.long()][..., 1], 1 - uv[f][..., 1], atol=1e-6)
+    assert torch.allclose(smooth.normals, torch.tensor([0.0, 0, 1]).expand(4, 3))  # computed
+    assert torch.equal(smooth.emission, torch.tensor([1.0, 2, 3]))
+    assert torch.equal(smooth.material.diffuse, torch.zeros(3))  # emitters: black by default
+    assert torch.equal(ply.vertices, v) and ply.indices.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert torch.allclose(ply.normals, torch.tensor([0.0, 0, 1]).expand(4, 3))
+    e = s.scene.envmap
+    assert torch.equal(e.values, env) and e.scale == 2.0
+    assert torch.allclose(e.to_world[:3, :3], torch.tensor([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]),
+                          atol=1e-6)
+
+
+def test_parameters_and_directions(tmp_path):
+    body = """<shape type="rectangle" id="plane"/>
+    <shape type="rectangle" id="lamp"><emitter type="area"><rgb name="radiance" value="1 1 1"/></emitter>
+        <transform name="to_world"><translate z="2"/><rotate x="1" angle="180"/></transform></shape>
+    <emitter type="constant"/>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    names = s.parameters()
+    assert set(names) == {"sensor.to_world", "sensor.position", "sensor.fov", "plane.vertices",
+                          "plane.bsdf.diffuse", "lamp.vertices", "lamp.emission",
+                          "lamp.bsdf.diffuse", "envmap.values"}
+    param, d = s.direction("plane.vertices", [1, 2, 3])
+    assert param is s.shapes["plane"].vertices and torch.equal(d, torch.tensor([1.0, 2, 3]).expand(4, 3))
+    param, d = s.direction("sensor.position", [0, 0, 1])
+    assert param is s.scene.camera.to_world and d[2, 3] == 1 and int((d != 0).sum()) == 1
+    param, d = s.direction("envmap.values", [0.5])
+    assert d.shape == (1, 1, 3) and bool((d == 0.5).all())
+    param, d = s.direction("sensor.fov", [2])
+    assert d.shape == () and float(d) == 2
+    with pytest.raises(ValueError, match="expected 3 numbers, got 1"):
+        s.direction("plane.vertices", [1])
+    with pytest.raises(ValueError, match="'nothing': not in this scene"):
+        s.direction("nothing", [1])
+    image = s.render(spp=1)  # the file's settings: 12 x 8 film
+    assert image.shape == (8, 12, 3) and float(image.min()) >= 0
