@@ -7,11 +7,13 @@
     ep.imwrite(image, "out.png")
 """
 
-from .io import imread, imwrite, load_obj
+from .io import imread, imwrite, load_obj, load_ply, save_obj
+from .mitsuba import MitsubaError, MitsubaScene, load_mitsuba
 from .render import derivative_image, finite_difference_image, render
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 __version__ = "0.1.0"
 
 __all__ = ["Camera", "EnvironmentMap", "Material", "Mesh", "Scene", "render", "derivative_image",
-           "finite_difference_image", "imread", "imwrite", "load_obj", "__version__"]
+           "finite_difference_image", "imread", "imwrite", "load_obj", "load_ply", "save_obj",
+           "load_mitsuba", "MitsubaScene", "MitsubaError", "__version__"]
