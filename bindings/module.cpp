@@ -356,6 +356,88 @@ void derivative_image(const nb::dict& camera, const nb::list& materials, const n
     edgepath::derivative_image(*scene, opt, slots, out.data());
 }
 
+// ---- output channels -------------------------------------------------------------------------
+// `channels`: a list of channel names (render/channels.h); the float image holds the continuous
+// ones in that order, the int32 image the ids.
+using IdsOut = nb::ndarray<int32_t, nb::c_contig, nb::device::cpu>;
+
+edgepath::ChannelLayout channel_layout(const std::vector<std::string>& names) {
+    std::vector<edgepath::Channel> list;
+    for (size_t i = 0; i < names.size(); ++i)
+        list.push_back(edgepath::channel_from_name(names[i], "channels[" + std::to_string(i) + "]"));
+    return edgepath::ChannelLayout(list);
+}
+
+// An (H, W, C) buffer of the size the scene renders.
+template <class Out>
+Out channel_buffer(nb::handle obj, const edgepath::Scene& scene, int channels, const std::string& field,
+                   const char* dtype) {
+    Out out;
+    const size_t height = edgepath::image_height(scene), width = edgepath::image_width(scene);
+    if (!nb::try_cast(obj, out, false) || out.ndim() != 3 || out.shape(0) != height ||
+        out.shape(1) != width || out.shape(2) != size_t(channels))
+        fail(field, std::string("expected a C-contiguous ") + dtype + " CPU array of shape (" +
+                        std::to_string(height) + ", " + std::to_string(width) + ", " +
+                        std::to_string(channels) + ")");
+    return out;
+}
+
+nb::dict render_channels(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                         nb::object envmap, const std::vector<std::string>& channels, nb::handle values,
+                         nb::handle ids, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    const edgepath::ChannelLayout layout = channel_layout(channels);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    const ImageOut v = channel_buffer<ImageOut>(values, *scene, layout.num_values, "values", "float32");
+    const IdsOut i = channel_buffer<IdsOut>(ids, *scene, layout.num_ids, "ids", "int32");
+    edgepath::RenderStats stats;
+    {
+        nb::gil_scoped_release release;
+        stats = edgepath::render_channels(*scene, opt, layout, v.data(), i.data());
+    }
+    nb::dict result;
+    result["camera_rays"] = stats.camera_rays;
+    result["shadow_rays"] = stats.shadow_rays;
+    result["bounce_rays"] = stats.bounce_rays;
+    return result;
+}
+
+void channel_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                       nb::object envmap, const std::vector<std::string>& channels, nb::handle adjoint,
+                       const nb::dict& grads, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    const edgepath::ChannelLayout layout = channel_layout(channels);
+    SlotViews views{true, {}, {}};
+    const edgepath::SceneGradients slots = gradient_slots(views, grads, d.desc);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    FloatView a;
+    if (!nb::try_cast(adjoint, a, false) || a.ndim() != 3 || a.shape(2) != size_t(layout.num_values) ||
+        a.shape(0) != size_t(edgepath::image_height(*scene)) ||
+        a.shape(1) != size_t(edgepath::image_width(*scene)))
+        fail("adjoint", "expected a C-contiguous float32 CPU array shaped like the channels' values");
+    nb::gil_scoped_release release;
+    edgepath::channel_gradients(*scene, opt, layout, a.data(), slots);
+}
+
+void channel_derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                              nb::object envmap, const std::vector<std::string>& channels,
+                              const nb::dict& directions, nb::handle values, const nb::dict& options) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    const edgepath::RenderOptions opt = render_options(options);
+    const edgepath::ChannelLayout layout = channel_layout(channels);
+    SlotViews views{false, {}, {}};
+    const edgepath::SceneGradients slots = gradient_slots(views, directions, d.desc);
+    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    const ImageOut out = channel_buffer<ImageOut>(values, *scene, layout.num_values, "values", "float32");
+    nb::gil_scoped_release release;
+    edgepath::channel_derivative_image(*scene, opt, layout, slots, out.data());
+}
+
 // Moves `values` into a numpy array of the given shape (owned by a capsule).
 template <typename T>
 nb::object to_numpy(std::vector<T>&& values, std::initializer_list<size_t> shape) {
@@ -444,6 +526,16 @@ NB_MODULE(_core, m) {
     m.def("derivative_image", &derivative_image, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "directions"_a, "image"_a, "options"_a,
           "Writes the derivative of the image along `directions` into `image` (H, W, 3).");
+    m.def("render_channels", &render_channels, "camera"_a, "materials"_a, "meshes"_a,
+          "envmap"_a.none(), "channels"_a, "values"_a, "ids"_a, "options"_a,
+          "Renders the named channels: the continuous ones into `values` (H, W, C) float32, the "
+          "ids into `ids` (H, W, K) int32, in place. Returns the render counters as a dict.");
+    m.def("channel_gradients", &channel_gradients, "camera"_a, "materials"_a, "meshes"_a,
+          "envmap"_a.none(), "channels"_a, "adjoint"_a, "gradients"_a, "options"_a,
+          "Adds d(sum(adjoint * values))/d(parameter) into the buffers of `gradients`.");
+    m.def("channel_derivative_image", &channel_derivative_image, "camera"_a, "materials"_a,
+          "meshes"_a, "envmap"_a.none(), "channels"_a, "directions"_a, "values"_a, "options"_a,
+          "Writes the derivative of the channels' values along `directions` into `values`.");
     m.def("imread", &imread, "path"_a,
           "Reads a PNG/JPEG (linearised) or EXR file as a float32 (H, W, C) numpy array.");
     m.def("imwrite", &imwrite, "path"_a, "image"_a,

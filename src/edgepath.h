@@ -3,6 +3,7 @@
 #pragma once
 #include <memory>
 #include "diff/gradients.h"
+#include "render/channels.h"
 #include "scene/desc.h"
 
 namespace edgepath {
@@ -33,5 +34,22 @@ void render_gradients(const Scene& scene, const RenderOptions& options, const fl
 // Forward-mode derivative image: out (image_height, image_width, 3) = dI/dtheta along the
 // directions in `dirs` (their `dir` slots), computed by the same adjoint code.
 void derivative_image(const Scene& scene, const RenderOptions& options, const SceneGradients& dirs, float* out);
+
+// Output channels (render/channels.h, docs/conventions.md): renders the layout's continuous
+// channels into `values` (image_height, image_width, layout.num_values) float32 and its ids into
+// `ids` (image_height, image_width, layout.num_ids) int32 (may be null without ids). The
+// radiance channel equals render()'s image for the same options, bit for bit; the other
+// continuous channels are filtered over the same camera samples; ids are those of the ray
+// through the pixel centre.
+RenderStats render_channels(const Scene& scene, const RenderOptions& options, const ChannelLayout& layout,
+                            float* values, int32_t* ids);
+
+// render_gradients for the continuous channels: `adjoint` (H, W, layout.num_values).
+void channel_gradients(const Scene& scene, const RenderOptions& options, const ChannelLayout& layout,
+                       const float* adjoint, const SceneGradients& grads);
+
+// derivative_image for the continuous channels: out (H, W, layout.num_values).
+void channel_derivative_image(const Scene& scene, const RenderOptions& options, const ChannelLayout& layout,
+                              const SceneGradients& dirs, float* out);
 
 }  // namespace edgepath

@@ -197,6 +197,160 @@ def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.
     return (images[0] - images[1]) / eps
 
 
+# ---- output channels -------------------------------------------------------------------------
+
+# Name -> number of values per pixel (docs/conventions.md, "Output channels").
+CHANNELS = {"radiance": 3, "alpha": 1, "depth": 1, "position": 3, "geometry_normal": 3,
+            "shading_normal": 3, "uv": 2, "albedo": 3, "mesh_id": 1, "triangle_id": 1}
+ID_CHANNELS = ("mesh_id", "triangle_id")
+
+
+def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int = 1,
+                    seed: int = 0, num_threads: Optional[int] = None, sampling: str = "mis",
+                    backward_spp: Optional[int] = None, backward_seed: Optional[int] = None,
+                    primary_edges: bool = True, secondary_edges: bool = True,
+                    edge_samples: Optional[int] = None,
+                    edge_sampling: str = "importance") -> Dict[str, torch.Tensor]:
+    """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
+    (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
+    the same options, bit for bit; "alpha", "depth", "position", "geometry_normal",
+    "shading_normal", "uv" and "albedo" are float32, averaged over the same camera samples
+    (filtered like radiance); "mesh_id" and "triangle_id" are int32 (-1 where nothing is hit),
+    those of the ray through the pixel centre. Meanings and units: docs/conventions.md.
+
+    Differentiable like ``render`` (same options): a loss on any continuous channel
+    backpropagates into the scene, including the boundary terms of silhouettes (alpha, depth,
+    ...) and of the geometric normal's jumps between faces; ids have no gradient."""
+    names = _channel_names(channels)
+    options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
+                             secondary_edges, edge_samples, edge_sampling)
+    flat = flatten_scene(scene)
+    attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
+    continuous = [n for n in names if n not in ID_CHANNELS]
+    if not attached or not continuous or not torch.is_grad_enabled():
+        values, ids, _ = render_channels_flat(flat, names, options)
+    else:
+        grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
+                                      _backward_seed(options.seed) if backward_seed is None else backward_seed,
+                                      num_threads, sampling, primary_edges, secondary_edges,
+                                      edge_samples, edge_sampling)
+        slots = [slot for slot, _ in attached]
+        values, ids = _ChannelsFunction.apply(flat, names, options, grad_options, slots,
+                                              *[t for _, t in attached])
+    return _split_channels(names, values, ids)
+
+
+def render_channels_flat(flat: FlatScene, names: List[str],
+                         options: RenderOptions) -> Tuple[torch.Tensor, torch.Tensor, dict]:
+    """One call into the core: the packed continuous values, the packed ids, the counters."""
+    nv = sum(CHANNELS[n] for n in names if n not in ID_CHANNELS)
+    ni = sum(1 for n in names if n in ID_CHANNELS)
+    values = torch.empty((flat.height, flat.width, nv), dtype=torch.float32)
+    ids = torch.empty((flat.height, flat.width, ni), dtype=torch.int32)
+    stats = _call_core(_core.render_channels, *flat.core_args(), names, values, ids, options.core())
+    return values, ids, stats
+
+
+class _ChannelsFunction(torch.autograd.Function):
+    """As _RenderFunction, for the packed continuous channels (the ids ride along, not
+    differentiable)."""
+
+    @staticmethod
+    def forward(ctx, flat, names, options, grad_options, slots, *tensors):
+        values, ids, _ = render_channels_flat(flat, names, options)
+        ctx.mark_non_differentiable(ids)
+        ctx.flat, ctx.names, ctx.grad_options, ctx.slots = flat, names, grad_options, slots
+        return values, ids
+
+    @staticmethod
+    def backward(ctx, grad_values, grad_ids):
+        flat = ctx.flat
+        needed = ctx.needs_input_grad[5:]
+        buffers = {slot: torch.zeros(flat.params[slot].shape, dtype=torch.float32)
+                   for slot, need in zip(ctx.slots, needed) if need}
+        if buffers and grad_values is not None:
+            adjoint = grad_values.detach().to(torch.float32).contiguous()
+            _call_core(_core.channel_gradients, *flat.core_args(), ctx.names, adjoint,
+                       flat.slot_buffers(buffers), ctx.grad_options.core())
+        return (None, None, None, None, None, *[buffers.get(slot) for slot in ctx.slots])
+
+
+def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tensor, channels=None,
+                        spp: int = 16, max_bounces: int = 1, seed: int = 0,
+                        num_threads: Optional[int] = None, sampling: str = "mis",
+                        primary_edges: bool = True, secondary_edges: bool = True,
+                        edge_samples: Optional[int] = None,
+                        edge_sampling: str = "importance") -> Dict[str, torch.Tensor]:
+    """``derivative_image`` for output channels: {name: (H, W, C) float32} derivatives along
+    ``direction`` of the continuous channels in ``channels`` (default: all of them; ids have
+    no derivative and are refused), with the same random numbers as ``render_channels``."""
+    names = _channel_names(channels, continuous_only=True)
+    options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
+                             secondary_edges, edge_samples, edge_sampling)
+    directions = _slot_directions(scene, param, direction)
+    flat = flatten_scene(scene)
+    values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
+    if directions:
+        _call_core(_core.channel_derivative_image, *flat.core_args(), names,
+                   flat.slot_buffers(directions), values, options.core())
+    else:
+        values.zero_()
+    return _split_channels(names, values, None)
+
+
+def finite_difference_channels(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
+                               channels=None, eps: float = 1e-3, spp: int = 16,
+                               max_bounces: int = 1, seed: int = 0,
+                               num_threads: Optional[int] = None,
+                               sampling: str = "mis") -> Dict[str, torch.Tensor]:
+    """``finite_difference_image`` for output channels: central differences of the continuous
+    channels in ``channels`` (default: all), both sides rendered with the same seed. Compare
+    with ``derivative_channels``."""
+    names = _channel_names(channels, continuous_only=True)
+    eps = v.number(eps, "eps")
+    if not eps > 0:
+        v.fail("eps", f"must be > 0, got {eps}")
+    base, direction = _check_direction(param, direction)
+    sides = []
+    with torch.no_grad():
+        for sign in (0.5, -0.5):
+            moved = _substitute(scene, param, (base + sign * eps * direction).to(param.dtype))
+            sides.append(render_channels(moved, names, spp, max_bounces, seed, num_threads, sampling))
+    return {n: (sides[0][n] - sides[1][n]) / eps for n in names}
+
+
+def _channel_names(channels, continuous_only: bool = False) -> List[str]:
+    if channels is None:
+        return [n for n in CHANNELS if not (continuous_only and n in ID_CHANNELS)]
+    if isinstance(channels, str) or not isinstance(channels, (list, tuple)):
+        v.fail("channels", f"expected a list of channel names, got {channels!r}")
+    if len(channels) == 0:
+        v.fail("channels", "asks for no channel")
+    names = []
+    for i, name in enumerate(channels):
+        if not isinstance(name, str) or name not in CHANNELS:
+            v.fail(f"channels[{i}]", f"unknown channel {name!r} (known: {', '.join(CHANNELS)})")
+        if name in names:
+            v.fail(f"channels[{i}]", f"{name!r} is asked for twice")
+        if continuous_only and name in ID_CHANNELS:
+            v.fail(f"channels[{i}]", f"{name!r} is an id and has no derivative")
+        names.append(name)
+    return names
+
+
+def _split_channels(names: List[str], values: torch.Tensor,
+                    ids: Optional[torch.Tensor]) -> Dict[str, torch.Tensor]:
+    out, o, k = {}, 0, 0
+    for name in names:
+        if name in ID_CHANNELS:
+            out[name] = ids[..., k:k + 1]
+            k += 1
+        else:
+            out[name] = values[..., o:o + CHANNELS[name]]
+            o += CHANNELS[name]
+    return out
+
+
 def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis",
                    primary_edges=True, secondary_edges=True, edge_samples=None,
                    edge_sampling="importance") -> RenderOptions:

@@ -8,10 +8,9 @@
 namespace edgepath {
 
 namespace {
-
 const GradSlot kNoSlot{};
+}  // namespace
 
-// Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
 void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv) {
     if (tex.is_constant()) {
         if (slot.wanted())
@@ -30,6 +29,8 @@ void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* 
         }
 }
 
+namespace {
+
 // Adjoint of Envmap::eval: texels and rotation into their slots; returns d L / d world
 // direction (the caller decides whether the direction moves).
 Vec3f d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
@@ -47,35 +48,20 @@ Vec3f d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir,
     return env.to_world_dir(d_local);
 }
 
-// The differentiable geometry of a hit: a fixed ray meeting a triangle.
-struct VertexGeometry {
-    const Mesh* mesh;
-    const int32_t* tri;
-    Vec3f v[3];
-    TriangleHit<float> th;
-    SurfacePoint sp;
+}  // namespace
 
-    VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir) {
-        mesh = &scene.meshes[hit.mesh];
-        tri = mesh->indices + 3 * hit.prim;
-        for (int k = 0; k < 3; ++k) v[k] = mesh->vertex(tri[k]);
-        th.b1 = hit.b1;
-        th.b2 = hit.b2;
-        th.t = hit.t;
-        // Re-solve the barycentrics from the ray so that value and adjoint agree exactly.
-        TriangleHit<float> h;
-        if (intersect_triangle(origin, dir, v[0], v[1], v[2], h)) th = h;
-        sp = scene.surface_point(hit.mesh, hit.prim, th.b1, th.b2);
-    }
-};
-
-// Accumulates adjoints of the quantities derived from a hit and sends them to the mesh's
-// buffers; returns the adjoint of the ray (origin, direction) through the intersection.
-struct HitAdjoint {
-    Vec3f dp, dn;    // position, shading normal
-    Vec2f duv;       // texture coordinates
-    HitAdjoint() : dp(0.f), dn(0.f), duv(0.f, 0.f) {}
-};
+VertexGeometry::VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir) {
+    mesh = &scene.meshes[hit.mesh];
+    tri = mesh->indices + 3 * hit.prim;
+    for (int k = 0; k < 3; ++k) v[k] = mesh->vertex(tri[k]);
+    th.b1 = hit.b1;
+    th.b2 = hit.b2;
+    th.t = hit.t;
+    // Re-solve the barycentrics from the ray so that value and adjoint agree exactly.
+    TriangleHit<float> h;
+    if (intersect_triangle(origin, dir, v[0], v[1], v[2], h)) th = h;
+    sp = scene.surface_point(hit.mesh, hit.prim, th.b1, th.b2);
+}
 
 void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
                 const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir) {
@@ -110,10 +96,12 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
             for (int k = 0; k < 3; ++k) sink.add3(ms->normals, ni[k], dN.x * b[k], dN.y * b[k], dN.z * b[k]);
         db1 += dot(dN, n[1] - n[0]);
         db2 += dot(dN, n[2] - n[0]);
-    } else {
-        // ns = normalize(cross(e1, e2))
+    }
+    // Geometric normal ng = normalize(cross(e1, e2)) (also the shading normal without normals).
+    const Vec3f dng = m.normals ? a.dng : a.dng + a.dn;
+    if (!is_black(dng)) {
         Vec3f e1 = g.v[1] - g.v[0], e2 = g.v[2] - g.v[0];
-        Vec3f dC = d_normalize(cross(e1, e2), a.dn);
+        Vec3f dC = d_normalize(cross(e1, e2), dng);
         Vec3f de1(0.f), de2(0.f);
         d_cross(e1, e2, dC, de1, de2);
         dv[1] += de1;
@@ -126,7 +114,7 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
     db2 += dot(a.dp, g.v[2] - g.v[0]);
     // (t, b1, b2) = intersect(origin, dir, v0, v1, v2)
     DTriangle<float> dt{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
-    d_intersect_triangle(origin, dir, g.v[0], g.v[1], g.v[2], g.th, 0.f, db1, db2, dt);
+    d_intersect_triangle(origin, dir, g.v[0], g.v[1], g.v[2], g.th, a.dt, db1, db2, dt);
     d_origin += dt.o;
     d_dir += dt.d;
     dv[0] += dt.v0;
@@ -139,6 +127,8 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
     return size_t(mesh) < s.meshes.size() ? &s.meshes[mesh] : nullptr;
 }
+
+namespace {
 
 TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp) {
     BsdfParams p = scene.bsdf_params(sp);

@@ -4,6 +4,7 @@
 #pragma once
 #include "diff/gradients.h"
 #include "render/path.h"
+#include "scene/geometry.h"
 
 namespace edgepath {
 
@@ -13,5 +14,37 @@ class SecondaryEdges;
 // boundary term of the edges seen from each scattering vertex (edges/secondary.h).
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& adjoint,
                    GradSink& sink, const SecondaryEdges* secondary = nullptr);
+
+// ---- pieces of the sweep, shared with the output channels (render/channels.h) ----------------
+
+// The differentiable geometry of a hit: a fixed ray (origin, dir) meeting a triangle.
+struct VertexGeometry {
+    const Mesh* mesh;
+    const int32_t* tri;
+    Vec3f v[3];
+    TriangleHit<float> th;  // re-solved from the ray, so that value and adjoint agree exactly
+    SurfacePoint sp;
+
+    VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir);
+};
+
+// Adjoints of the quantities derived from a hit.
+struct HitAdjoint {
+    Vec3f dp, dn, dng;  // position, shading normal (unbent), geometric normal
+    Vec2f duv;          // texture coordinates
+    float dt = 0.f;     // distance along the ray
+    HitAdjoint() : dp(0.f), dn(0.f), dng(0.f), duv(0.f, 0.f) {}
+};
+
+// Sends the adjoints `a` of a hit to the mesh's buffers (`ms`, may be null) and adds the
+// adjoint of the ray through the intersection to (d_origin, d_dir).
+void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
+                const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir);
+
+// Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
+void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv);
+
+// The slots of mesh `mesh`, or null when none were given.
+const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh);
 
 }  // namespace edgepath

@@ -118,12 +118,17 @@ bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const Sc
 }
 
 void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
-                       const float* adjoint, float* out) {
+                       const ChannelLayout& layout, const float* adjoint, float* out) {
     if (!primary_edges_wanted(scene, opt, slots)) return;
     const Camera& cam = scene.camera;
     const bool camera_wanted = slots.camera.wanted();
     // The baseline: every edge, silhouette or not, by world length, points not stratified.
     const bool uniform = opt.edge_sampling == EdgeSampling::Uniform;
+    const int nv = layout.num_values;
+    const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
+    const int ro = layout.offset[int(Channel::Radiance)];
+    // The geometric normal jumps across every edge between faces at an angle.
+    const bool smooth_edges_jump = layout.has(Channel::GeometryNormal);
 
     // The film window whose pixels the filter reaches: the output, widened by the filter's
     // reach beyond a pixel.
@@ -142,9 +147,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (uniform) {
             len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
         } else {
-            // Folds and creases (shading or texture jumps); smooth edges that do not fold never
-            // separate different values.
-            if (!fe.fold && e.kind == EdgeKind::Smooth) continue;
+            // Folds and creases (shading or texture jumps); smooth edges that do not fold
+            // separate different values only in the geometric normal.
+            if (!fe.fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) continue;
             if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
             len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
         }
@@ -244,10 +249,24 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 };
                 if (!(at_edge(first_u, ray_u) && at_edge(first_l, ray_l))) continue;
             }
-            Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
-            const Vec3f delta = trace_path(scene, opt, ray_u, path_u, counters, nullptr, &first_u) -
+            // The channels' values on both sides.
+            float value_u[kMaxChannelValues], value_l[kMaxChannelValues], delta[kMaxChannelValues];
+            if (hit_values) {
+                eval_hit_channels(scene, layout, ray_u, first_u.found, first_u.hit, value_u);
+                eval_hit_channels(scene, layout, ray_l, first_l.found, first_l.hit, value_l);
+            }
+            if (radiance) {
+                Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
+                const Vec3f L = trace_path(scene, opt, ray_u, path_u, counters, nullptr, &first_u) -
                                 trace_path(scene, opt, ray_l, path_l, counters, nullptr, &first_l);
-            if (is_black(delta)) continue;
+                for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], value_l[ro + c] = 0.f;
+            }
+            bool jump = false;
+            for (int c = 0; c < nv; ++c) {
+                delta[c] = value_u[c] - value_l[c];
+                jump = jump || delta[c] != 0.f;
+            }
+            if (!jump) continue;
             const float weight = float(point_weight / glen);
 
             // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
@@ -280,8 +299,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (adjoint) {
                 double s = 0.0;
                 for_each_pixel([&](int64_t p, float k) {
-                    const float* a = adjoint + 3 * p;
-                    s += double(k) * (a[0] * delta.x + a[1] * delta.y + a[2] * delta.z);
+                    const float* a = adjoint + nv * p;
+                    float ad = 0.f;
+                    for (int c = 0; c < nv; ++c) ad += a[c] * delta[c];
+                    s += double(k) * ad;
                 });
                 if (s != 0.0) add_side_gradient(float(s * weight));
             } else {
@@ -289,7 +310,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const float dg = float(sink.take_projection()) * weight;
                 if (dg == 0.f) continue;
                 for_each_pixel([&](int64_t p, float k) {
-                    for (int c = 0; c < 3; ++c) atomic_add(out + 3 * p + c, k * dg * delta[c]);
+                    for (int c = 0; c < nv; ++c)
+                        if (delta[c] != 0.f) atomic_add(out + nv * p + c, k * dg * delta[c]);
                 });
             }
         }

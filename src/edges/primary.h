@@ -6,6 +6,7 @@
 // the camera through the derivative of the side function (edges/edges.h).
 #pragma once
 #include "diff/gradients.h"
+#include "render/channels.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
 
@@ -15,9 +16,19 @@ namespace edgepath {
 bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots);
 
 // Reverse mode: adds d(adjoint . image)/d(parameter) to the slots' gradient buffers
-// (adjoint: the output image's (H, W, 3) adjoint). Forward mode (adjoint == nullptr): adds the
-// term's share of the derivative image along the slots' directions to `out` (H, W, 3).
+// (adjoint: the output image's (H, W, layout.num_values) adjoint). Forward mode
+// (adjoint == nullptr): adds the term's share of the derivative image along the slots'
+// directions to `out` (H, W, layout.num_values). The image holds the layout's continuous
+// channels: each side of an edge sample traces a path (radiance) and evaluates the camera
+// ray's first hit (the other channels). With the geometric normal, the smooth edges of meshes
+// with shading normals (where only that normal jumps) are sampled too.
 void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
-                       const float* adjoint, float* out);
+                       const ChannelLayout& layout, const float* adjoint, float* out);
+
+// The radiance image alone (H, W, 3).
+inline void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
+                              const float* adjoint, float* out) {
+    primary_edge_pass(scene, opt, slots, ChannelLayout::radiance(), adjoint, out);
+}
 
 }  // namespace edgepath

@@ -42,7 +42,9 @@ public:
 
     // Normalised 1D weight at offset x (integrates to one); the 2D weight is the product.
     float eval(float x) const {
-        if (type_ == FilterType::Box) return std::abs(x) <= 0.5f ? 1.f : 0.f;
+        // Box: half-open [-0.5, 0.5), like the film samples, so a point on the border of two
+        // pixels belongs to one of them (the right / lower one).
+        if (type_ == FilterType::Box) return x >= -0.5f && x < 0.5f ? 1.f : 0.f;
         return float(raw(x) / norm_);
     }
 

@@ -1,10 +1,13 @@
 // The gradient pass: every camera sample is re-traced with the random numbers of the forward
 // pass (same seed: same paths), recorded, and swept in reverse (the interior term); then the
-// boundary terms of the edges are added by their own passes.
+// boundary terms of the edges are added by their own passes. The same pass serves the output
+// channels (render/channels.h): the radiance through the recorded path, the other continuous
+// channels through the camera ray's first hit.
 #include "diff/backprop.h"
 #include "edgepath.h"
 #include "edges/primary.h"
 #include "edges/secondary.h"
+#include "render/channels.h"
 #include "render/path.h"
 #include "render/tiles.h"
 #include <tbb/enumerable_thread_specific.h>
@@ -13,70 +16,102 @@ namespace edgepath {
 
 namespace {
 
-// Runs fn(pixel x, y, sample record) for every camera sample, in parallel.
-template <class SampleFn, class TileEnd>
-void for_each_sample(const Scene& scene, const RenderOptions& opt, SampleFn&& fn, TileEnd&& tile_end) {
-    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
-        RayCounters c;
-        PathRecord rec;
-        rec.vertices.reserve(size_t(opt.max_bounces) + 1);
-        for (int y = y0; y < y1; ++y)
-            for (int x = x0; x < x1; ++x) {
-                uint64_t pixel = film_pixel_index(scene, x, y);
-                for (int s = 0; s < opt.spp; ++s) {
-                    Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
-                    rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (pixel * uint64_t(opt.spp) + uint64_t(s)));
-                    rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                    trace_path(scene, opt, scene.camera.generate_ray(rec.film.x, rec.film.y), rng, c, &rec);
-                    fn(x, y, rec);
-                }
-            }
-        tile_end();
-    });
+void check_layout(const ChannelLayout& layout) {
+    if (layout.num_values == 0)
+        throw std::invalid_argument("channels: no continuous channel to differentiate (ids have no derivative)");
 }
 
 }  // namespace
 
-void render_gradients(const Scene& scene, const RenderOptions& opt, const float* adjoint, const SceneGradients& grads) {
+void channel_gradients(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout,
+                       const float* adjoint, const SceneGradients& grads) {
     check_options(opt);
+    check_layout(layout);
     const float inv_spp = 1.f / float(opt.spp);
-    const SecondaryEdges secondary(scene, opt, grads);
+    const int nv = layout.num_values;
+    const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
+    const int ro = layout.offset[int(Channel::Radiance)];
+    const SceneGradients none;  // the other channels see no secondary edges
+    const SecondaryEdges secondary(scene, opt, radiance ? grads : none);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
     tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(false); });
     for_each_sample(
-        scene, opt,
+        scene, opt, radiance,
         [&](int x, int y, const PathRecord& rec) {
-            const float* a = adjoint + (int64_t(y) * scene.out_width + x) * 3;
-            Vec3f av(a[0] * inv_spp, a[1] * inv_spp, a[2] * inv_spp);
-            if (is_black(av)) return;
-            backprop_path(scene, grads, rec, av, sinks.local(), sec);
+            const float* a = adjoint + (int64_t(y) * scene.out_width + x) * nv;
+            if (radiance) {
+                Vec3f av(a[ro] * inv_spp, a[ro + 1] * inv_spp, a[ro + 2] * inv_spp);
+                if (!is_black(av)) backprop_path(scene, grads, rec, av, sinks.local(), sec);
+            }
+            if (hit_values && !rec.camera_missed) {
+                float ah[kMaxChannelValues];
+                bool any = false;
+                for (int j = 0; j < nv; ++j) {
+                    ah[j] = a[j] * inv_spp;
+                    any = any || ah[j] != 0.f;
+                }
+                const PathVertexRecord& v = rec.vertices[0];
+                Ray ray;
+                ray.origin = v.origin;
+                ray.dir = v.dir;
+                if (any) d_hit_channels(scene, layout, grads, rec.film, ray, v.hit, ah, sinks.local());
+            }
         },
         [&] { sinks.local().flush(); });
-    primary_edge_pass(scene, opt, grads, adjoint, nullptr);
+    primary_edge_pass(scene, opt, grads, layout, adjoint, nullptr);
 }
 
-void derivative_image(const Scene& scene, const RenderOptions& opt, const SceneGradients& dirs, float* out) {
+void channel_derivative_image(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout,
+                              const SceneGradients& dirs, float* out) {
     check_options(opt);
+    check_layout(layout);
     const float inv_spp = 1.f / float(opt.spp);
-    const int64_t n = int64_t(scene.out_width) * scene.out_height * 3;
+    const int nv = layout.num_values;
+    const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
+    const int ro = layout.offset[int(Channel::Radiance)];
+    const int64_t n = int64_t(scene.out_width) * scene.out_height * nv;
     std::fill(out, out + n, 0.f);
-    const SecondaryEdges secondary(scene, opt, dirs);
+    const SceneGradients none;  // the other channels see no secondary edges
+    const SecondaryEdges secondary(scene, opt, radiance ? dirs : none);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
     tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(true); });
     for_each_sample(
-        scene, opt,
+        scene, opt, radiance,
         [&](int x, int y, const PathRecord& rec) {
             GradSink& sink = sinks.local();
-            float* o = out + (int64_t(y) * scene.out_width + x) * 3;
-            for (int c = 0; c < 3; ++c) {
-                Vec3f e(0.f);
-                e[c] = inv_spp;
-                backprop_path(scene, dirs, rec, e, sink, sec);
-                o[c] += float(sink.take_projection());  // each pixel belongs to one tile: no race
+            float* o = out + (int64_t(y) * scene.out_width + x) * nv;  // each pixel belongs to one tile: no race
+            if (radiance)
+                for (int c = 0; c < 3; ++c) {
+                    Vec3f e(0.f);
+                    e[c] = inv_spp;
+                    backprop_path(scene, dirs, rec, e, sink, sec);
+                    o[ro + c] += float(sink.take_projection());
+                }
+            if (hit_values && !rec.camera_missed) {
+                const PathVertexRecord& v = rec.vertices[0];
+                Ray ray;
+                ray.origin = v.origin;
+                ray.dir = v.dir;
+                float e[kMaxChannelValues] = {};
+                for (int j = 0; j < nv; ++j) {
+                    if (radiance && j >= ro && j < ro + 3) continue;
+                    e[j] = inv_spp;
+                    d_hit_channels(scene, layout, dirs, rec.film, ray, v.hit, e, sink);
+                    e[j] = 0.f;
+                    o[j] += float(sink.take_projection());
+                }
             }
         },
         [] {});
-    primary_edge_pass(scene, opt, dirs, nullptr, out);
+    primary_edge_pass(scene, opt, dirs, layout, nullptr, out);
+}
+
+void render_gradients(const Scene& scene, const RenderOptions& opt, const float* adjoint, const SceneGradients& grads) {
+    channel_gradients(scene, opt, ChannelLayout::radiance(), adjoint, grads);
+}
+
+void derivative_image(const Scene& scene, const RenderOptions& opt, const SceneGradients& dirs, float* out) {
+    channel_derivative_image(scene, opt, ChannelLayout::radiance(), dirs, out);
 }
 
 }  // namespace edgepath

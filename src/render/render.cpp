@@ -35,4 +35,60 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
     return st;
 }
 
+RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout, float* values,
+                            int32_t* ids) {
+    check_options(opt);
+    if (layout.num_ids > 0 && !ids) throw std::invalid_argument("ids: missing (the channels include ids)");
+    const int nv = layout.num_values, ni = layout.num_ids;
+    const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
+    const int ro = layout.offset[int(Channel::Radiance)];
+    std::atomic<uint64_t> n_camera{0}, n_shadow{0}, n_bounce{0};
+    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
+        RayCounters c;
+        float v[kMaxChannelValues];
+        for (int y = y0; y < y1; ++y)
+            for (int x = x0; x < x1; ++x) {
+                const uint64_t pixel = film_pixel_index(scene, x, y);
+                const int64_t index = int64_t(y) * scene.out_width + x;
+                if (nv > 0) {
+                    double sum[kMaxChannelValues] = {};
+                    for (int s = 0; s < opt.spp; ++s) {
+                        Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
+                        const Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
+                        const Ray ray = scene.camera.generate_ray(film.x, film.y);
+                        FirstHit first;
+                        if (hit_values) {
+                            first = first_hit(scene, ray);
+                            eval_hit_channels(scene, layout, ray, first.found, first.hit, v);
+                        }
+                        if (radiance) {
+                            const Vec3f L = trace_path(scene, opt, ray, rng, c, nullptr, hit_values ? &first : nullptr);
+                            for (int k = 0; k < 3; ++k) v[ro + k] = L[k];
+                        } else {
+                            ++c.camera;
+                        }
+                        for (int k = 0; k < nv; ++k) sum[k] += v[k];
+                    }
+                    float* out = values + index * nv;
+                    for (int k = 0; k < nv; ++k) out[k] = float(sum[k] / opt.spp);
+                }
+                if (ni > 0) {
+                    // The ray through the pixel centre.
+                    const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
+                    const FirstHit first = first_hit(scene, ray);
+                    ++c.camera;
+                    eval_hit_ids(layout, first.found, first.hit, ids + index * ni);
+                }
+            }
+        n_camera += c.camera;
+        n_shadow += c.shadow;
+        n_bounce += c.bounce;
+    });
+    RenderStats st;
+    st.camera_rays = n_camera;
+    st.shadow_rays = n_shadow;
+    st.bounce_rays = n_bounce;
+    return st;
+}
+
 }  // namespace edgepath

@@ -7,6 +7,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "render/path.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
 
@@ -58,6 +59,46 @@ void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&
 // renders the same samples as the full image.
 inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
     return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
+}
+
+// Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
+// the random numbers of render() for the same options; tile_end() after each tile, on the thread
+// that ran it. With `full_paths` the whole path is traced and recorded (the radiance's gradient);
+// without, only the camera ray's first hit (record.vertices holds it, or record.camera_missed).
+template <class SampleFn, class TileEnd>
+void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_paths, SampleFn&& fn,
+                     TileEnd&& tile_end) {
+    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
+        RayCounters c;
+        PathRecord rec;
+        rec.vertices.reserve(size_t(opt.max_bounces) + 1);
+        for (int y = y0; y < y1; ++y)
+            for (int x = x0; x < x1; ++x) {
+                uint64_t pixel = film_pixel_index(scene, x, y);
+                for (int s = 0; s < opt.spp; ++s) {
+                    Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
+                    rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (pixel * uint64_t(opt.spp) + uint64_t(s)));
+                    rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
+                    const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y);
+                    if (full_paths) {
+                        trace_path(scene, opt, ray, rng, c, &rec);
+                    } else {
+                        rec.vertices.clear();
+                        rec.escaped = false;
+                        Hit hit;
+                        rec.camera_missed = !scene.intersect(ray, hit);
+                        if (!rec.camera_missed) {
+                            rec.vertices.emplace_back();
+                            rec.vertices.back().hit = hit;
+                            rec.vertices.back().origin = ray.origin;
+                            rec.vertices.back().dir = ray.dir;
+                        }
+                    }
+                    fn(x, y, rec);
+                }
+            }
+        tile_end();
+    });
 }
 
 }  // namespace edgepath
