@@ -167,7 +167,7 @@ def _ply_read_binary(data, pos, count, props, endian):
     # Fast path: every list of this element has the length of the first row's.
     if count > 0:
         first, offset = [], pos
-        for name, t, item in props:
+        for _, t, item in props:
             size = np.dtype(t).itemsize
             if item is None:
                 first.append(None)
@@ -311,7 +311,7 @@ def save_obj(meshes: Union[Mesh, Sequence[Mesh]], path: PathLike, materials: boo
         lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in v]
         corners = [idx + 1 + counts[0]]
         counts[0] += len(v)
-        for attr, tag, width in (("uvs", "vt", 2), ("normals", "vn", 3)):
+        for attr, width in (("uvs", 2), ("normals", 3)):
             values = getattr(mesh, attr)
             if values is None:
                 corners.append(None)

@@ -1050,7 +1050,7 @@ def _merge(meshes: List[Mesh]) -> Mesh:
     def cat(values, index_attr):
         if values[0] is None:
             return None, None
-        offsets, idx, total = [], [], 0
+        idx, total = [], 0
         for m, val in zip(meshes, values):
             idx.append(getattr(m, index_attr).long() + total)
             total += val.shape[0]

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import edgepath as ep
-import edgepath.shapes  # noqa: F401  (ep.shapes)
+import edgepath.shapes  # ep.shapes
 from edgepath import cli
 
 SCENE = """<?xml version="1.0"?>

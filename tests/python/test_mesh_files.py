@@ -3,12 +3,11 @@ into triangles) and ep.save_obj (read back by ep.load_obj)."""
 
 import struct
 
-import numpy as np
 import pytest
 import torch
 
 import edgepath as ep
-import edgepath.shapes  # noqa: F401  (ep.shapes)
+import edgepath.shapes  # ep.shapes
 
 # A unit square (quad) and a triangle, with normals and uvs.
 VERTICES = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0), (0.5, 0.5, 1.0)]
@@ -121,7 +120,7 @@ def test_save_obj_round_trip(tmp_path):
         assert torch.equal(t, b)  # inputs untouched
     loaded = ep.load_obj(tmp_path / "out" / "scene.obj")
     assert len(loaded) == 2
-    s, l = loaded
+    s, lamp_back = loaded
     for attr, index_attr in (("vertices", "indices"), ("uvs", "uv_indices"),
                              ("normals", "normal_indices")):
         assert torch.allclose(_corners(s, attr, index_attr), _corners(sphere, attr, index_attr),
@@ -130,9 +129,9 @@ def test_save_obj_round_trip(tmp_path):
     assert torch.allclose(s.material.specular, sphere.material.specular)
     assert s.material.roughness == pytest.approx(0.3, abs=1e-6)
     assert s.emission is None
-    assert torch.equal(_corners(l), _corners(lamp))
-    assert torch.equal(l.emission, lamp.emission)
-    assert l.uvs is None and l.normals is None
+    assert torch.equal(_corners(lamp_back), _corners(lamp))
+    assert torch.equal(lamp_back.emission, lamp.emission)
+    assert lamp_back.uvs is None and lamp_back.normals is None
 
 
 def test_save_obj_single_mesh_without_materials_and_errors(tmp_path):
