@@ -78,6 +78,15 @@ def test_render_in_chunks_with_progress_and_overrides(scene_file, tmp_path, caps
     assert not torch.allclose(a, default)
 
 
+def test_render_resolution_and_unknown_parameter(scene_file, tmp_path, capsys):
+    out = tmp_path / "small.exr"
+    code, _, err = _run(["render", scene_file, "-o", out, "--resolution", "6", "8"], capsys)
+    assert code == 0, err
+    assert ep.imread(out).shape == (6, 8, 3)
+    code, _, err = _run(["render", scene_file, "-o", out, "-D", "albdeo=0.5"], capsys)
+    assert code == 1 and "albdeo" in err and "unknown to the file" in err
+
+
 def test_render_obj_still_works(tmp_path, capsys):
     v, f = ep.shapes.quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
     ep.save_obj(ep.Mesh(vertices=v, indices=f), tmp_path / "quad.obj")
@@ -88,6 +97,10 @@ def test_render_obj_still_works(tmp_path, capsys):
     assert ep.imread(out).shape == (8, 10, 3)
     code, _, err = _run(["render", tmp_path / "quad.obj", "-D", "x=1"], capsys)
     assert code == 1 and "-D" in err
+    code, text, err = _run(["info", tmp_path / "quad.obj"], capsys)
+    assert code == 0, err
+    assert "meshes: 1, triangles: 2, vertices: 4" in text and "environment: constant" in text
+    assert "  mesh_0.vertices  (4, 3)" in text
 
 
 def test_derivative_writes_exr_and_png(scene_file, tmp_path, capsys):

@@ -138,6 +138,10 @@ UNSUPPORTED = [
      '</emitter></shape>', "wavelength:value pairs are not supported"),
     ('<integrator type="path"><boolean name="hide_emitters" value="true"/></integrator>',
      "hide_emitters is not supported"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap"/></bsdf></shape>',
+     "a texture inside a <bsdf> needs a name"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1, 2"/></bsdf></shape>',
+     "expected 1 or 3 numbers, got 2"),
 ]
 
 
