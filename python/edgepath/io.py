@@ -107,6 +107,8 @@ def _ply_header(path: str, data: bytes):
             if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
                 raise ValueError(f"{path}: header line {number}: unknown format '{fmt}'")
         elif words[0] == "element" and len(words) == 3:
+            if not words[2].isdigit():
+                raise ValueError(f"{path}: header line {number}: bad element count in {line!r}")
             elements.append((words[1], int(words[2]), []))
         elif words[0] == "property" and elements:
             if words[1] == "list" and len(words) == 5:
@@ -167,7 +169,7 @@ def _ply_read_binary(data, pos, count, props, endian):
     # Fast path: every list of this element has the length of the first row's.
     if count > 0:
         first, offset = [], pos
-        for name, t, item in props:
+        for _, t, item in props:
             size = np.dtype(t).itemsize
             if item is None:
                 first.append(None)
@@ -229,14 +231,14 @@ def load_ply(path: PathLike) -> Mesh:
     vertices = np.stack([vertex[k] for k in "xyz"], 1).astype(np.float32)
     triangles = []
     polygons = face[key]
-    if polygons and all(len(p) == 3 for p in polygons[:1]) and isinstance(polygons, list):
-        try:
-            block = np.array(polygons, dtype=np.int64)
-        except ValueError:
-            block = None
-        if block is not None and block.ndim == 2 and block.shape[1] == 3:
-            triangles = [block]
-    if not triangles:
+    block = None
+    if polygons and len({len(p) for p in polygons}) == 1:  # all faces of one size: vectorised
+        block = np.array(polygons, dtype=np.int64).reshape(len(polygons), -1)
+    if block is not None and block.shape[1] >= 3:
+        k = block.shape[1]
+        fans = [np.stack([block[:, 0], block[:, j], block[:, j + 1]], 1) for j in range(1, k - 1)]
+        triangles = [np.stack(fans, 1).reshape(-1, 3)]  # each face's triangles together
+    else:
         for i, p in enumerate(polygons):
             p = np.asarray(p, dtype=np.int64)
             if len(p) < 3:
@@ -311,7 +313,7 @@ def save_obj(meshes: Union[Mesh, Sequence[Mesh]], path: PathLike, materials: boo
         lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in v]
         corners = [idx + 1 + counts[0]]
         counts[0] += len(v)
-        for attr, tag, width in (("uvs", "vt", 2), ("normals", "vn", 3)):
+        for attr, width in (("uvs", 2), ("normals", 3)):
             values = getattr(mesh, attr)
             if values is None:
                 corners.append(None)

@@ -811,6 +811,8 @@ class _Loader:
             for child in nested:
                 if child.tag != "texture" and child.tag != "ref":
                     self.fail(child, "unexpected element inside <bsdf>")
+                if child.tag == "texture" and "name" not in child.attrs:
+                    self.fail(child, "a texture inside a <bsdf> needs a name (the property it sets)")
             refs = [c for c in nested if c.tag == "ref"]
             for r in refs:
                 props[self.attr(r, "name")] = r
@@ -1050,7 +1052,7 @@ def _merge(meshes: List[Mesh]) -> Mesh:
     def cat(values, index_attr):
         if values[0] is None:
             return None, None
-        offsets, idx, total = [], [], 0
+        idx, total = [], 0
         for m, val in zip(meshes, values):
             idx.append(getattr(m, index_attr).long() + total)
             total += val.shape[0]

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 import edgepath as ep
-import edgepath.shapes  # noqa: F401  (ep.shapes)
+import edgepath.shapes  # ep.shapes
 from edgepath import cli
 
 SCENE = """<?xml version="1.0"?>
@@ -78,6 +78,15 @@ def test_render_in_chunks_with_progress_and_overrides(scene_file, tmp_path, caps
     assert not torch.allclose(a, default)
 
 
+def test_render_resolution_and_unknown_parameter(scene_file, tmp_path, capsys):
+    out = tmp_path / "small.exr"
+    code, _, err = _run(["render", scene_file, "-o", out, "--resolution", "6", "8"], capsys)
+    assert code == 0, err
+    assert ep.imread(out).shape == (6, 8, 3)
+    code, _, err = _run(["render", scene_file, "-o", out, "-D", "albdeo=0.5"], capsys)
+    assert code == 1 and "albdeo" in err and "unknown to the file" in err
+
+
 def test_render_obj_still_works(tmp_path, capsys):
     v, f = ep.shapes.quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
     ep.save_obj(ep.Mesh(vertices=v, indices=f), tmp_path / "quad.obj")
@@ -88,6 +97,10 @@ def test_render_obj_still_works(tmp_path, capsys):
     assert ep.imread(out).shape == (8, 10, 3)
     code, _, err = _run(["render", tmp_path / "quad.obj", "-D", "x=1"], capsys)
     assert code == 1 and "-D" in err
+    code, text, err = _run(["info", tmp_path / "quad.obj"], capsys)
+    assert code == 0, err
+    assert "meshes: 1, triangles: 2, vertices: 4" in text and "environment: constant" in text
+    assert "  mesh_0.vertices  (4, 3)" in text
 
 
 def test_derivative_writes_exr_and_png(scene_file, tmp_path, capsys):
@@ -165,3 +178,19 @@ def test_command_as_a_process(scene_file, tmp_path):
                             capture_output=True, text=True, env=env, timeout=120)
     assert result.returncode == 0, result.stderr
     assert "triangles: 6" in result.stdout
+
+
+def test_derivative_matches_finite_differences_of_a_linear_parameter(scene_file, tmp_path, capsys):
+    # The image is linear in the floor's albedo (the floor is flat: no path meets it twice), so
+    # a finite difference with the same random numbers is exact up to rounding.
+    out = tmp_path / "albedo.exr"
+    code, _, err = _run(["derivative", scene_file, "--param", "paint.diffuse", "--direction",
+                         "1", "0", "0", "-o", out, "--spp", "4"], capsys)
+    assert code == 0, err
+    d = ep.imread(out)
+    images = [ep.render(ep.load_mitsuba(scene_file, albedo=a).scene, spp=4, max_bounces=2, seed=0)
+              for a in ("0.2, 0.5, 0.8", "0.3, 0.5, 0.8")]
+    fd = (images[1] - images[0]) / 0.1
+    assert float(d[..., 0].abs().max()) > 0.01
+    assert torch.allclose(d, fd, atol=1e-4, rtol=1e-3)
+    assert float(d[..., 1:].abs().max()) == 0.0

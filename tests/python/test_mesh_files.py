@@ -3,12 +3,11 @@ into triangles) and ep.save_obj (read back by ep.load_obj)."""
 
 import struct
 
-import numpy as np
 import pytest
 import torch
 
 import edgepath as ep
-import edgepath.shapes  # noqa: F401  (ep.shapes)
+import edgepath.shapes  # ep.shapes
 
 # A unit square (quad) and a triangle, with normals and uvs.
 VERTICES = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0), (0.5, 0.5, 1.0)]
@@ -83,6 +82,23 @@ def test_load_ply_uv_names_and_minimal(tmp_path):
     assert float(image.sum()) > 0
 
 
+def test_load_ply_quads_and_empty_faces(tmp_path):
+    quads = tmp_path / "quads.ply"
+    quads.write_bytes(b"ply\nformat binary_little_endian 1.0\nelement vertex 6\nproperty float x\n"
+                      b"property float y\nproperty float z\nelement face 2\n"
+                      b"property list uchar int vertex_indices\nend_header\n"
+                      + struct.pack("<18f", 0, 0, 0, 1, 0, 0, 1, 1, 0, 0, 1, 0, 2, 0, 0, 2, 1, 0)
+                      + struct.pack("<B4i", 4, 0, 1, 2, 3) + struct.pack("<B4i", 4, 1, 4, 5, 2))
+    m = ep.load_ply(quads)
+    assert m.indices.tolist() == [[0, 1, 2], [0, 2, 3], [1, 4, 5], [1, 5, 2]]
+    lines = tmp_path / "lines.ply"
+    lines.write_text("ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
+                     "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+                     "end_header\n0 0 0\n1 0 0\n2 0 1\n")
+    with pytest.raises(ValueError, match="face 0 has 2 vertices"):
+        ep.load_ply(lines)
+
+
 def test_load_ply_errors(tmp_path):
     bad = tmp_path / "bad.ply"
     bad.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
@@ -95,6 +111,9 @@ def test_load_ply_errors(tmp_path):
         ep.load_ply(bad)
     bad.write_text("solid cube\n")
     with pytest.raises(ValueError, match="not a PLY file"):
+        ep.load_ply(bad)
+    bad.write_text("ply\nformat ascii 1.0\nelement vertex many\nend_header\n")
+    with pytest.raises(ValueError, match="header line 3: bad element count"):
         ep.load_ply(bad)
     bad.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty fancy x\nend_header\n")
     with pytest.raises(ValueError, match="header line 4"):
@@ -121,7 +140,7 @@ def test_save_obj_round_trip(tmp_path):
         assert torch.equal(t, b)  # inputs untouched
     loaded = ep.load_obj(tmp_path / "out" / "scene.obj")
     assert len(loaded) == 2
-    s, l = loaded
+    s, lamp_back = loaded
     for attr, index_attr in (("vertices", "indices"), ("uvs", "uv_indices"),
                              ("normals", "normal_indices")):
         assert torch.allclose(_corners(s, attr, index_attr), _corners(sphere, attr, index_attr),
@@ -130,9 +149,9 @@ def test_save_obj_round_trip(tmp_path):
     assert torch.allclose(s.material.specular, sphere.material.specular)
     assert s.material.roughness == pytest.approx(0.3, abs=1e-6)
     assert s.emission is None
-    assert torch.equal(_corners(l), _corners(lamp))
-    assert torch.equal(l.emission, lamp.emission)
-    assert l.uvs is None and l.normals is None
+    assert torch.equal(_corners(lamp_back), _corners(lamp))
+    assert torch.equal(lamp_back.emission, lamp.emission)
+    assert lamp_back.uvs is None and lamp_back.normals is None
 
 
 def test_save_obj_single_mesh_without_materials_and_errors(tmp_path):

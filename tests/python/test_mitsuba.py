@@ -138,6 +138,10 @@ UNSUPPORTED = [
      '</emitter></shape>', "wavelength:value pairs are not supported"),
     ('<integrator type="path"><boolean name="hide_emitters" value="true"/></integrator>',
      "hide_emitters is not supported"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap"/></bsdf></shape>',
+     "a texture inside a <bsdf> needs a name"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1, 2"/></bsdf></shape>',
+     "expected 1 or 3 numbers, got 2"),
 ]
 
 
@@ -303,7 +307,7 @@ def test_orthographic_sensor(tmp_path):
 def test_bsdfs(tmp_path):
     texture = tmp_path / "albedo.png"
     ep.imwrite(torch.rand(4, 6, 3, generator=torch.Generator().manual_seed(0)), texture)
-    body = f"""
+    body = """
     <texture type="bitmap" id="tex"><string name="filename" value="albedo.png"/></texture>
     <bsdf type="twosided" id="shared"><bsdf type="diffuse"><ref name="reflectance" id="tex"/></bsdf></bsdf>
     <shape type="rectangle" id="a"><ref id="shared"/></shape>
@@ -404,3 +408,22 @@ def test_parameters_and_directions(tmp_path):
         s.direction("nothing", [1])
     image = s.render(spp=1)  # the file's settings: 12 x 8 film
     assert image.shape == (8, 12, 3) and float(image.min()) >= 0
+
+
+def test_the_documented_example_loads(tmp_path):
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scene-files.md").read_text()
+    xml = doc.split("```xml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "meshes").mkdir()
+    v, f = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), \
+        torch.tensor([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    ep.save_obj(ep.Mesh(vertices=v, indices=f), tmp_path / "meshes" / "bunny.obj", materials=False)
+    (tmp_path / "scene.xml").write_text(xml)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the example uses no approximated feature
+        s = ep.load_mitsuba(tmp_path / "scene.xml", spp=2)
+    assert s.shape_ids == ["bunny", "floor", "lamp"] and s.spp == 2 and s.max_bounces == 2
+    assert s.bsdfs["paint"].two_sided and s.shapes["bunny"].material is s.bsdfs["paint"]
+    bunny = s.shapes["bunny"]
+    assert torch.allclose(bunny.vertices[bunny.indices.long()],
+                          (2 * v + torch.tensor([0.0, -0.5, 0.0]))[f])
+    assert {"bunny.vertices", "paint.diffuse", "lamp.emission", "envmap.values"} <= set(s.parameters())
