@@ -5,7 +5,7 @@
 #                  install the package (one CMake build in build/py: module + C++ tests)
 #   make build     same as setup
 #   make test      C++ tests (ctest) and Python tests (pytest)
-#   make demo      render the built-in scene to demo_out/demo.png and demo_out/demo.exr
+#   make demo      the inverse-rendering demo: images, GIF and convergence plot in demo_out/
 #   make bench     run bench/run.sh, if there is one (options: BENCH_ARGS="--runs 3")
 #   make sanitize  C++ tests built with AddressSanitizer + UBSan (build/asan)
 #   make lint      byte-compile the Python sources; ruff if the venv has it
@@ -24,7 +24,7 @@ CMAKE_GENERATOR_FLAG := $(if $(shell command -v ninja 2>/dev/null),-G Ninja,)
 APT_PACKAGES := cmake ninja-build g++ make pkg-config python3-venv python3-dev \
 	libembree-dev libtbb-dev libgtest-dev libpugixml-dev libtinyobjloader-dev \
 	libopenexr-dev libpng-dev libjpeg-dev
-PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest
+PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest pillow matplotlib
 
 # Everything the package build reads. The list itself is a prerequisite (through
 # build/sources.list, rewritten only when it changes) so adding or deleting a file rebuilds.

@@ -1,4 +1,6 @@
-"""Command line: ``edgepath render MESH.obj -o out.png``, ``edgepath demo``."""
+"""Command line: ``edgepath render SCENE -o out.exr``, ``edgepath derivative SCENE --param NAME
+--direction ...``, ``edgepath info SCENE``, ``edgepath demo``. SCENE is a Mitsuba 3 XML file
+(the subset ``load_mitsuba`` reads) or an OBJ file. See docs/cli.md."""
 
 from __future__ import annotations
 
@@ -11,23 +13,10 @@ from typing import List, Optional
 
 import torch
 
-from .demo import default_scene
 from .io import imwrite, load_obj
-from .render import SAMPLING, render
-from .scene import Camera, EnvironmentMap, Scene
-
-
-def _add_render_options(parser: argparse.ArgumentParser, spp: int, max_bounces: int) -> None:
-    parser.add_argument("--spp", type=int, default=spp, help=f"samples per pixel (default {spp})")
-    parser.add_argument("--max-bounces", type=int, default=max_bounces,
-                        help="scattering events per path: 0 = emitters only, 1 = direct light, "
-                             f"2 = one indirect bounce, ... (default {max_bounces})")
-    parser.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    parser.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
-    parser.add_argument("--sampling", choices=list(SAMPLING), default="mis",
-                        help="direct-light sampling strategy (default mis)")
-    parser.add_argument("--resolution", type=int, nargs=2, metavar=("HEIGHT", "WIDTH"),
-                        default=(256, 256), help="image size (default 256 256)")
+from .mitsuba import MitsubaScene, load_mitsuba
+from .render import SAMPLING, derivative_image, render
+from .scene import Camera, EnvironmentMap, Material, Scene
 
 
 def _framing_camera(meshes, resolution, fov: float) -> Camera:
@@ -55,22 +44,228 @@ def _render_and_write(scene: Scene, args, outputs: List[str]) -> None:
     print(f"rendered {width}x{height} at {args.spp} spp in {seconds:.2f} s: {', '.join(outputs)}")
 
 
-def _cmd_render(args) -> None:
+def _obj_scene(args) -> MitsubaScene:
+    """An OBJ file seen from the +z side of its bounding box, as a MitsubaScene (shape ids
+    mesh_0, mesh_1, ...). Without emitters it is lit by a constant white environment."""
     meshes = load_obj(args.scene)
     if not meshes:
         raise ValueError(f"{args.scene}: no faces")
-    camera = _framing_camera(meshes, args.resolution, args.fov)
+    camera = _framing_camera(meshes, args.resolution or (256, 256),
+                             45.0 if args.fov is None else args.fov)
     envmap = None
     if args.env >= 0 and (args.env > 0 or all(m.emission is None for m in meshes)):
         # A constant white environment (1x1 map) lights scenes without emitters.
         envmap = EnvironmentMap(values=torch.full((1, 1, 3), 1.0), scale=args.env or 1.0)
-    _render_and_write(Scene(camera=camera, meshes=meshes, envmap=envmap), args, args.output or ["out.png"])
+    for m in meshes:  # materials of their own, so that their tensors can be named
+        if m.material is None:
+            m.material = Material(diffuse=torch.full((3,), 0.0 if m.emission is not None else 0.5))
+    ids = [f"mesh_{i}" for i in range(len(meshes))]
+    return MitsubaScene(scene=Scene(camera=camera, meshes=meshes, envmap=envmap), max_bounces=None,
+                        spp=16, shapes=dict(zip(ids, meshes)), shape_ids=ids, path=args.scene)
+
+
+def _load_scene(args) -> MitsubaScene:
+    """The scene of ``args.scene`` (XML or OBJ) with the command line's overrides applied."""
+    if args.scene.lower().endswith(".obj"):
+        if args.define:
+            raise ValueError("-D: parameters apply to XML scene files only")
+        loaded = _obj_scene(args)
+    else:
+        if args.fov is not None or args.env != 0.0:
+            raise ValueError("--fov and --env apply to OBJ files only (an XML file has its sensor "
+                             "and emitters)")
+        loaded = load_mitsuba(args.scene, **dict(args.define or []))
+        if args.resolution:
+            camera = loaded.scene.camera
+            camera.resolution = tuple(args.resolution)
+            camera.crop_window = None
+    if args.spp is not None:
+        loaded.spp = args.spp
+    if args.max_bounces is not None:
+        loaded.max_bounces = args.max_bounces
+    elif loaded.max_bounces is None:
+        loaded.max_bounces = DEFAULT_MAX_BOUNCES
+    if args.seed is not None:
+        loaded.seed = args.seed
+    return loaded
+
+
+DEFAULT_MAX_BOUNCES = 2
+
+
+def _progress(done: int, total: int, start: float, final: bool = False) -> None:
+    elapsed = time.perf_counter() - start
+    left = elapsed * (total - done) / done if done else 0.0
+    end = "\n" if final or not sys.stderr.isatty() else ""
+    print(f"\r{done}/{total} spp, {elapsed:.1f} s elapsed, ~{left:.1f} s left ",
+          end=end, file=sys.stderr, flush=True)
+
+
+def render_in_chunks(loaded: MitsubaScene, chunk_spp: int, num_threads=None, sampling="mis",
+                     quiet: bool = False) -> torch.Tensor:
+    """The mean of renders of at most ``chunk_spp`` samples per pixel each (chunk k with seed
+    seed + k), with progress on stderr. One chunk (spp <= chunk_spp) is exactly
+    ``ep.render(scene, spp, max_bounces, seed)``."""
+    if chunk_spp < 1:
+        raise ValueError(f"--chunk-spp: must be >= 1, got {chunk_spp}")
+    total, done, k = loaded.spp, 0, 0
+    start = time.perf_counter()
+    image = None
+    while done < total:
+        n = min(chunk_spp, total - done)
+        part = render(loaded.scene, spp=n, max_bounces=loaded.max_bounces, seed=loaded.seed + k,
+                      num_threads=num_threads, sampling=sampling)
+        image = part * n if image is None else image + part * n
+        done, k = done + n, k + 1
+        if not quiet and total > chunk_spp:
+            _progress(done, total, start, final=done == total)
+    return image / total
+
+
+def _cmd_render(args) -> None:
+    loaded = _load_scene(args)
+    start = time.perf_counter()
+    image = render_in_chunks(loaded, args.chunk_spp, args.threads, args.sampling)
+    seconds = time.perf_counter() - start
+    outputs = args.output or ["out.png"]
+    for path in outputs:
+        _make_parent(path)
+        imwrite(image, path)
+    height, width = image.shape[:2]
+    print(f"rendered {width}x{height} at {loaded.spp} spp, max_bounces {loaded.max_bounces}, "
+          f"in {seconds:.2f} s: {', '.join(outputs)}")
+
+
+def _make_parent(path: str) -> None:
+    directory = os.path.dirname(path)
+    if directory:
+        os.makedirs(directory, exist_ok=True)
+
+
+def diverging_colours(values: torch.Tensor, scale: float) -> torch.Tensor:
+    """(H, W) signed values to (H, W, 3) linear RGB: blue (-scale) through white (0) to red
+    (+scale), clamped beyond; the colours are chosen in sRGB and linearised for imwrite."""
+    t = (values / scale).clamp(-1, 1) if scale > 0 else torch.zeros_like(values)
+    pos, neg = t.clamp_min(0), (-t).clamp_min(0)
+    srgb = torch.stack([1 - neg, 1 - pos - neg, 1 - pos], -1).clamp(0, 1)
+    return torch.where(srgb <= 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)
+
+
+def robust_scale(values: torch.Tensor, percentile: float) -> float:
+    """The ``percentile`` of |values| over the non-zero entries (0 if all are zero)."""
+    a = values.abs().flatten()
+    a = a[a > 0]
+    if a.numel() == 0:
+        return 0.0
+    return float(torch.quantile(a.double(), percentile / 100.0)) if a.numel() <= 16_000_000 \
+        else float(a.double().kthvalue(max(1, int(a.numel() * percentile / 100.0))).values)
+
+
+def _cmd_derivative(args) -> None:
+    loaded = _load_scene(args)
+    if not args.output.lower().endswith(".exr"):
+        raise ValueError(f"-o: the derivative image is written as EXR, got {args.output!r}")
+    if not 0 < args.percentile <= 100:
+        raise ValueError(f"--percentile: must be in (0, 100], got {args.percentile}")
+    param, direction = loaded.direction(args.param, args.direction)
+    start = time.perf_counter()
+    image = derivative_image(loaded.scene, param, direction, spp=loaded.spp,
+                             max_bounces=loaded.max_bounces, seed=loaded.seed,
+                             num_threads=args.threads, sampling=args.sampling)
+    seconds = time.perf_counter() - start
+    _make_parent(args.output)
+    imwrite(image, args.output)
+    signed = image.mean(dim=2)
+    scale = robust_scale(signed, args.percentile)
+    png = os.path.splitext(args.output)[0] + ".png"
+    imwrite(diverging_colours(signed, scale), png)
+    height, width = image.shape[:2]
+    print(f"derivative of {width}x{height} image along {args.param} at {loaded.spp} spp in "
+          f"{seconds:.2f} s: {args.output}, {png} (colour scale +-{scale:.4g}: the "
+          f"{args.percentile:g}th percentile of |mean over RGB|)")
+
+
+def _fmt(values) -> str:
+    return "(" + ", ".join(f"{float(x):.4g}" for x in values) + ")"
+
+
+def _cmd_info(args) -> None:
+    loaded = _load_scene(args)
+    scene = loaded.scene
+    triangles = sum(int(m.indices.shape[0]) for m in scene.meshes)
+    vertices = sum(int(m.vertices.shape[0]) for m in scene.meshes)
+    area_lights = sum(m.emission is not None for m in scene.meshes)
+    points = torch.cat([m.vertices.detach().reshape(-1, 3).double() for m in scene.meshes])
+    lo, hi = points.min(dim=0).values, points.max(dim=0).values
+    c = scene.camera
+    position, look_at, up = (t.detach() for t in c.frame())
+    print(f"scene: {loaded.path}")
+    print(f"meshes: {len(scene.meshes)}, triangles: {triangles}, vertices: {vertices}")
+    env = "none" if scene.envmap is None else \
+        f"{tuple(scene.envmap.values.shape[:2])} map" if scene.envmap.values.shape[:2] != (1, 1) \
+        else "constant"
+    print(f"lights: {area_lights} area, environment: {env}")
+    print(f"bounds: min {_fmt(lo)}, max {_fmt(hi)}")
+    view = f"fov {float(c.fov):.4g} deg" if c.camera_type == "perspective" else \
+        f"ortho_scale {float(c.ortho_scale):.4g}"
+    height, width = c.resolution
+    crop = f", crop {tuple(c.crop_window)}" if c.crop_window is not None else ""
+    print(f"camera: {c.camera_type}, position {_fmt(position)}, look_at {_fmt(look_at)}, "
+          f"up {_fmt(up)}, {view}, {width}x{height}{crop}, {c.pixel_filter} filter")
+    print(f"render: spp {loaded.spp}, max_bounces {loaded.max_bounces}, seed {loaded.seed}")
+    print("shapes: " + ", ".join(
+        f"{sid} ({int(m.indices.shape[0])} triangles{', emitter' if m.emission is not None else ''})"
+        for sid, m in zip(loaded.shape_ids, scene.meshes)))
+    print("parameters (NAME, shape, what --direction takes):")
+    for name, t in loaded.parameters().items():
+        print(f"  {name}  {tuple(t.shape)}  {_direction_help(name, t)}")
+
+
+def _direction_help(name: str, t: torch.Tensor) -> str:
+    if name.endswith(".vertices") or name == "sensor.position":
+        return "3 numbers: a translation"
+    if name == "sensor.to_world":
+        return "16 numbers: a 4x4 matrix, row-major"
+    if t.dim() > 0 and t.shape[-1] == 3:
+        return "1 or 3 numbers: added to every " + ("texel" if t.dim() == 3 else "channel")
+    return "1 number"
+
+
+def _define(text: str):
+    if "=" not in text:
+        raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
+    name, value = text.split("=", 1)
+    return name.strip(), value
+
+
+def _add_scene_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("scene", help="a Mitsuba 3 XML scene file, or an OBJ file")
+    parser.add_argument("-D", dest="define", action="append", type=_define, metavar="NAME=VALUE",
+                        help="set the XML file's parameter $NAME (overrides its <default>); repeat")
+    parser.add_argument("--spp", type=int, default=None,
+                        help="samples per pixel (default: the file's sampler, 16 for OBJ)")
+    parser.add_argument("--max-bounces", type=int, default=None,
+                        help="scattering events per path: 0 = emitters only, 1 = direct light, ... "
+                             "(default: the file's max_depth - 1, or "
+                             f"{DEFAULT_MAX_BOUNCES} where it has none)")
+    parser.add_argument("--seed", type=int, default=None,
+                        help="random seed (default: the file's sampler seed, or 0)")
+    parser.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    parser.add_argument("--sampling", choices=list(SAMPLING), default="mis",
+                        help="direct-light sampling strategy (default mis)")
+    parser.add_argument("--resolution", type=int, nargs=2, metavar=("HEIGHT", "WIDTH"), default=None,
+                        help="image size (default: the file's film, 256 256 for OBJ)")
+    parser.add_argument("--fov", type=float, default=None,
+                        help="OBJ only: horizontal field of view, degrees (default 45)")
+    parser.add_argument("--env", type=float, default=0.0,
+                        help="OBJ only: constant environment radiance: 0 = only if the file has no "
+                             "emitters (radiance 1), < 0 = never (default 0)")
 
 
 def _cmd_demo(args) -> None:
-    scene = default_scene(resolution=tuple(args.resolution))
-    outputs = [os.path.join(args.output_dir, "demo.png"), os.path.join(args.output_dir, "demo.exr")]
-    _render_and_write(scene, args, outputs)
+    from .demo import run_demo
+    run_demo(iterations=args.iterations, size=args.size, spp=args.spp, output_dir=args.output_dir,
+             seed=args.seed, num_threads=args.threads, progress=not args.quiet)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -78,25 +273,61 @@ def build_parser() -> argparse.ArgumentParser:
                                      description="edgepath: a differentiable path tracer.")
     commands = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    r = commands.add_parser("render", help="render an OBJ file",
-                            description="Render an OBJ file (with its MTL materials) seen from the "
-                                        "+z side of its bounding box. Without emitters in the file "
-                                        "it is lit by a constant white environment.")
-    r.add_argument("scene", help="the .obj file")
+    r = commands.add_parser("render", help="render a scene file (Mitsuba XML or OBJ)",
+                            description="Render a Mitsuba 3 XML scene (see docs/scene-files.md) or "
+                                        "an OBJ file (with its MTL materials, seen from the +z side "
+                                        "of its bounding box; without emitters in the file it is "
+                                        "lit by a constant white environment). Renders in chunks "
+                                        "of --chunk-spp samples, with progress on stderr.")
+    _add_scene_options(r)
     r.add_argument("-o", "--output", action="append", metavar="FILE",
                    help="output image, .png or .exr; repeat for several (default out.png)")
-    r.add_argument("--fov", type=float, default=45.0, help="horizontal field of view, degrees")
-    r.add_argument("--env", type=float, default=0.0,
-                   help="constant environment radiance: 0 = only if the file has no emitters "
-                        "(radiance 1), < 0 = never (default 0)")
-    _add_render_options(r, spp=16, max_bounces=2)
+    r.add_argument("--chunk-spp", type=int, default=16,
+                   help="samples per pixel per chunk (default 16; chunk k uses seed + k)")
     r.set_defaults(run=_cmd_render)
 
-    d = commands.add_parser("demo", help="render the built-in demo scene",
-                            description="Render the built-in demo scene to DIR/demo.png and DIR/demo.exr.")
+    g = commands.add_parser(
+        "derivative", help="render the derivative image along a parameter",
+        description="Write dI/dt, the derivative of the image along a direction in one "
+                    "parameter's space (forward mode, with edge sampling), as EXR, and a "
+                    "colour-mapped PNG beside it (blue negative, white zero, red positive; the "
+                    "mean over RGB, scaled by a percentile of its magnitude). NAME: a name that "
+                    "`edgepath info` lists, e.g. SHAPE.vertices, SHAPE.emission, BSDF.diffuse, "
+                    "sensor.position, sensor.fov, envmap.values.")
+    _add_scene_options(g)
+    g.add_argument("--param", required=True, metavar="NAME", help="the parameter (see edgepath info)")
+    g.add_argument("--direction", required=True, type=float, nargs="+", metavar="X",
+                   help="SHAPE.vertices, sensor.position: 3 numbers, a translation; colours: 1 "
+                        "number (all channels) or 3, added to every texel; scalars (sensor.fov, "
+                        "roughness): 1 number; sensor.to_world: 16 numbers")
+    g.add_argument("-o", "--output", default="derivative.exr", metavar="FILE.exr",
+                   help="the derivative image (default derivative.exr); the PNG goes beside it")
+    g.add_argument("--percentile", type=float, default=99.0,
+                   help="the PNG's colour scale: this percentile of |dI| (default 99)")
+    g.set_defaults(run=_cmd_derivative)
+
+    n = commands.add_parser("info", help="print what a scene file holds",
+                            description="Print counts (meshes, triangles, vertices, lights), "
+                                        "bounds, the camera, the render settings and the names of "
+                                        "the differentiable parameters.")
+    _add_scene_options(n)
+    n.set_defaults(run=_cmd_info)
+
+    d = commands.add_parser("demo", help="inverse rendering: recover pose, colour and light from one image",
+                            description="The built-in inverse-rendering demo: a box floats above a "
+                                        "floor under a small area light. From one target image, Adam "
+                                        "recovers the box's position, rotation and colour and the "
+                                        "lamp's position and intensity, the shadow doing part of the "
+                                        "work. Writes DIR/target.png, start.png, result.png, "
+                                        "optimisation.gif and convergence.png.")
     d.add_argument("-o", "--output-dir", default="demo_out", metavar="DIR",
                    help="output directory (default demo_out)")
-    _add_render_options(d, spp=64, max_bounces=2)
+    d.add_argument("--iterations", type=int, default=150, help="optimisation steps (default 150)")
+    d.add_argument("--size", type=int, default=128, help="image height and width (default 128)")
+    d.add_argument("--spp", type=int, default=4, help="samples per pixel per step (default 4)")
+    d.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    d.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(run=_cmd_demo)
     return parser
 

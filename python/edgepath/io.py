@@ -1,9 +1,11 @@
-"""Files: images (PNG, JPEG, EXR) and OBJ meshes, read and written by the C++ core."""
+"""Files: images (PNG, JPEG, EXR) and OBJ meshes, read and written by the C++ core; PLY meshes
+(read) and OBJ meshes (written) here in Python."""
 
 from __future__ import annotations
 
 import os
-from typing import List, Union
+import re
+from typing import List, Sequence, Union
 
 import numpy as np
 import torch
@@ -80,3 +82,292 @@ def load_obj(path: PathLike) -> List[Mesh]:
                            uv_indices=tensor("uv_indices"), normal_indices=tensor("normal_indices"),
                            material=material, emission=emission))
     return meshes
+
+
+# ---- PLY -------------------------------------------------------------------------------------
+
+_PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short": "i2",
+              "int16": "i2", "ushort": "u2", "uint16": "u2", "int": "i4", "int32": "i4",
+              "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
+              "float64": "f8"}
+_PLY_UV_NAMES = (("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+
+
+def _ply_header(path: str, data: bytes):
+    end = re.search(rb"end_header[ \t]*\r?\n", data)
+    if not data.startswith(b"ply") or end is None:
+        raise ValueError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
+    fmt, elements = None, []
+    for number, line in enumerate(data[:end.start()].decode("ascii", "replace").splitlines(), 1):
+        words = line.split()
+        if not words or words[0] in ("ply", "comment", "obj_info"):
+            continue
+        if words[0] == "format" and len(words) >= 2:
+            fmt = words[1]
+            if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
+                raise ValueError(f"{path}: header line {number}: unknown format '{fmt}'")
+        elif words[0] == "element" and len(words) == 3:
+            if not words[2].isdigit():
+                raise ValueError(f"{path}: header line {number}: bad element count in {line!r}")
+            elements.append((words[1], int(words[2]), []))
+        elif words[0] == "property" and elements:
+            if words[1] == "list" and len(words) == 5:
+                count_type, item_type, name = words[2:]
+                if count_type not in _PLY_TYPES or item_type not in _PLY_TYPES:
+                    raise ValueError(f"{path}: header line {number}: unknown type in {line!r}")
+                elements[-1][2].append((name, _PLY_TYPES[count_type], _PLY_TYPES[item_type]))
+            elif len(words) == 3 and words[1] in _PLY_TYPES:
+                elements[-1][2].append((words[2], _PLY_TYPES[words[1]], None))
+            else:
+                raise ValueError(f"{path}: header line {number}: cannot read {line!r}")
+        else:
+            raise ValueError(f"{path}: header line {number}: cannot read {line!r}")
+    if fmt is None:
+        raise ValueError(f"{path}: no 'format' line in the header")
+    return fmt, elements, end.end()
+
+
+def _ply_read_ascii(tokens, pos, count, props):
+    """Rows of one element from whitespace-separated tokens: {name: array or list of arrays}."""
+    if all(p[2] is None for p in props):
+        n = len(props)
+        block = np.array(tokens[pos:pos + count * n], dtype=np.float64)
+        if block.size != count * n:
+            raise ValueError("file ends early")
+        block = block.reshape(count, n)
+        return {p[0]: block[:, i] for i, p in enumerate(props)}, pos + count * n
+    out = {p[0]: [] for p in props}
+    for _ in range(count):
+        for name, _, item in props:
+            if item is None:
+                out[name].append(float(tokens[pos]))
+                pos += 1
+            else:
+                k = int(tokens[pos])
+                out[name].append(np.array(tokens[pos + 1:pos + 1 + k], dtype=np.float64))
+                pos += 1 + k
+    return {k: (np.array(v) if props[i][2] is None else v)
+            for i, (k, v) in enumerate(out.items())}, pos
+
+
+def _ply_read_binary(data, pos, count, props, endian):
+    def dtype_of(k_lists):
+        fields = []
+        for (name, t, item), k in zip(props, k_lists):
+            if item is None:
+                fields.append((name, endian + t))
+            else:
+                fields.append((name + "#count", endian + t))
+                fields.append((name, endian + item, (k,)))
+        return np.dtype(fields)
+
+    list_props = [p for p in props if p[2] is not None]
+    if not list_props:
+        dt = dtype_of([None] * len(props))
+        rows = np.frombuffer(data, dt, count, pos)
+        return {p[0]: rows[p[0]] for p in props}, pos + count * dt.itemsize
+    # Fast path: every list of this element has the length of the first row's.
+    if count > 0:
+        first, offset = [], pos
+        for _, t, item in props:
+            size = np.dtype(t).itemsize
+            if item is None:
+                first.append(None)
+                offset += size
+            else:
+                k = int(np.frombuffer(data, endian + t, 1, offset)[0])
+                first.append(k)
+                offset += size + k * np.dtype(item).itemsize
+        dt = dtype_of(first)
+        if pos + count * dt.itemsize <= len(data):
+            rows = np.frombuffer(data, dt, count, pos)
+            if all((rows[p[0] + "#count"] == k).all() for p, k in zip(props, first) if k is not None):
+                return ({p[0]: (rows[p[0]] if p[2] is None else list(rows[p[0]])) for p in props},
+                        pos + count * dt.itemsize)
+    out = {p[0]: [] for p in props}
+    for _ in range(count):
+        for name, t, item in props:
+            value = np.frombuffer(data, endian + t, 1, pos)[0]
+            pos += np.dtype(t).itemsize
+            if item is None:
+                out[name].append(value)
+            else:
+                k = int(value)
+                out[name].append(np.frombuffer(data, endian + item, k, pos))
+                pos += k * np.dtype(item).itemsize
+    return {k: (np.array(v) if props[i][2] is None else v)
+            for i, (k, v) in enumerate(out.items())}, pos
+
+
+def load_ply(path: PathLike) -> Mesh:
+    """Loads a PLY mesh (ASCII or binary, little or big endian) as one Mesh: vertex positions
+    (x, y, z), normals (nx, ny, nz) and uvs (u, v; or s, t / texture_u, texture_v) where the
+    file has them, one per vertex; polygons are split into triangle fans. uvs are kept as
+    stored (v = 0 is the top row of a texture, as Mitsuba reads PLY files). Other elements and
+    properties are skipped."""
+    path = _existing(path, "PLY file")
+    with open(path, "rb") as f:
+        data = f.read()
+    fmt, elements, pos = _ply_header(path, data)
+    values = {}
+    tokens = data[pos:].split() if fmt == "ascii" else None
+    tpos = 0
+    try:
+        for name, count, props in elements:
+            if fmt == "ascii":
+                values[name], tpos = _ply_read_ascii(tokens, tpos, count, props)
+            else:
+                endian = "<" if fmt == "binary_little_endian" else ">"
+                values[name], pos = _ply_read_binary(data, pos, count, props, endian)
+    except (ValueError, IndexError) as error:
+        raise ValueError(f"{path}: cannot read the data of element '{name}' ({error})") from None
+    vertex = values.get("vertex")
+    if vertex is None or not all(k in vertex for k in "xyz"):
+        raise ValueError(f"{path}: no vertex element with x, y, z")
+    face = values.get("face", {})
+    key = "vertex_indices" if "vertex_indices" in face else "vertex_index"
+    if key not in face:
+        raise ValueError(f"{path}: no face element with vertex_indices")
+    vertices = np.stack([vertex[k] for k in "xyz"], 1).astype(np.float32)
+    triangles = []
+    polygons = face[key]
+    block = None
+    if polygons and len({len(p) for p in polygons}) == 1:  # all faces of one size: vectorised
+        block = np.array(polygons, dtype=np.int64).reshape(len(polygons), -1)
+    if block is not None and block.shape[1] >= 3:
+        k = block.shape[1]
+        fans = [np.stack([block[:, 0], block[:, j], block[:, j + 1]], 1) for j in range(1, k - 1)]
+        triangles = [np.stack(fans, 1).reshape(-1, 3)]  # each face's triangles together
+    else:
+        for i, p in enumerate(polygons):
+            p = np.asarray(p, dtype=np.int64)
+            if len(p) < 3:
+                raise ValueError(f"{path}: face {i} has {len(p)} vertices")
+            triangles.append(np.stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]], 1))
+    indices = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
+    if indices.size and (indices.min() < 0 or indices.max() >= len(vertices)):
+        bad = int(indices.max() if indices.max() >= len(vertices) else indices.min())
+        raise ValueError(f"{path}: vertex index {bad} out of range for {len(vertices)} vertices")
+    normals = uvs = None
+    if all(k in vertex for k in ("nx", "ny", "nz")):
+        normals = torch.from_numpy(np.stack([vertex[k] for k in ("nx", "ny", "nz")], 1)
+                                   .astype(np.float32))
+    for u, v in _PLY_UV_NAMES:
+        if u in vertex and v in vertex:
+            uvs = torch.from_numpy(np.stack([vertex[u], vertex[v]], 1).astype(np.float32))
+            break
+    return Mesh(vertices=torch.from_numpy(vertices),
+                indices=torch.from_numpy(indices.astype(np.int32)), uvs=uvs, normals=normals)
+
+
+# ---- writing OBJ -----------------------------------------------------------------------------
+
+def _constant(value, field: str, channels: int) -> List[float]:
+    """A constant material value as numbers; textures raise (MTL stores only Kd maps here)."""
+    if isinstance(value, torch.Tensor):
+        t = value.detach().to(torch.float64).reshape(-1)
+        if value.dim() > 1 or t.numel() not in (1, channels):
+            raise ValueError(f"{field}: a texture cannot be written to an MTL file (only the "
+                             "diffuse texture can); pass materials=False to skip materials")
+        return (t.tolist() * channels)[:channels] if t.numel() == 1 else t.tolist()
+    return [float(value)] * channels
+
+
+def save_obj(meshes: Union[Mesh, Sequence[Mesh]], path: PathLike, materials: bool = True) -> None:
+    """Writes one Mesh or a list of them to an OBJ file that ``load_obj`` reads back: vertices,
+    uvs (v flipped back to OBJ's convention), normals, their index arrays. With ``materials``,
+    a ``.mtl`` file beside it holds one material per mesh (Kd or a map_Kd EXR texture, Ks,
+    Ns from the roughness, Ke for emitters), so that ``load_obj`` gives the meshes back one by
+    one; textures other than the diffuse one raise ValueError. Tensors are detached, never
+    modified."""
+    if isinstance(meshes, Mesh):
+        meshes = [meshes]
+    if not isinstance(meshes, (list, tuple)) or not meshes:
+        raise ValueError("meshes: expected an edgepath.Mesh or a non-empty list of them")
+    path = os.fspath(path)
+    directory = os.path.dirname(path)
+    if directory:
+        os.makedirs(directory, exist_ok=True)
+    base = os.path.splitext(path)[0]
+    stem = os.path.basename(base)
+    lines = ["# written by edgepath"]
+    mtl = []
+    if materials:
+        lines.append(f"mtllib {stem}.mtl")
+    counts = [0, 0, 0]  # vertices, uvs, normals written so far
+
+    def rows(t, field, width):
+        if not isinstance(t, torch.Tensor) or t.dim() != 2 or t.shape[1] != width:
+            raise ValueError(f"{field}: expected a tensor of shape (N, {width})")
+        return t.detach().to(device="cpu", dtype=torch.float64).numpy()
+
+    for i, mesh in enumerate(meshes):
+        f = f"meshes[{i}]"
+        if not isinstance(mesh, Mesh):
+            raise ValueError(f"{f}: expected an edgepath.Mesh, got {type(mesh).__name__}")
+        v = rows(mesh.vertices, f + ".vertices", 3)
+        idx = rows(mesh.indices, f + ".indices", 3).astype(np.int64)
+        if idx.size and (idx.min() < 0 or idx.max() >= len(v)):
+            raise ValueError(f"{f}.indices: index out of range for {len(v)} vertices")
+        lines.append(f"o mesh_{i}")
+        lines += [f"v {x:.9g} {y:.9g} {z:.9g}" for x, y, z in v]
+        corners = [idx + 1 + counts[0]]
+        counts[0] += len(v)
+        for attr, width in (("uvs", 2), ("normals", 3)):
+            values = getattr(mesh, attr)
+            if values is None:
+                corners.append(None)
+                continue
+            a = rows(values, f"{f}.{attr}", width)
+            index_attr = "uv_indices" if attr == "uvs" else "normal_indices"
+            ai = getattr(mesh, index_attr)
+            ai = idx if ai is None else rows(ai, f"{f}.{index_attr}", 3).astype(np.int64)
+            if ai.size and (ai.min() < 0 or ai.max() >= len(a)):
+                raise ValueError(f"{f}.{index_attr}: index out of range for {len(a)} {attr}")
+            if attr == "uvs":
+                lines += [f"vt {s:.9g} {1.0 - t:.9g}" for s, t in a]
+                corners.append(ai + 1 + counts[1])
+                counts[1] += len(a)
+            else:
+                lines += [f"vn {x:.9g} {y:.9g} {z:.9g}" for x, y, z in a]
+                corners.append(ai + 1 + counts[2])
+                counts[2] += len(a)
+        if materials:
+            lines.append(f"usemtl mesh_{i}")
+            mtl += _mtl_entry(mesh, i, base, stem)
+        vi, ti, ni = corners
+        for r in range(len(idx)):
+            parts = []
+            for k in range(3):
+                s = str(vi[r, k])
+                if ti is not None or ni is not None:
+                    s += "/" + (str(ti[r, k]) if ti is not None else "")
+                if ni is not None:
+                    s += "/" + str(ni[r, k])
+                parts.append(s)
+            lines.append("f " + " ".join(parts))
+    with open(path, "w") as out:
+        out.write("\n".join(lines) + "\n")
+    if materials:
+        with open(base + ".mtl", "w") as out:
+            out.write("\n".join(mtl) + "\n")
+
+
+def _mtl_entry(mesh: Mesh, i: int, base: str, stem: str) -> List[str]:
+    f = f"meshes[{i}]"
+    material = mesh.material if mesh.material is not None else \
+        Material(diffuse=0.0 if mesh.emission is not None else 0.5)
+    out = [f"newmtl mesh_{i}"]
+    diffuse = material.diffuse
+    if isinstance(diffuse, torch.Tensor) and diffuse.dim() == 3:
+        texture = f"{base}_mesh{i}_diffuse.exr"
+        imwrite(diffuse, texture)
+        out.append(f"map_Kd {stem}_mesh{i}_diffuse.exr")
+    else:
+        out.append("Kd " + " ".join(f"{x:.9g}" for x in _constant(diffuse, f + ".material.diffuse", 3)))
+    out.append("Ks " + " ".join(f"{x:.9g}" for x in _constant(material.specular, f + ".material.specular", 3)))
+    r = _constant(material.roughness, f + ".material.roughness", 1)[0]
+    out.append(f"Ns {2.0 / max(r, 1e-6) ** 2 - 2.0:.9g}")  # load_obj: roughness sqrt(2 / (Ns + 2))
+    if mesh.emission is not None:
+        out.append("Ke " + " ".join(f"{x:.9g}" for x in _constant(mesh.emission, f + ".emission", 3)))
+    return out

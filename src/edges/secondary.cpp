@@ -113,8 +113,12 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     Vec3f d_p(0.f);
     const Edge& e = scene_.edges()[size_t(edge)];
     const Mesh& m = scene_.meshes[size_t(e.mesh)];
-    const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1), p = sp.p;
+    const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
     const Vec3f x = v0 + (v1 - v0) * t;
+    // Everything is measured from the origin the rays towards x leave from: p lifted off the
+    // surface as spawn_ray lifts it. (Measured from p itself, at grazing angles the lift alone
+    // can carry both rays past the same side of the edge.)
+    const Vec3f p = spawn_ray(sp.p, sp.ng, x - sp.p).origin;
     const float dist = length(x - p);
     if (!(dist > 0.f)) return d_p;
     const Vec3f w = (x - p) / dist;
@@ -126,13 +130,17 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     if (!(n_len > 1e-6f * length(v0 - p) * length(v1 - p))) return d_p;
     const Vec3f side = N / n_len;
 
-    // Both sides of the arc, a small angle away: w_u with w_u . N > 0. (At 3e-5 rad and below,
-    // rays passing that close outside a triangle's edge were still reported as hitting it.)
+    // Rays from p to points a small distance either side of x, off the plane: w_u with w_u . N > 0.
+    // (At 3e-5 of the distance and below, rays passing that close outside a triangle's edge were
+    // still reported as hitting it.)
     constexpr float kStep = 1e-4f;
-    const Vec3f w_u = normalize(w + side * kStep), w_l = normalize(w - side * kStep);
+    const Vec3f w_u = normalize(x + side * (kStep * dist) - p), w_l = normalize(x - side * (kStep * dist) - p);
     const Vec3f f_u = bsdf_eval_world(bsdf, sp.ns, wo, w_u), f_l = bsdf_eval_world(bsdf, sp.ns, wo, w_l);
     if (is_black(f_u) && is_black(f_l)) return d_p;
-    const Ray ray_u = spawn_ray(p, sp.ng, w_u), ray_l = spawn_ray(p, sp.ng, w_l);
+    Ray ray_u, ray_l;
+    ray_u.origin = ray_l.origin = p;
+    ray_u.dir = w_u;
+    ray_l.dir = w_l;
     const FirstHit first_u = first_hit(scene_, ray_u), first_l = first_hit(scene_, ray_l);
     if (same_surface(first_u, first_l)) return d_p;  // the edge is hidden from p
     RenderOptions rest = opt_;

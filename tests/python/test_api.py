@@ -303,6 +303,6 @@ def test_cli_help_and_demo(tmp_path, capsys):
         main(["render", "--help"])
     assert exit_info.value.code == 0
     assert "--spp" in capsys.readouterr().out
-    assert main(["demo", "--output-dir", str(tmp_path), "--spp", "1", "--resolution", "16", "16"]) == 0
-    assert ep.imread(tmp_path / "demo.exr").shape == (16, 16, 3)
-    assert (tmp_path / "demo.png").is_file()
+    assert main(["demo", "--output-dir", str(tmp_path), "--spp", "1", "--size", "16",
+                 "--iterations", "1", "--quiet"]) == 0
+    assert ep.imread(tmp_path / "result.png").shape == (16, 16, 3)

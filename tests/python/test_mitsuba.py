@@ -1,0 +1,429 @@
+"""ep.load_mitsuba: the conformance scenes as Mitsuba XML files (tests/python/scenes) give the
+same scenes as conformance.build, and what lies outside the supported subset raises an error
+naming the element and its line."""
+
+import math
+import warnings
+from pathlib import Path
+
+import pytest
+import torch
+
+import conformance
+import edgepath as ep
+from edgepath.render import flatten_scene
+
+SCENES = Path(__file__).resolve().parent / "scenes"
+
+needs_data = pytest.mark.skipif(not conformance.data_available(),
+                                reason=conformance.missing_data_reason())
+
+
+def _assert_same(a, b, where="flat"):
+    """Same structure, equal numbers and tensors (within 1e-6) of two flattened scenes."""
+    if isinstance(a, torch.Tensor) or isinstance(b, torch.Tensor):
+        assert isinstance(a, torch.Tensor) and isinstance(b, torch.Tensor), where
+        assert tuple(a.shape) == tuple(b.shape), f"{where}: {tuple(a.shape)} != {tuple(b.shape)}"
+        if a.dtype.is_floating_point:
+            assert torch.allclose(a.double(), b.double(), rtol=0, atol=1e-6), \
+                f"{where}: max diff {float((a.double() - b.double()).abs().max())}"
+        else:
+            assert torch.equal(a, b), where
+    elif isinstance(a, dict):
+        assert isinstance(b, dict) and a.keys() == b.keys(), f"{where}: {a.keys()} != {b.keys()}"
+        for k in a:
+            _assert_same(a[k], b[k], f"{where}.{k}")
+    elif isinstance(a, (list, tuple)):
+        assert isinstance(b, (list, tuple)) and len(a) == len(b), where
+        for i, (x, y) in enumerate(zip(a, b)):
+            _assert_same(x, y, f"{where}[{i}]")
+    elif isinstance(a, float) or isinstance(b, float):
+        assert a == pytest.approx(b, abs=1e-6), f"{where}: {a} != {b}"
+    else:
+        assert a == b, f"{where}: {a!r} != {b!r}"
+
+
+def _flat(scene):
+    f = flatten_scene(scene)
+    return {"camera": f.camera, "materials": f.materials, "meshes": f.meshes, "envmap": f.envmap,
+            "size": (f.height, f.width),
+            "params": {str(k): v.detach() for k, v in f.params.items()}}
+
+
+def _load(name, **params):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # clamped bitmaps load as repeat (identical here)
+        return ep.load_mitsuba(SCENES / f"{name}.xml", data=conformance.DATA_DIR, **params)
+
+
+@needs_data
+@pytest.mark.parametrize("name", conformance.config_names())
+def test_conformance_scene_files_match_hand_built(name):
+    loaded = _load(name)
+    built, param = conformance.build(name)
+    _assert_same(_flat(loaded.scene), _flat(built))
+    assert loaded.max_bounces == param.max_bounces
+    assert loaded.spp == 64
+    ids = [s["id"] for s in conformance.config(name)["scene"]["shapes"]
+           if s["id"] not in conformance.SCENE_CORRECTIONS.get(name, {}).get("drop_shapes", ())]
+    assert loaded.shape_ids == ids
+    # Same images (at most 128 x 128 here), 1 spp, a fixed seed.
+    small = {"spp": 1, "max_bounces": param.max_bounces, "seed": 7}
+    a = ep.render(loaded.scene, **small)
+    b = ep.render(built, **small)
+    assert torch.equal(a, b)
+    assert float(a.abs().sum()) > 0
+
+
+@needs_data
+def test_data_default_points_at_the_reference_data():
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        default = ep.load_mitsuba(SCENES / "translate_textured_plane.xml")
+    _assert_same(_flat(default.scene), _flat(_load("translate_textured_plane").scene))
+
+
+# ---- small scenes written here ----------------------------------------------------------------
+
+SENSOR = """
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="12"/><integer name="height" value="8"/>
+            <rfilter type="box"/></film>
+    </sensor>"""
+
+
+def _write(tmp_path, body, sensor=SENSOR, name="scene.xml"):
+    path = tmp_path / name
+    path.write_text(f'<?xml version="1.0"?>\n<scene version="3.0.0">{sensor}\n{body}\n</scene>\n')
+    return path
+
+
+def _line_of(path, text):
+    for i, line in enumerate(Path(path).read_text().splitlines(), 1):
+        if text in line:
+            return i
+    raise AssertionError(text)
+
+
+UNSUPPORTED = [
+    ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
+    ('<emitter type="point"><point name="position" value="0, 1, 0"/></emitter>',
+     "unsupported emitter type 'point'"),
+    ('<shape type="rectangle"><bsdf type="dielectric"/></shape>', "unsupported bsdf type 'dielectric'"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/>'
+     '</bsdf></shape>', "unsupported texture type 'checkerboard'"),
+    ('<integrator type="volpath"/>', "unsupported integrator type 'volpath'"),
+    ('<medium type="homogeneous"/>', "unsupported element"),
+    ('<shape type="rectangle"><float name="radius" value="2"/></shape>',
+     "property 'radius' of shape 'rectangle' is not supported"),
+    ('<shape type="rectangle"><bsdf type="roughconductor"><float name="alpha_u" value="0.1"/>'
+     '<float name="alpha_v" value="0.2"/></bsdf></shape>', "anisotropic roughness"),
+    ('<shape type="rectangle"><bsdf type="roughconductor"><string name="material" value="Hg"/>'
+     '</bsdf></shape>', "conductor material 'Hg' is not supported"),
+    ('<shape type="rectangle"><bsdf type="roughplastic"><boolean name="nonlinear" value="true"/>'
+     '</bsdf></shape>', "nonlinear=true is not supported"),
+    ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="diffuse"/>'
+     '</bsdf></shape>', "twosided takes exactly one BSDF"),
+    ('<shape type="rectangle"><transform name="to_world"><shear value="1"/></transform></shape>',
+     "unsupported transform operation"),
+    ('<shape type="rectangle"><emitter type="spot"/></shape>', "unsupported emitter type 'spot'"),
+    ('<shape type="rectangle"><ref id="nowhere"/></shape>', "unknown id 'nowhere'"),
+    ('<emitter type="constant"/>\n<emitter type="constant"><float name="radiance" value="2"/></emitter>',
+     "only one environment emitter"),
+    ('<shape type="rectangle"><spectrum name="x" value="400:1, 500:2"/></shape>',
+     "property 'x' of shape 'rectangle' is not supported"),
+    ('<shape type="rectangle"><emitter type="area"><spectrum name="radiance" value="400:1"/>'
+     '</emitter></shape>', "wavelength:value pairs are not supported"),
+    ('<integrator type="path"><boolean name="hide_emitters" value="true"/></integrator>',
+     "hide_emitters is not supported"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap"/></bsdf></shape>',
+     "a texture inside a <bsdf> needs a name"),
+    ('<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1, 2"/></bsdf></shape>',
+     "expected 1 or 3 numbers, got 2"),
+]
+
+
+@pytest.mark.parametrize("body, message", UNSUPPORTED)
+def test_unsupported_elements_name_the_element_and_line(tmp_path, body, message):
+    # The offending element sits on the last line of the body, after a few others.
+    path = _write(tmp_path, '<shape type="rectangle"/>\n\n' + body)
+    with pytest.raises(ep.MitsubaError) as info:
+        ep.load_mitsuba(path)
+    text = str(info.value)
+    assert message in text
+    assert text.startswith(f"{path}:{_line_of(path, body.splitlines()[-1])}: <")
+
+
+@pytest.mark.parametrize("sensor, message", [
+    (SENSOR.replace('type="perspective"', 'type="thinlens"'), "unsupported sensor type 'thinlens'"),
+    (SENSOR.replace('type="box"', 'type="tent"'), "unsupported rfilter type 'tent'"),
+    (SENSOR.replace('<rfilter type="box"/>', '<integer name="banner" value="1"/>'),
+     "property 'banner' of film 'hdrfilm' is not supported"),
+    (SENSOR.replace('<lookat', '<scale x="-1"/><lookat'), "mirrors the image"),
+    (SENSOR.replace('<float name="fov" value="40"/>', '<float name="fov" value="40"/>'
+                    '<string name="focal_length" value="35mm"/>'), "give fov or focal_length"),
+    (SENSOR.replace('"hdrfilm">', '"specfilm">'), "unsupported film type 'specfilm'"),
+])
+def test_unsupported_sensor_parts(tmp_path, sensor, message):
+    path = _write(tmp_path, '<shape type="rectangle"/>', sensor=sensor)
+    with pytest.raises(ep.MitsubaError, match=message) as info:
+        ep.load_mitsuba(path)
+    line = int(str(info.value).split(":")[1])
+    assert _line_of(path, "<sensor") <= line <= _line_of(path, "</sensor>")
+
+
+def test_malformed_xml_names_the_line(tmp_path):
+    path = _write(tmp_path, '<shape type="rectangle">\n<bsdf type="diffuse">\n</shape>')
+    with pytest.raises(ep.MitsubaError, match=r"scene\.xml:\d+: malformed XML"):
+        ep.load_mitsuba(path)
+
+
+def test_substitution_defaults_and_keyword_overrides(tmp_path):
+    body = """
+    <default name="albedo" value="0.25, 0.5, 0.75"/>
+    <default name="kind" value="rectangle"/>
+    <default name="s" value="2"/>
+    <shape type="$kind" id="thing">
+        <transform name="to_world"><scale value="$s"/></transform>
+        <bsdf type="diffuse" id="paint"><rgb name="reflectance" value="$albedo"/></bsdf>
+    </shape>"""
+    path = _write(tmp_path, body)
+    a = ep.load_mitsuba(path)
+    assert torch.equal(a.bsdfs["paint"].diffuse, torch.tensor([0.25, 0.5, 0.75]))
+    assert float(a.shapes["thing"].vertices.abs().max()) == 2.0
+    assert a.shapes["thing"].indices.shape == (2, 3)
+    b = ep.load_mitsuba(path, albedo=(0.1, 0.2, 0.3), s=3, kind="cube")
+    assert torch.allclose(b.bsdfs["paint"].diffuse, torch.tensor([0.1, 0.2, 0.3]))
+    assert float(b.shapes["thing"].vertices.abs().max()) == 3.0
+    assert b.shapes["thing"].indices.shape == (12, 3)
+    with pytest.raises(ep.MitsubaError, match="unknown to the file"):
+        ep.load_mitsuba(path, albdeo=0.5)
+    undefined = _write(tmp_path, '<shape type="rectangle"><transform name="to_world">'
+                                 '<scale value="$size"/></transform></shape>', name="u.xml")
+    with pytest.raises(ep.MitsubaError, match=r"u\.xml:\d+: <scale>: undefined parameter \$size"):
+        ep.load_mitsuba(undefined)
+    assert float(ep.load_mitsuba(undefined, size=0.5).scene.meshes[0].vertices.abs().max()) == 0.5
+
+
+# ---- elements of the subset ---------------------------------------------------------------------
+
+def _face_normals(mesh):
+    v, i = mesh.vertices.double(), mesh.indices.long()
+    return torch.linalg.cross(v[i[:, 1]] - v[i[:, 0]], v[i[:, 2]] - v[i[:, 0]])
+
+
+def test_analytic_shapes(tmp_path):
+    body = """
+    <shape type="sphere" id="ball"><point name="center" x="1" y="2" z="3"/><float name="radius" value="0.5"/></shape>
+    <shape type="disk" id="disk"><transform name="to_world"><scale value="2"/><translate z="-1"/></transform></shape>
+    <shape type="cube" id="box"/>
+    <shape type="cube" id="inside"><boolean name="flip_normals" value="true"/></shape>
+    <shape type="rectangle" id="rect"><transform name="to_world"><rotate x="1" angle="90"/></transform></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    ball = s.shapes["ball"]
+    centre = torch.tensor([1.0, 2.0, 3.0])
+    assert torch.allclose((ball.vertices - centre).norm(dim=1), torch.tensor(0.5), atol=1e-6)
+    fn = _face_normals(ball)
+    corners = ball.vertices[ball.indices.long()].double().mean(1) - centre.double()
+    assert bool(((fn * corners).sum(1) > 0).all())  # counter-clockwise seen from outside
+    assert torch.allclose(ball.normals, (ball.vertices - centre) / 0.5, atol=1e-5)
+    assert ball.uvs.min() >= 0 and ball.uvs.max() <= 1
+    disk = s.shapes["disk"]
+    assert torch.allclose(disk.vertices[:, 2], torch.tensor(-1.0))
+    assert float(disk.vertices[:, :2].norm(dim=1).max()) == pytest.approx(2.0)
+    assert bool((_face_normals(disk)[:, 2] > 0).all()) and disk.normals is None
+    box, inside = s.shapes["box"], s.shapes["inside"]
+    assert box.indices.shape == (12, 3) and float(box.vertices.abs().max()) == 1.0
+    out = (_face_normals(box) * box.vertices[box.indices.long()].double().mean(1)).sum(1)
+    assert bool((out > 0).all())
+    assert torch.equal(_face_normals(inside), -_face_normals(box))
+    rect = s.shapes["rect"]  # rotated +90 degrees about x: +z turns into -y
+    assert torch.allclose(_face_normals(rect)[:, 1], torch.tensor(-4.0, dtype=torch.float64))
+
+
+def test_transforms_compose_in_order(tmp_path):
+    body = """
+    <shape type="rectangle" id="a"><transform name="to_world">
+        <scale x="2" y="3"/><rotate value="0 0 1" angle="90"/><translate value="10 0 0"/>
+    </transform></shape>
+    <shape type="rectangle" id="b"><transform name="to_world">
+        <matrix value="0 -3 0 10  2 0 0 0  0 0 1 0  0 0 0 1"/></transform></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    # (x, y) -> scale (2x, 3y) -> rotate (-3y, 2x) -> translate (10 - 3y, 2x)
+    v = torch.tensor([[-1.0, -1, 0], [1, -1, 0], [-1, 1, 0], [1, 1, 0]])
+    expected = torch.stack([10 - 3 * v[:, 1], 2 * v[:, 0], v[:, 2]], 1)
+    assert torch.allclose(s.shapes["a"].vertices, expected, atol=1e-6)
+    assert torch.allclose(s.shapes["b"].vertices, expected, atol=1e-6)
+
+
+@pytest.mark.parametrize("axis, tan_x", [
+    ("x", math.tan(math.radians(30))),
+    ("y", math.tan(math.radians(30)) * 12 / 8),
+    ("diagonal", math.tan(math.radians(30)) * 12 / math.hypot(12, 8)),
+    ("smaller", math.tan(math.radians(30)) * 12 / 8),   # the 8 px height is the smaller side
+    ("larger", math.tan(math.radians(30))),
+])
+def test_fov_axes(tmp_path, axis, tan_x):
+    sensor = SENSOR.replace('value="40"/>', f'value="60"/><string name="fov_axis" value="{axis}"/>')
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    assert math.tan(math.radians(float(s.scene.camera.fov)) / 2) == pytest.approx(tan_x, rel=1e-6)
+
+
+def test_default_focal_length_and_film(tmp_path):
+    sensor = '<sensor type="perspective"><film type="hdrfilm"><integer name="width" value="64"/>' \
+             '<integer name="height" value="64"/></film></sensor>'
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = s.scene.camera
+    assert float(c.fov) == pytest.approx(34.02205717235932, abs=1e-4)  # 50 mm, diagonal
+    assert c.pixel_filter == "gaussian" and c.filter_stddev == 0.5  # Mitsuba's default filter
+    assert s.max_bounces is None and s.spp == 4  # no integrator; the default sampler
+    bare = _write(tmp_path, '<shape type="rectangle"/>', sensor='<sensor type="perspective"/>',
+                  name="bare.xml")
+    assert ep.load_mitsuba(bare).scene.camera.resolution == (576, 768)
+
+
+def test_orthographic_sensor(tmp_path):
+    sensor = """<sensor type="orthographic">
+        <transform name="to_world"><scale value="2.5"/><lookat origin="0 0 5" target="0 0 0" up="0 1 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/>
+            <rfilter type="gaussian"><float name="stddev" value="0.3"/></rfilter></film>
+        <sampler type="stratified"><integer name="sample_count" value="9"/><integer name="seed" value="3"/></sampler>
+    </sensor>"""
+    s = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = s.scene.camera
+    assert c.camera_type == "orthographic" and c.ortho_scale == pytest.approx(2.5)
+    assert c.pixel_filter == "gaussian" and c.filter_stddev == pytest.approx(0.3)
+    assert (s.spp, s.seed) == (9, 3)
+    position, look_at, up = c.frame()
+    assert torch.allclose(position, torch.tensor([0.0, 0, 5]))
+    assert torch.allclose((look_at - position) / 2.5, torch.tensor([0.0, 0, -1]))
+    bad = sensor.replace('<scale value="2.5"/>', '<scale x="2" y="1"/>')
+    with pytest.raises(ep.MitsubaError, match="scales x and y differently"):
+        ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=bad, name="b.xml"))
+
+
+def test_bsdfs(tmp_path):
+    texture = tmp_path / "albedo.png"
+    ep.imwrite(torch.rand(4, 6, 3, generator=torch.Generator().manual_seed(0)), texture)
+    body = """
+    <texture type="bitmap" id="tex"><string name="filename" value="albedo.png"/></texture>
+    <bsdf type="twosided" id="shared"><bsdf type="diffuse"><ref name="reflectance" id="tex"/></bsdf></bsdf>
+    <shape type="rectangle" id="a"><ref id="shared"/></shape>
+    <shape type="rectangle" id="b"><ref name="bsdf" id="shared"/></shape>
+    <shape type="rectangle" id="gold"><bsdf type="roughconductor">
+        <string name="material" value="Au"/><string name="distribution" value="ggx"/>
+        <float name="alpha" value="0.2"/><rgb name="specular_reflectance" value="0.5"/></bsdf></shape>
+    <shape type="rectangle" id="metal"><bsdf type="roughconductor" id="ek">
+        <string name="distribution" value="ggx"/>
+        <rgb name="eta" value="0.2, 0.9, 1.1"/><rgb name="k" value="3.9, 2.4, 2.2"/></bsdf></shape>
+    <shape type="rectangle" id="plastic"><bsdf type="roughplastic" id="pl">
+        <string name="distribution" value="ggx"/><float name="alpha" value="0.3"/>
+        <string name="int_ior" value="bk7"/><rgb name="diffuse_reflectance" value="0.1, 0.2, 0.3"/></bsdf></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shapes["a"].material is s.shapes["b"].material is s.bsdfs["shared"]
+    shared = s.bsdfs["shared"]
+    assert shared.two_sided and torch.equal(shared.diffuse, ep.imread(texture))
+    assert s.textures["tex"] is shared.diffuse
+    gold = s.shapes["gold"].material
+    assert torch.allclose(gold.specular, 0.5 * torch.tensor([1.000, 0.782, 0.344]))
+    assert gold.roughness == pytest.approx(0.2) and torch.equal(gold.diffuse, torch.zeros(3))
+    eta, k = torch.tensor([0.2, 0.9, 1.1]), torch.tensor([3.9, 2.4, 2.2])
+    f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
+    assert torch.allclose(s.bsdfs["ek"].specular, f0) and s.bsdfs["ek"].roughness == 0.1
+    pl = s.bsdfs["pl"]
+    r = ((1.5046 - 1.000277) / (1.5046 + 1.000277)) ** 2
+    assert torch.allclose(pl.specular, torch.full((3,), r)) and pl.roughness == pytest.approx(0.3)
+    assert torch.allclose(pl.diffuse, torch.tensor([0.1, 0.2, 0.3])) and not pl.two_sided
+    names = s.parameters()
+    assert names["shared.diffuse"] is shared.diffuse and names["ek.specular"] is s.bsdfs["ek"].specular
+    assert names["gold.bsdf.specular"] is gold.specular
+
+
+def test_beckmann_is_rendered_as_ggx_with_a_warning(tmp_path):
+    path = _write(tmp_path, '<shape type="rectangle"><bsdf type="roughconductor"/></shape>')
+    with pytest.warns(UserWarning, match="Beckmann distribution .* rendered as GGX"):
+        s = ep.load_mitsuba(path)
+    assert s.scene.meshes[0].material.roughness == 0.1  # Mitsuba's default alpha; copper
+    assert torch.allclose(s.scene.meshes[0].material.specular, torch.tensor([0.955, 0.638, 0.538]))
+
+
+def test_mesh_files_and_emitters(tmp_path):
+    v, f = torch.tensor([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]]), torch.tensor([[0, 1, 2], [0, 2, 3]])
+    uv = torch.tensor([[0.0, 0.1], [1, 0.1], [1, 0.9], [0, 0.9]])
+    ep.save_obj(ep.Mesh(vertices=v, indices=f, uvs=uv), tmp_path / "quad.obj", materials=False)
+    (tmp_path / "quad.ply").write_text(
+        "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n"
+        "property float z\nelement face 1\nproperty list uchar int vertex_indices\nend_header\n"
+        "0 0 0\n1 0 0\n1 1 0\n0 1 0\n4 0 1 2 3\n")
+    env = torch.rand(4, 8, 3, generator=torch.Generator().manual_seed(2))
+    ep.imwrite(env, tmp_path / "sky.exr")
+    body = """
+    <shape type="obj" id="flat"><string name="filename" value="quad.obj"/>
+        <boolean name="face_normals" value="true"/></shape>
+    <shape type="obj" id="smooth"><string name="filename" value="quad.obj"/>
+        <boolean name="flip_tex_coords" value="false"/>
+        <emitter type="area"><rgb name="radiance" value="1, 2, 3"/></emitter></shape>
+    <shape type="ply" id="ply"><string name="filename" value="quad.ply"/></shape>
+    <emitter type="envmap"><string name="filename" value="sky.exr"/><float name="scale" value="2"/>
+        <transform name="to_world"><rotate y="1" angle="90"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    flat, smooth, ply = (s.shapes[k] for k in ("flat", "smooth", "ply"))
+    assert flat.normals is None
+    assert torch.allclose(flat.uvs[flat.uv_indices.long()], uv[f], atol=1e-6)  # as written
+    assert torch.allclose(smooth.uvs[smooth.uv_indices.long()][..., 1], 1 - uv[f][..., 1], atol=1e-6)
+    assert torch.allclose(smooth.normals, torch.tensor([0.0, 0, 1]).expand(4, 3))  # computed
+    assert torch.equal(smooth.emission, torch.tensor([1.0, 2, 3]))
+    assert torch.equal(smooth.material.diffuse, torch.zeros(3))  # emitters: black by default
+    assert torch.equal(ply.vertices, v) and ply.indices.tolist() == [[0, 1, 2], [0, 2, 3]]
+    assert torch.allclose(ply.normals, torch.tensor([0.0, 0, 1]).expand(4, 3))
+    e = s.scene.envmap
+    assert torch.equal(e.values, env) and e.scale == 2.0
+    assert torch.allclose(e.to_world[:3, :3], torch.tensor([[0.0, 0, 1], [0, 1, 0], [-1, 0, 0]]),
+                          atol=1e-6)
+
+
+def test_parameters_and_directions(tmp_path):
+    body = """<shape type="rectangle" id="plane"/>
+    <shape type="rectangle" id="lamp"><emitter type="area"><rgb name="radiance" value="1 1 1"/></emitter>
+        <transform name="to_world"><translate z="2"/><rotate x="1" angle="180"/></transform></shape>
+    <emitter type="constant"/>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    names = s.parameters()
+    assert set(names) == {"sensor.to_world", "sensor.position", "sensor.fov", "plane.vertices",
+                          "plane.bsdf.diffuse", "lamp.vertices", "lamp.emission",
+                          "lamp.bsdf.diffuse", "envmap.values"}
+    param, d = s.direction("plane.vertices", [1, 2, 3])
+    assert param is s.shapes["plane"].vertices and torch.equal(d, torch.tensor([1.0, 2, 3]).expand(4, 3))
+    param, d = s.direction("sensor.position", [0, 0, 1])
+    assert param is s.scene.camera.to_world and d[2, 3] == 1 and int((d != 0).sum()) == 1
+    param, d = s.direction("envmap.values", [0.5])
+    assert d.shape == (1, 1, 3) and bool((d == 0.5).all())
+    param, d = s.direction("sensor.fov", [2])
+    assert d.shape == () and float(d) == 2
+    with pytest.raises(ValueError, match="expected 3 numbers, got 1"):
+        s.direction("plane.vertices", [1])
+    with pytest.raises(ValueError, match="'nothing': not in this scene"):
+        s.direction("nothing", [1])
+    image = s.render(spp=1)  # the file's settings: 12 x 8 film
+    assert image.shape == (8, 12, 3) and float(image.min()) >= 0
+
+
+def test_the_documented_example_loads(tmp_path):
+    doc = (Path(__file__).resolve().parents[2] / "docs" / "scene-files.md").read_text()
+    xml = doc.split("```xml\n", 1)[1].split("```", 1)[0]
+    (tmp_path / "meshes").mkdir()
+    v, f = torch.tensor([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]), \
+        torch.tensor([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    ep.save_obj(ep.Mesh(vertices=v, indices=f), tmp_path / "meshes" / "bunny.obj", materials=False)
+    (tmp_path / "scene.xml").write_text(xml)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the example uses no approximated feature
+        s = ep.load_mitsuba(tmp_path / "scene.xml", spp=2)
+    assert s.shape_ids == ["bunny", "floor", "lamp"] and s.spp == 2 and s.max_bounces == 2
+    assert s.bsdfs["paint"].two_sided and s.shapes["bunny"].material is s.bsdfs["paint"]
+    bunny = s.shapes["bunny"]
+    assert torch.allclose(bunny.vertices[bunny.indices.long()],
+                          (2 * v + torch.tensor([0.0, -0.5, 0.0]))[f])
+    assert {"bunny.vertices", "paint.diffuse", "lamp.emission", "envmap.values"} <= set(s.parameters())
