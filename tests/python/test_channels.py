@@ -264,6 +264,30 @@ def test_edge_on_a_pixel_border_is_counted_once():
     assert float(alpha.sum()) == 16.0
 
 
+def test_crop_window_and_environment():
+    """A crop renders the crop of the full film's channels (the same samples and centre rays);
+    the environment lights the background's radiance but is no surface: alpha and ids stay
+    empty there, and the channels' derivatives have the crop's shape."""
+    scene = sphere_scene((10, 12), rings=12, segments=24)
+    black = ep.render_channels(scene, spp=2, seed=3)
+    scene.envmap = ep.EnvironmentMap(values=torch.full((4, 8, 3), 0.5))
+    full = ep.render_channels(scene, spp=2, seed=3)
+    background = full["alpha"][..., 0] == 0
+    assert bool(background.any())
+    assert bool((full["radiance"][background] == 0.5).all())
+    assert not torch.equal(full["radiance"], black["radiance"])
+    for name in ep.CHANNELS:
+        if name != "radiance":
+            assert torch.equal(full[name], black[name]), name
+    scene.camera.crop_window = (3, 2, 6, 5)  # x, y, width, height
+    crop = ep.render_channels(scene, spp=2, seed=3)
+    for name in ep.CHANNELS:
+        assert torch.equal(crop[name], full[name][2:7, 3:9]), name
+    v = scene.meshes[0].vertices
+    d = ep.derivative_channels(scene, v, torch.ones_like(v), channels=["depth", "uv"], spp=1)
+    assert tuple(d["depth"].shape) == (5, 6, 1) and tuple(d["uv"].shape) == (5, 6, 2)
+
+
 def test_channel_errors_name_the_field():
     scene = sphere_scene((4, 4), rings=4, segments=6)
     with pytest.raises(ValueError, match=r"channels\[1\]: unknown channel 'normal'"):
