@@ -246,6 +246,33 @@ def test_reverse_mode_equals_forward_mode():
         assert got == pytest.approx(expected, rel=2e-3, abs=1e-5), label
 
 
+def test_a_silhouette_loss_points_towards_the_target():
+    """Matching alpha alone moves the sphere: the gradient of the squared alpha difference with
+    respect to a translation points to the target's position (it is all boundary term), and a
+    few gradient steps close most of the gap."""
+    base = sphere_scene((16, 16), rings=16, segments=32)
+    target_offset = torch.tensor([0.15, -0.1, 0.0])
+    v0 = base.meshes[0].vertices
+    base.meshes[0].vertices = v0 + target_offset
+    target = ep.render_channels(base, channels=["alpha"], spp=16, seed=1)["alpha"]
+    offset = torch.zeros(3, requires_grad=True)
+    optimiser = torch.optim.Adam([offset], lr=0.03)
+    for step in range(20):
+        base.meshes[0].vertices = v0 + offset
+        alpha = ep.render_channels(base, channels=["alpha"], spp=4, seed=step)["alpha"]
+        loss = (alpha - target).square().sum()
+        optimiser.zero_grad()
+        loss.backward()
+        if step == 0:
+            g = -offset.grad[:2]
+            cosine = float(g @ target_offset[:2]) / float(g.norm() * target_offset[:2].norm())
+            assert cosine > 0.9, cosine
+        optimiser.step()
+    error = float((offset.detach() - target_offset)[:2].norm())
+    print(f"offset {offset.detach().tolist()}, target {target_offset.tolist()}, error {error:.4f}")
+    assert error < 0.25 * float(target_offset[:2].norm()), (offset, error)
+
+
 def test_edge_on_a_pixel_border_is_counted_once():
     """A square whose sides lie exactly on pixel borders (orthographic, 4 pixels per unit):
     moving its right side by dt adds 4 * height_px * dt to the alpha sum. Counting an edge
