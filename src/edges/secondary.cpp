@@ -115,6 +115,13 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     const Mesh& m = scene_.meshes[size_t(e.mesh)];
     const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
     const Vec3f x = v0 + (v1 - v0) * t;
+    // An edge in the plane of the surface at the shading point (its own triangle's, a coplanar
+    // neighbour's) is seen only along grazing directions, where the surface itself is the
+    // boundary and nothing changes as the edge moves within the plane: no contribution. (Tested
+    // against the lift off the surface: within it, the side rays would see a difference of the
+    // order of the lift alone.)
+    const float lift = ray_offset_scale(sp.p);
+    if (std::abs(dot(v0 - sp.p, sp.ng)) <= lift && std::abs(dot(v1 - sp.p, sp.ng)) <= lift) return d_p;
     // Everything is measured from the origin the rays towards x leave from: p lifted off the
     // surface as spawn_ray lifts it. (Measured from p itself, at grazing angles the lift alone
     // can carry both rays past the same side of the edge.)

@@ -52,8 +52,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             Vec3f wi = frame.to_local(ls.dir);
             Vec3f f = bsdf_eval(bp, wo, wi);
             if (!is_black(f)) {
-                Ray shadow = spawn_ray(sp.p, sp.ng, ls.dir);
-                shadow.tmax = ls.dist * (1.f - kShadowEpsilon);
+                Ray shadow = shadow_ray(sp.p, sp.ng, ls.dir, ls.dist);
                 ++counters.shadow;
                 if (!scene.occluded(shadow)) {
                     float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;

@@ -130,6 +130,19 @@ def test_penumbra_far_from_the_origin():
     assert d == pytest.approx(fd, rel=tolerance)
 
 
+@pytest.mark.parametrize("sampling", ["light", "bsdf", "mis"])
+def test_light_reaches_a_scene_far_from_the_origin(sampling):
+    """The same penumbra 30 units along x renders the same image: a shadow ray leaves from the
+    lifted origin and must be aimed and measured from there, or (when the lift is larger than
+    the shadow epsilon's shortening) it reaches the light's own surface and counts as blocked."""
+    zero = {k: torch.zeros(3) for k in PARTS}
+    far = {k: torch.tensor([30.0, 0.0, 0.0]) for k in PARTS}
+    near_image = ep.render(penumbra_scene(zero), spp=4096, seed=3, sampling=sampling)
+    far_image = ep.render(penumbra_scene(far), spp=4096, seed=3, sampling=sampling)
+    assert float(near_image[0, 0, 0]) > 0.05
+    assert float(far_image[0, 0, 0]) == pytest.approx(float(near_image[0, 0, 0]), rel=0.05)
+
+
 # ---- closed form: the shadow of a polygon under a uniform sky --------------------------------
 #
 # A Lambertian floor (albedo RHO) under uniform radiance L from every direction above it, and a
