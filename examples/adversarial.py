@@ -18,7 +18,7 @@ import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import lamp, output_dir, parser, plot, rotation, row, save_images, weld
+from _common import output_dir, parser, plot, rotation, row, save_images, weld
 
 CLASSES = ("sphere", "box", "cylinder")
 BASE_V, BASE_I = weld(*shapes.sphere(radius=1.0, rings=12, segments=24)[:2])

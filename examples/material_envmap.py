@@ -60,7 +60,7 @@ def main(argv=None):
 
     # Unknowns, all positive: optimised through their logarithms.
     log_material = {k: v.log().requires_grad_() for k, v in START_MATERIAL.items()}
-    log_map = torch.full(MAP_SIZE + (3,), math.log(0.5), requires_grad=True)
+    log_map = torch.full(MAP_SIZE + (3,), math.log(0.5), requires_grad=True)  # start: uniform grey
     optimizer = torch.optim.Adam([{"params": list(log_material.values()), "lr": 0.03},
                                   {"params": [log_map], "lr": 0.05}])
     losses, material_errors = [], []
@@ -80,7 +80,8 @@ def main(argv=None):
 
     material = {k: v.detach().exp() for k, v in log_material.items()}
     recovered_map = log_map.detach().exp()
-    start_views = [ep.render(s, spp=128) for s in make_scenes(START_MATERIAL, torch.full(MAP_SIZE + (3,), 0.5), args.size)]
+    start_map = torch.full(MAP_SIZE + (3,), 0.5)
+    start_views = [ep.render(s, spp=128) for s in make_scenes(START_MATERIAL, start_map, args.size)]
     result_views = [ep.render(s, spp=128) for s in make_scenes(material, recovered_map, args.size)]
     # The maps scaled up 8x (nearest) and tone-mapped so that the sun does not hide the sky.
     show = lambda m: (m / (1 + m)).repeat_interleave(8, 0).repeat_interleave(8, 1)  # noqa: E731

@@ -265,7 +265,8 @@ def _add_scene_options(parser: argparse.ArgumentParser) -> None:
 def _cmd_demo(args) -> None:
     from .demo import run_demo
     run_demo(iterations=args.iterations, size=args.size, spp=args.spp, output_dir=args.output_dir,
-             seed=args.seed, num_threads=args.threads, progress=not args.quiet)
+             seed=args.seed, num_threads=args.threads, progress=not args.quiet,
+             secondary_edges=not args.no_secondary_edges)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -327,6 +328,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--spp", type=int, default=4, help="samples per pixel per step (default 4)")
     d.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     d.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    d.add_argument("--no-secondary-edges", action="store_true",
+                   help="leave the shadow and lamp outlines out of the gradient (for comparison: "
+                        "the lamp then gets no gradient)")
     d.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     d.set_defaults(run=_cmd_demo)
     return parser

@@ -2,9 +2,12 @@
 
 A box floats above a grey floor, lit by a small square area light above it; the camera sees
 the box and the shadow it casts. From one target image, gradient descent recovers the box's
-position and rotation, its colour, and the lamp's position and intensity. The box's height
-and the lamp's position are fixed mostly by where the shadow falls: that part of the gradient
-comes from the edge sampling of shadow boundaries.
+position and rotation, its colour, and the lamp's position and intensity. The shadows do part
+of the work: the lamp's position reaches the image only through visibility (where the box's
+shadow and the lamp's own outline fall, seen from the floor and the box), so its whole
+gradient comes from the edge sampling of those boundaries (secondary edges; with
+``secondary_edges=False`` the lamp gets no gradient), and the shadow's offset from the box
+tells the box's height.
 
 ``edgepath demo`` (and ``make demo``) runs it and writes target, start and result images, an
 animated GIF of the optimisation and a plot of loss and parameter error against iteration.
@@ -241,12 +244,14 @@ class DemoResult:
 
 def run_demo(iterations: int = 150, size: int = 128, spp: int = 4, output_dir: Optional[str] = "demo_out",
              seed: int = 0, num_threads: Optional[int] = None, lr: float = 1.0,
-             progress: bool = True, frames: int = 50,
+             progress: bool = True, frames: int = 50, secondary_edges: bool = True,
              log: Callable[[str], None] = print) -> DemoResult:
     """Runs the demo: renders the target, optimises from :data:`START` with Adam for
     ``iterations`` steps of ``spp`` samples per pixel on a ``size`` x ``size`` film, and
     (unless ``output_dir`` is None) writes target.png, start.png, result.png,
-    optimisation.gif (``frames`` frames: target | current estimate) and convergence.png."""
+    optimisation.gif (``frames`` frames: target | current estimate) and convergence.png.
+    ``secondary_edges=False`` leaves the moving shadow's boundary out of the gradient (for
+    comparison)."""
     if iterations < 1:
         raise ValueError(f"iterations: must be >= 1, got {iterations}")
     if size < 8:
@@ -295,7 +300,8 @@ def run_demo(iterations: int = 150, size: int = 128, spp: int = 4, output_dir: O
         optimizer.zero_grad()
         estimate = current()
         errors = parameter_errors(estimate)
-        image = render(demo_scene(estimate, size), spp=spp, seed=seed + step, **options)
+        image = render(demo_scene(estimate, size), spp=spp, seed=seed + step,
+                       secondary_edges=secondary_edges, **options)
         loss = image_loss(image, target)
         loss.backward()
         optimizer.step()

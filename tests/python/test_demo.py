@@ -44,6 +44,8 @@ def test_demo_command_line(tmp_path, capsys):
     assert "truth:" in out and "result:" in out
     for name in FILES:
         assert (tmp_path / name).is_file(), name
+    assert main(["demo", "--output-dir", str(tmp_path / "off"), "--iterations", "1", "--size", "16",
+                 "--spp", "1", "--quiet", "--no-secondary-edges"]) == 0
 
 
 @pytest.mark.parametrize("kwargs, field", [({"iterations": 0}, "iterations"), ({"size": 4}, "size"),
@@ -51,3 +53,17 @@ def test_demo_command_line(tmp_path, capsys):
 def test_demo_bad_options(kwargs, field):
     with pytest.raises(ValueError, match=field):
         run_demo(output_dir=None, progress=False, log=lambda line: None, **kwargs)
+
+
+def test_demo_needs_the_secondary_edges():
+    """The lamp's position reaches the image only through visibility (where the lamp's outline
+    and the box's shadow fall, seen from the floor and the box): without the secondary-edge
+    term the lamp gets no gradient at all and the optimisation goes astray."""
+    options = dict(iterations=40, size=32, spp=2, lr=3.0, output_dir=None, progress=False,
+                   log=lambda line: None)
+    with_edges = run_demo(**options)
+    without = run_demo(secondary_edges=False, **options)
+    start_light = parameter_errors(START)["light"]
+    assert without.errors["light"] == pytest.approx(start_light, abs=1e-6)
+    assert with_edges.errors["light"] < 0.3 * start_light
+    assert without.history["relative_error"][-1] > 3 * with_edges.history["relative_error"][-1]
