@@ -185,16 +185,8 @@ def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.
     both images rendered with the same seed (the same random numbers), as Mitsuba's references
     are made. Compare it with ``derivative_image``. ``param`` must be a tensor the scene holds
     (to difference a tensor the scene is computed from, rebuild the scene at both values)."""
-    eps = v.number(eps, "eps")
-    if not eps > 0:
-        v.fail("eps", f"must be > 0, got {eps}")
-    base, direction = _check_direction(param, direction)
-    images = []
-    with torch.no_grad():
-        for sign in (0.5, -0.5):
-            moved = _substitute(scene, param, (base + sign * eps * direction).to(param.dtype))
-            images.append(render(moved, spp, max_bounces, seed, num_threads, sampling))
-    return (images[0] - images[1]) / eps
+    return finite_difference_channels(scene, param, direction, ["radiance"], eps, spp, max_bounces,
+                                      seed, num_threads, sampling)["radiance"]
 
 
 # ---- output channels -------------------------------------------------------------------------

@@ -6,9 +6,28 @@
 
 namespace edgepath {
 
+namespace {
+// Ray counts summed over the tiles of a pass.
+struct RayTally {
+    std::atomic<uint64_t> camera{0}, shadow{0}, bounce{0};
+    void add(const RayCounters& c) {
+        camera += c.camera;
+        shadow += c.shadow;
+        bounce += c.bounce;
+    }
+    RenderStats stats() const {
+        RenderStats st;
+        st.camera_rays = camera;
+        st.shadow_rays = shadow;
+        st.bounce_rays = bounce;
+        return st;
+    }
+};
+}  // namespace
+
 RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
     check_options(opt);
-    std::atomic<uint64_t> n_camera{0}, n_shadow{0}, n_bounce{0};
+    RayTally tally;
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         for (int y = y0; y < y1; ++y)
@@ -24,15 +43,9 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
                 float* out = image + (int64_t(y) * scene.out_width + x) * 3;
                 for (int k = 0; k < 3; ++k) out[k] = float(sum[k] / opt.spp);
             }
-        n_camera += c.camera;
-        n_shadow += c.shadow;
-        n_bounce += c.bounce;
+        tally.add(c);
     });
-    RenderStats st;
-    st.camera_rays = n_camera;
-    st.shadow_rays = n_shadow;
-    st.bounce_rays = n_bounce;
-    return st;
+    return tally.stats();
 }
 
 RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout, float* values,
@@ -42,7 +55,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
     const int nv = layout.num_values, ni = layout.num_ids;
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
-    std::atomic<uint64_t> n_camera{0}, n_shadow{0}, n_bounce{0};
+    RayTally tally;
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         float v[kMaxChannelValues];
@@ -80,15 +93,9 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                     eval_hit_ids(layout, first.found, first.hit, ids + index * ni);
                 }
             }
-        n_camera += c.camera;
-        n_shadow += c.shadow;
-        n_bounce += c.bounce;
+        tally.add(c);
     });
-    RenderStats st;
-    st.camera_rays = n_camera;
-    st.shadow_rays = n_shadow;
-    st.bounce_rays = n_bounce;
-    return st;
+    return tally.stats();
 }
 
 }  // namespace edgepath
