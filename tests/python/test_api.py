@@ -306,3 +306,9 @@ def test_cli_help_and_demo(tmp_path, capsys):
     assert main(["demo", "--output-dir", str(tmp_path), "--spp", "1", "--size", "16",
                  "--iterations", "1", "--quiet"]) == 0
     assert ep.imread(tmp_path / "result.png").shape == (16, 16, 3)
+
+
+def test_python_api_page_names_every_public_name():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "python-api.md").read_text()
+    missing = [name for name in ep.__all__ if f"`{name}`" not in page and f"`ep.{name}" not in page]
+    assert not missing, f"docs/python-api.md does not name {missing}"

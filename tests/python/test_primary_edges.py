@@ -9,7 +9,6 @@ constant emitter is zero), so this checks the estimator, the projection's adjoin
 clipping of edges to the image.
 """
 
-import math
 
 import pytest
 import torch
