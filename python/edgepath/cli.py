@@ -14,7 +14,7 @@ from typing import List, Optional
 import torch
 
 from .io import imwrite, load_obj
-from .mitsuba import MitsubaScene, load_mitsuba
+from .mitsuba import UNBOUNDED_MAX_BOUNCES, MitsubaScene, load_mitsuba
 from .render import SAMPLING, derivative_image, render
 from .scene import Camera, EnvironmentMap, Material, Scene
 
@@ -90,7 +90,7 @@ def _load_scene(args) -> MitsubaScene:
     return loaded
 
 
-DEFAULT_MAX_BOUNCES = 2
+DEFAULT_MAX_BOUNCES = UNBOUNDED_MAX_BOUNCES
 
 
 def _progress(done: int, total: int, start: float, final: bool = False) -> None:

@@ -60,12 +60,18 @@ class MitsubaError(ValueError):
     """A scene file outside the supported subset, or malformed."""
 
 
+# What an unbounded integrator depth (max_depth -1, Mitsuba's default) renders with: the
+# direct light and one indirect bounce. ``MitsubaScene.render`` and the command line agree.
+UNBOUNDED_MAX_BOUNCES = 2
+
+
 @dataclass
 class MitsubaScene:
     """What ``load_mitsuba`` returns.
 
     ``scene``: the ``edgepath.Scene``; ``max_bounces``: the integrator's ``max_depth - 1``
-    (None where the file leaves it unbounded: choose one); ``spp`` and ``seed``: the sampler's
+    (None where the file leaves it unbounded: ``render`` and the command line then use
+    ``UNBOUNDED_MAX_BOUNCES``, 2); ``spp`` and ``seed``: the sampler's
     ``sample_count`` and ``seed``; ``shapes``: meshes by shape id (shapes without an id are
     named ``shape_<i>``, in file order), ``shape_ids`` in the order of ``scene.meshes``;
     ``bsdfs``: materials by BSDF id; ``textures``: bitmap tensors by texture id. The tensors
@@ -145,9 +151,8 @@ class MitsubaScene:
         """``ep.render`` of the scene with the file's spp, max_bounces and seed (keyword
         arguments override them)."""
         from .render import render
-        args = {"spp": self.spp, "seed": self.seed}
-        if self.max_bounces is not None:
-            args["max_bounces"] = self.max_bounces
+        args = {"spp": self.spp, "seed": self.seed,
+                "max_bounces": UNBOUNDED_MAX_BOUNCES if self.max_bounces is None else self.max_bounces}
         args.update(options)
         return render(self.scene, **args)
 

@@ -284,6 +284,22 @@ def test_default_focal_length_and_film(tmp_path):
     assert ep.load_mitsuba(bare).scene.camera.resolution == (576, 768)
 
 
+def test_unbounded_depth_renders_with_the_command_lines_bounces(tmp_path):
+    from edgepath.cli import DEFAULT_MAX_BOUNCES
+    sensor = '<sensor type="perspective"><transform name="to_world"><lookat origin="0 0 -4" ' \
+             'target="0 0 0" up="0 1 0"/></transform><film type="hdrfilm"><integer name="width" ' \
+             'value="8"/><integer name="height" value="8"/></film></sensor>'
+    shapes = '<shape type="rectangle"><transform name="to_world"><scale value="3"/>' \
+             '<translate z="1"/></transform><bsdf type="twosided"><bsdf type="diffuse"/></bsdf>' \
+             '</shape><shape type="sphere"><float name="radius" ' \
+             'value="0.5"/></shape><emitter type="constant"/>'
+    s = ep.load_mitsuba(_write(tmp_path, shapes, sensor=sensor))
+    assert s.max_bounces is None and DEFAULT_MAX_BOUNCES == 2
+    image = s.render(spp=2)
+    assert torch.equal(image, ep.render(s.scene, spp=2, max_bounces=2, seed=s.seed))
+    assert float(image.sum()) > float(ep.render(s.scene, spp=2, max_bounces=1, seed=s.seed).sum())
+
+
 def test_orthographic_sensor(tmp_path):
     sensor = """<sensor type="orthographic">
         <transform name="to_world"><scale value="2.5"/><lookat origin="0 0 5" target="0 0 0" up="0 1 0"/></transform>
