@@ -88,6 +88,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         node.center = (node.lo + node.hi) * 0.5f;
         node.radius = length(node.hi - node.lo) * 0.5f;
         node.a = in.p0[i];
+        node.b = in.p1[i];
         node.n0 = in.n0[i];
         node.n1 = in.n1[i];
         const Vec3f s = in.n0[i] + in.n1[i];
@@ -235,7 +236,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
 
 // ---- importance -------------------------------------------------------------------------------
 
-void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2]) const {
+void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int refine) const {
     out[0] = out[1] = 0.f;
     const bool leaf = n.left < 0;
     // A smooth edge is a silhouette only where p is in front of exactly one of its faces.
@@ -249,7 +250,26 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2]) cons
     // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
     // would be infinite for boxes that hold p).
     const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
-    if (!(dc2 > r2)) {  // p inside the bounding sphere: every direction
+    // Nothing above the tangent plane (the BSDF's support, n on the side of wo): no light
+    // through the node's edges reaches p (edges in the plane itself are seen at grazing angles,
+    // where the cosine vanishes).
+    const Vec3f half = (n.hi - n.lo) * 0.5f, ln = q.lobe.n;
+    if (dot(ln, v) + std::abs(ln.x) * half.x + std::abs(ln.y) * half.y + std::abs(ln.z) * half.z <= 0.f) return;
+    if (leaf) {  // the segment itself: both ends below, or within 1e-5 rad above, the plane
+        const Vec3f ea = n.a - q.p, eb = n.b - q.p;
+        if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
+    }
+    if (!(dc2 > r2)) {
+        // p inside the bounding sphere: every direction. The children's bounds are tighter (a
+        // few levels down); at the end, the lobe's peak.
+        if (!leaf && refine > 0) {
+            float a[2], b[2];
+            importance(q, nodes_[size_t(n.left)], a, refine - 1);
+            importance(q, nodes_[size_t(n.right)], b, refine - 1);
+            out[0] = a[0] + b[0];
+            out[1] = a[1] + b[1];
+            return;
+        }
         out[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
         out[1] = q.cone ? out[0] : 0.f;
         return;
@@ -286,7 +306,7 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2]) cons
     // Towards the lights: apart when the angle between the axes exceeds beta + the cone's.
     // Otherwise the share of the node inside the cone: the overlap of the two angular
     // intervals along the line of their centres over the smaller one, times the ratio of their
-    // sizes when the node is the larger (squared for a node of many edges: an area).
+    // sizes when the node is the larger (silhouettes are curves: the ratio, not its square).
     if (q.cone) {
         const BoundsCone& c = *q.cone;
         const float cos_g = dot(dir, c.axis);
@@ -297,7 +317,7 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2]) cons
             const float beta = std::asin(sin_b), gamma = std::acos(std::clamp(cos_g, -1.f, 1.f));
             const float small = std::min(beta, c.half);
             float share = small > 0.f ? std::clamp((beta + c.half - gamma) / (2.f * small), 0.f, 1.f) : 1.f;
-            if (beta > c.half) share *= leaf ? c.half / beta : (c.half / beta) * (c.half / beta);
+            if (beta > c.half) share *= c.half / beta;
             out[1] = out[0] * share;
         }
     }
@@ -411,52 +431,53 @@ float EdgePointSampler::param(float phi) const {
 }
 
 bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {
-    float phi;
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return false;
-        phi = cone0_ + u * (cone1_ - cone0_);
-    } else if (u < kUniform || total_ <= 0.f) {
-        phi = phi0_ + (u < kUniform ? u / kUniform : (u - kUniform) / (1.f - kUniform)) * (phi1_ - phi0_);
-    } else {
-        // The piecewise-linear density: the bin, then x in [0, 1] inside it with
-        //   g0 x + (g1 - g0) x^2 / 2 = c,
-        // by Newton's method kept inside a shrinking bracket (bisection when a step leaves it).
-        const float target = (u - kUniform) / (1.f - kUniform) * total_, step = (phi1_ - phi0_) / float(kBins);
-        int k = 0;
-        while (k < kBins - 1 && cdf_[k + 1] <= target) ++k;
-        const float g0 = g_[k], g1 = g_[k + 1], c = (target - cdf_[k]) / step;
-        float lo = 0.f, hi = 1.f, x = g0 + g1 > 0.f ? std::clamp(2.f * c / (g0 + g1), 0.f, 1.f) : 0.5f;
-        for (int it = 0; it < 20; ++it) {
-            const float F = g0 * x + 0.5f * (g1 - g0) * x * x - c, dF = g0 + (g1 - g0) * x;
-            if (F > 0.f) hi = x;
-            else lo = x;
-            float next = dF > 0.f ? x - F / dF : 0.5f * (lo + hi);
-            if (!(next > lo && next < hi)) next = 0.5f * (lo + hi);
-            const bool done = std::abs(next - x) < 1e-7f;
-            x = next;
-            if (done) break;
-        }
-        phi = phi0_ + (float(k) + x) * step;
+        const float t0 = param(cone0_), t1 = param(cone1_);
+        if (!(t1 > t0)) return false;
+        t = t0 + u * (t1 - t0);
+        return true;
     }
-    t = param(phi);
+    if (u < kUniform || total_ <= 0.f) {
+        t = u < kUniform ? u / kUniform : (u - kUniform) / (1.f - kUniform);
+        return true;
+    }
+    // The piecewise-linear density in angle: the bin, then x in [0, 1] inside it with
+    //   g0 x + (g1 - g0) x^2 / 2 = c,
+    // by Newton's method kept inside a shrinking bracket (bisection when a step leaves it).
+    const float target = (u - kUniform) / (1.f - kUniform) * total_, step = (phi1_ - phi0_) / float(kBins);
+    int k = 0;
+    while (k < kBins - 1 && cdf_[k + 1] <= target) ++k;
+    const float g0 = g_[k], g1 = g_[k + 1], c = (target - cdf_[k]) / step;
+    float lo = 0.f, hi = 1.f, x = g0 + g1 > 0.f ? std::clamp(2.f * c / (g0 + g1), 0.f, 1.f) : 0.5f;
+    for (int it = 0; it < 20; ++it) {
+        const float F = g0 * x + 0.5f * (g1 - g0) * x * x - c, dF = g0 + (g1 - g0) * x;
+        if (F > 0.f) hi = x;
+        else lo = x;
+        float next = dF > 0.f ? x - F / dF : 0.5f * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5f * (lo + hi);
+        const bool done = std::abs(next - x) < 1e-7f;
+        x = next;
+        if (done) break;
+    }
+    t = param(phi0_ + (float(k) + x) * step);
     return true;
 }
 
-float EdgePointSampler::pdf_angle(EdgeHierarchy::Strategy s, float phi) const {
-    if (s == EdgeHierarchy::Lights) return cone1_ > cone0_ && phi >= cone0_ && phi <= cone1_ ? 1.f / (cone1_ - cone0_) : 0.f;
-    if (!(phi >= phi0_ && phi <= phi1_)) return 0.f;
-    const float uniform = 1.f / (phi1_ - phi0_);
-    if (total_ <= 0.f) return uniform;
-    const float step = (phi1_ - phi0_) / float(kBins), f = (phi - phi0_) / step;
-    const int k = std::clamp(int(f), 0, kBins - 1);
-    const float x = f - float(k), g = g_[k] + (g_[k + 1] - g_[k]) * x;
-    return kUniform * uniform + (1.f - kUniform) * g / total_;
-}
-
 float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
+    if (!(t >= 0.f && t <= 1.f)) return 0.f;
+    if (s == EdgeHierarchy::Lights) {
+        if (!(cone1_ > cone0_)) return 0.f;
+        const float t0 = param(cone0_), t1 = param(cone1_);
+        return t1 > t0 && t >= t0 && t <= t1 ? 1.f / (t1 - t0) : 0.f;
+    }
+    if (total_ <= 0.f) return 1.f;
     const float along = t * len_ - s_foot_;
     const float dphi_dt = len_ * h_ / (h_ * h_ + along * along);
-    return pdf_angle(s, angle(t)) * dphi_dt;
+    const float step = (phi1_ - phi0_) / float(kBins), f = (angle(t) - phi0_) / step;
+    const int k = std::clamp(int(f), 0, kBins - 1);
+    const float x = std::clamp(f - float(k), 0.f, 1.f), g = g_[k] + (g_[k + 1] - g_[k]) * x;
+    return kUniform + (1.f - kUniform) * g / total_ * dphi_dt;
 }
 
 }  // namespace edgepath

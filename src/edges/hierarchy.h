@@ -18,11 +18,12 @@
 // the probability of the chosen edge under both comes out of one traversal, for multiple
 // importance sampling.
 //
-// EdgePointSampler: the point on a chosen edge, by the angle phi it subtends at the point
-// (directions w(phi) in the plane through the point and the edge). Strategy All: a mixture of
-// uniform-by-angle and a density proportional to the lobe bound along the edge (tabulated,
-// piecewise linear, its cumulative distribution inverted by Newton's method with a bisection
-// safeguard). Strategy Lights: uniform by angle over the part of the edge inside the light cone.
+// EdgePointSampler: the point on a chosen edge. Strategy All: a mixture of uniform by length
+// and a density in the angle phi the edge subtends at the point (directions w(phi) in the plane
+// through the point and the edge) proportional to the lobe bound (tabulated, piecewise linear,
+// its cumulative distribution inverted by Newton's method with a bisection safeguard). Strategy
+// Lights: uniform by length over the part of the edge inside the light cone (found in closed
+// form: w(phi) . axis = R cos(phi - psi) >= cos(half angle)).
 //
 // Built once per render call in O(n log n) (parallel median splits).
 #pragma once
@@ -93,11 +94,11 @@ private:
         int32_t right = -1;
         int32_t parent = -1;
         int32_t edge = -1;          // leaf: index into scene.edges()
-        Vec3f a, n0, n1;            // leaf of a smooth edge: a point on it, its faces' normals
+        Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
         bool always = false;        // holds a boundary edge or a crease
     };
     // The node's importance under both strategies.
-    void importance(const Query& q, const Node& n, float out[2]) const;
+    void importance(const Query& q, const Node& n, float out[2], int refine = 3) const;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);
@@ -122,10 +123,9 @@ public:
     float angle(float t) const;
     float param(float phi) const;
     static constexpr int kBins = 16;
-    static constexpr float kUniform = 0.25f;  // strategy All's share of uniform-by-angle
+    static constexpr float kUniform = 0.25f;  // strategy All's share of uniform by length
 
 private:
-    float pdf_angle(EdgeHierarchy::Strategy s, float phi) const;
     float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;
     float phi0_ = 0.f, phi1_ = 0.f;
     float cone0_ = 0.f, cone1_ = 0.f;  // the part inside the light cone; empty when cone1 <= cone0

@@ -93,37 +93,35 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     }
 }
 
-// A glossy lobe concentrates the probability on the edges near the mirror direction.
+// A glossy lobe concentrates the probability on the edges near the mirror direction: from a
+// point on a (virtual) floor, the sphere in the mirror direction against the box 30 degrees off.
 TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
-    std::vector<int32_t> ids(scene.edges().size());
-    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
+    std::vector<int32_t> ids;  // the sphere's and the box's edges (no floor around the point)
+    for (size_t i = 0; i < scene.edges().size(); ++i)
+        if (scene.edges()[i].mesh != 2) ids.push_back(int32_t(i));
     EdgeHierarchy h;
     h.build(scene, ids);
-    // From (-1.5, 0.01, 0), the sphere (centre (0, 1, 0)) is in the mirror direction of wo.
     const Vec3f p(-1.5f, 0.01f, 0.f), towards = normalize(Vec3f(0, 1, 0) - p);
     const Vec3f wo = normalize(Vec3f(-towards.x, towards.y, -towards.z));
     EdgeHierarchy::Query diffuse, glossy;
     diffuse.p = glossy.p = p;
     diffuse.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.5f, 0.f, 0.1f);
     glossy.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.f, 0.5f, 0.1f);
-    // The sphere's share of what the descents pick among the sphere and the box (off the mirror
-    // direction; the floor holds p, so every direction is possible for its edges).
     double on_sphere[2] = {0, 0}, total[2] = {0, 0};
-    for (size_t e = 0; e < ids.size(); ++e) {
-        if (scene.edges()[e].mesh == 2) continue;
-        const float pd = h.pdf(diffuse, int32_t(e)).prob[0], pg = h.pdf(glossy, int32_t(e)).prob[0];
+    for (int32_t e : ids) {
+        const float pd = h.pdf(diffuse, e).prob[0], pg = h.pdf(glossy, e).prob[0];
         total[0] += pd;
         total[1] += pg;
-        if (scene.edges()[e].mesh == 0) {
+        if (scene.edges()[size_t(e)].mesh == 0) {
             on_sphere[0] += pd;
             on_sphere[1] += pg;
         }
     }
     const double diffuse_share = on_sphere[0] / total[0], glossy_share = on_sphere[1] / total[1];
     std::printf("sphere's share: diffuse %.3f, glossy %.3f\n", diffuse_share, glossy_share);
-    // The box, 30 degrees off the mirror direction, loses at least a third of its share.
+    // The box loses at least a third of its share.
     EXPECT_LT(1 - glossy_share, 0.67 * (1 - diffuse_share));
 }
 
