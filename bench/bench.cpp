@@ -701,7 +701,7 @@ int backward_memory(const Options& o, BenchScene& bs) {
 // image with secondary edges off (the interior and primary terms draw the same random numbers
 // either way). The hierarchy renders it with --seeds seeds at --spp, the uniform sampler at the
 // spp that takes about as long (so that its rare large samples show up as often as at equal
-// time). Each one's MSE against a reference (the hierarchy at 32x the samples) times the time the
+// time). Each one's MSE against a reference (the hierarchy at 64x the samples) times the time the
 // term takes (the two renders' difference, in process CPU time: steadier than wall time on a
 // busy machine) is the cost of a given accuracy; the ratio of those products, uniform over
 // hierarchy, is the equal-time MSE ratio (also given with the whole derivative image's time).
@@ -751,7 +751,7 @@ int secondary_only(const Options& o) {
     std::printf("edgepath benchmark: secondary edges, edge hierarchy against uniform sampling by length\n");
     std::printf("settings : %dx%d pixels, %d spp, %d seeds per sampler, %d threads, 1 bounce; reference: the "
                 "hierarchy at %d spp\n",
-                o.size, o.size, o.spp, o.seeds, o.threads, 32 * o.spp);
+                o.size, o.size, o.spp, o.seeds, o.threads, 64 * o.spp);
     Table table({"scene", "sampler", "spp", "MSE", "secondary cpu ms", "whole cpu ms", "MSE x secondary ms", "MSE x whole ms"});
     std::vector<std::pair<std::string, std::pair<double, double>>> ratios;
     for (int which = 0; which < 2; ++which) {
@@ -784,7 +784,7 @@ int secondary_only(const Options& o) {
             return out;
         };
         double ms, total_ms;
-        const std::vector<double> ref = term(EdgeSampling::Importance, 32 * o.spp, 999, ms, total_ms);
+        const std::vector<double> ref = term(EdgeSampling::Importance, 64 * o.spp, 999, ms, total_ms);
         double ref_sq = 0;
         for (double v : ref) ref_sq += v * v;
         // Equal time: the uniform sampler gets as many samples per pixel as fit in the

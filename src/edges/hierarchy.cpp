@@ -284,7 +284,8 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
     // plane range. A smooth edge is a silhouette where its faces' distances have opposite signs:
     // none if the range is all positive or all negative. Otherwise the share of silhouettes:
     // the two faces of an edge differ by about d x dihedral, so about that over the range's
-    // width.
+    // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
+    // silhouettes happen to carry the contribution).
     float fraction = 1.f;
     if (!leaf && !n.always && n.cone_cos > -1.f) {
         const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
@@ -292,7 +293,7 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
         if (!(lo < 0.f && hi > 0.f)) return;
-        fraction = std::min(1.f, d * n.dihedral / (hi - lo));
+        fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
     }
     // The lobe over the node's directions.
     const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
