@@ -1048,7 +1048,7 @@ int main(int argc, char** argv) {
             EdgeHierarchy h;
             h.build(*scene, ids);
             std::printf("\nEdges of a %s-triangle mesh: %s edges extracted (welded, classified) in %.0f ms; edge "
-                        "hierarchy built in %.0f ms (one thread)\n",
+                        "hierarchy built in %.0f ms (parallel)\n",
                         grouped(uint64_t(big.num_triangles())).c_str(), grouped(uint64_t(edges)).c_str(), extract_ms,
                         h.build_ms());
             record("edges", "sphere", "edges", double(edges), "");
