@@ -18,6 +18,8 @@
 //
 //   edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]
 //                  [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv] [--render-only]
+//   edgepath_bench --backward-memory [--size N] [--spp N]
+//   edgepath_bench --secondary-only [--size N] [--spp N] [--seeds N] [--threads N]
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
 // the renderer alone.
@@ -80,6 +82,8 @@ struct Options {
     std::string csv_path;      // optional: writes every record
     bool render_only = false;  // skip the Embree-only runs (for profilers)
     bool backward_memory = false;  // only: peak RSS of one backward pass (--size, --spp)
+    bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
+    int seeds = 8;                 // --secondary-only: renders per sampler
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -87,6 +91,7 @@ struct Options {
                  "%s\nusage: edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]\n"
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
+                 "                      [--secondary-only [--seeds N]]  (alone: secondary-edge samplers' MSE)\n"
                  "                      [--render-only]\n",
                  msg);
     std::exit(status);
@@ -118,6 +123,8 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--no-all-cores") o.all_cores = false;
         else if (a == "--render-only") o.render_only = true;
         else if (a == "--backward-memory") o.backward_memory = true;
+        else if (a == "--secondary-only") o.secondary_only = true;
+        else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -687,6 +694,134 @@ int backward_memory(const Options& o, BenchScene& bs) {
     return 0;
 }
 
+// ---------------------------------------------------------------------------------------------
+// Secondary edges: the edge hierarchy against uniform edge sampling, at equal time.
+//
+// The secondary-edge term of a derivative image is the derivative image minus the same seed's
+// image with secondary edges off (the interior and primary terms draw the same random numbers
+// either way). The hierarchy renders it with --seeds seeds at --spp, the uniform sampler at the
+// spp that takes about as long (so that its rare large samples show up as often as at equal
+// time). Each one's MSE against a reference (the hierarchy at 64x the samples) times the time the
+// term takes (the two renders' difference, in process CPU time: steadier than wall time on a
+// busy machine) is the cost of a given accuracy; the ratio of those products, uniform over
+// hierarchy, is the equal-time MSE ratio (also given with the whole derivative image's time).
+
+// (a) a small area light, a large floor, a sphere of about 50k triangles casting the shadow;
+// the sphere moves along x. (b) a glossy floor (GGX alpha 0.1) reflecting a box that moves along
+// x in front of a bright emissive backdrop.
+void make_shadow_case(BenchScene& bs, int size) {
+    SceneDesc& d = bs.desc;
+    const int floor = bs.material(bs.constant({0.7f, 0.7f, 0.7f}), {0.f, 0.f, 0.f}, 0.5f);
+    const int matte = bs.material(bs.constant({0.5f, 0.5f, 0.5f}), {0.f, 0.f, 0.f}, 0.5f);
+    bs.add("sphere", make_sphere(Vec3f(0.2f, 1.f, 0.2f), 0.5f, 125, 200), matte);
+    bs.add("floor", make_quad(Vec3f(-5, 0, -5), Vec3f(0, 0, 10), Vec3f(10, 0, 0)), floor);
+    MeshDesc& light = bs.add("light", make_quad(Vec3f(-2.15f, 3.f, -0.15f), Vec3f(0.3f, 0, 0), Vec3f(0, 0, 0.3f)), matte);
+    light.emission = bs.constant({200.f, 200.f, 200.f});
+    // Looking straight down at the shadow, the sphere out of view (only the shadow's edge moves).
+    const float pos[3] = {1.5f, 2.f, 0.3f}, at[3] = {1.5f, 0, 0.3f}, up[3] = {0, 0, 1};
+    std::copy(pos, pos + 3, d.camera.position);
+    std::copy(at, at + 3, d.camera.look_at);
+    std::copy(up, up + 3, d.camera.up);
+    d.camera.fov = 50;
+    d.camera.width = d.camera.height = size;
+}
+
+void make_glossy_case(BenchScene& bs, int size) {
+    SceneDesc& d = bs.desc;
+    const int glossy = bs.material(bs.constant({0.05f, 0.05f, 0.05f}), {0.8f, 0.8f, 0.8f}, 0.1f);
+    const int matte = bs.material(bs.constant({0.5f, 0.5f, 0.5f}), {0.f, 0.f, 0.f}, 0.5f);
+    bs.add("box", make_box(Vec3f(-0.5f, 0.f, 1.f), Vec3f(0.5f, 1.f, 2.f)), matte);
+    bs.add("floor", make_quad(Vec3f(-5, 0, -5), Vec3f(0, 0, 10), Vec3f(10, 0, 0)), glossy);
+    MeshDesc& wall = bs.add("backdrop", make_quad(Vec3f(-4, 0, 4), Vec3f(0, 3, 0), Vec3f(8, 0, 0)), matte);
+    wall.emission = bs.constant({2.f, 2.f, 2.f});
+    const float pos[3] = {0, 1.2f, -3.f}, at[3] = {0, 0, 1.5f}, up[3] = {0, 1, 0};
+    std::copy(pos, pos + 3, d.camera.position);
+    std::copy(at, at + 3, d.camera.look_at);
+    std::copy(up, up + 3, d.camera.up);
+    d.camera.fov = 45;
+    d.camera.width = d.camera.height = size;
+}
+
+struct SecondaryRun {
+    int spp = 0;
+    double mse = 0, ms = 0, total_ms = 0;  // mean over seeds; ms: the secondary term's time
+};
+
+int secondary_only(const Options& o) {
+    std::printf("edgepath benchmark: secondary edges, edge hierarchy against uniform sampling by length\n");
+    std::printf("settings : %dx%d pixels, %d spp, %d seeds per sampler, %d threads, 1 bounce; reference: the "
+                "hierarchy at %d spp\n",
+                o.size, o.size, o.spp, o.seeds, o.threads, 64 * o.spp);
+    Table table({"scene", "sampler", "spp", "MSE", "secondary cpu ms", "whole cpu ms", "MSE x secondary ms", "MSE x whole ms"});
+    std::vector<std::pair<std::string, std::pair<double, double>>> ratios;
+    for (int which = 0; which < 2; ++which) {
+        BenchScene bs;
+        if (which == 0) make_shadow_case(bs, o.size);
+        else make_glossy_case(bs, o.size);
+        const std::string name = which == 0 ? "(a) shadow of a 50k-triangle sphere, small light"
+                                            : "(b) box reflected in a glossy floor (alpha 0.1)";
+        std::shared_ptr<const Scene> scene = build_scene(bs.desc);
+        const size_t n = size_t(o.size) * o.size * 3;
+        std::vector<float> dir(size_t(bs.desc.meshes[0].num_vertices) * 3, 0.f);
+        for (size_t i = 0; i < dir.size(); i += 3) dir[i] = 1.f;  // the moving mesh along x
+        SceneGradients dirs;
+        dirs.meshes.resize(bs.desc.meshes.size());
+        dirs.meshes[0].vertices.dir = dir.data();
+        // The secondary term: with minus without, same seed; its time and the whole render's.
+        auto term = [&](EdgeSampling sampling, int spp, uint64_t seed, double& ms, double& total_ms) {
+            RenderOptions ro;
+            ro.spp = spp;
+            ro.max_bounces = 1;
+            ro.num_threads = o.threads;
+            ro.seed = seed;
+            ro.edge_sampling = sampling;
+            std::vector<float> with(n), without(n);
+            total_ms = time_once_cpu([&] { derivative_image(*scene, ro, dirs, with.data()); }).cpu_ms;
+            ro.secondary_edges = false;
+            ms = total_ms - time_once_cpu([&] { derivative_image(*scene, ro, dirs, without.data()); }).cpu_ms;
+            std::vector<double> out(n);
+            for (size_t i = 0; i < n; ++i) out[i] = double(with[i]) - double(without[i]);
+            return out;
+        };
+        double ms, total_ms;
+        const std::vector<double> ref = term(EdgeSampling::Importance, 64 * o.spp, 999, ms, total_ms);
+        double ref_sq = 0;
+        for (double v : ref) ref_sq += v * v;
+        // Equal time: the uniform sampler gets as many samples per pixel as fit in the
+        // hierarchy's time (from one render of each), so that its rare large samples show up in
+        // the MSE as often as they would at equal time.
+        double h_ms, u_ms;
+        term(EdgeSampling::Importance, o.spp, 500, h_ms, total_ms);
+        term(EdgeSampling::Uniform, o.spp, 500, u_ms, total_ms);
+        const int u_spp = std::clamp(int(std::lround(o.spp * std::max(h_ms, 1e-3) / std::max(u_ms, 1e-3))), o.spp, 64 * o.spp);
+        SecondaryRun runs[2];
+        for (int s = 0; s < 2; ++s) {
+            const EdgeSampling sampling = s == 0 ? EdgeSampling::Importance : EdgeSampling::Uniform;
+            runs[s].spp = s == 0 ? o.spp : u_spp;
+            for (int k = 0; k < o.seeds; ++k) {
+                const std::vector<double> img = term(sampling, runs[s].spp, uint64_t(k + 1), ms, total_ms);
+                double se = 0;
+                for (size_t i = 0; i < n; ++i) se += (img[i] - ref[i]) * (img[i] - ref[i]);
+                runs[s].mse += se / double(n) / o.seeds;
+                runs[s].ms += std::max(ms, 0.0) / o.seeds;
+                runs[s].total_ms += total_ms / o.seeds;
+            }
+        }
+        for (int s = 0; s < 2; ++s)
+            table.add({name, s == 0 ? "hierarchy" : "uniform", std::to_string(runs[s].spp), fmt(runs[s].mse, 6), fmt(runs[s].ms, 1),
+                       fmt(runs[s].total_ms, 1), fmt(runs[s].mse * runs[s].ms, 4),
+                       fmt(runs[s].mse * runs[s].total_ms, 4)});
+        const double ratio = (runs[1].mse * runs[1].ms) / (runs[0].mse * runs[0].ms),
+                     whole = (runs[1].mse * runs[1].total_ms) / (runs[0].mse * runs[0].total_ms);
+        std::printf("%s: reference mean square %.6f; equal-time MSE ratio (uniform / hierarchy) %.1f "
+                    "(secondary term's time), %.1f (whole derivative image's time)\n",
+                    name.c_str(), ref_sq / double(n), ratio, whole);
+        ratios.push_back({name, {ratio, whole}});
+    }
+    table.print("Secondary-edge term of the derivative image (mean over seeds)");
+    return 0;
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
     if (o.backward_memory) {
@@ -694,6 +829,7 @@ int main(int argc, char** argv) {
         build_bench_scene(bs, o);
         return backward_memory(o, bs);
     }
+    if (o.secondary_only) return secondary_only(o);
     std::vector<Record> records;
     auto record = [&](const std::string& section, const std::string& config, const std::string& metric, double v,
                       const std::string& unit) { records.push_back({section, config, metric, v, unit}); };
@@ -912,7 +1048,7 @@ int main(int argc, char** argv) {
             EdgeHierarchy h;
             h.build(*scene, ids);
             std::printf("\nEdges of a %s-triangle mesh: %s edges extracted (welded, classified) in %.0f ms; edge "
-                        "hierarchy built in %.0f ms (one thread)\n",
+                        "hierarchy built in %.0f ms (parallel)\n",
                         grouped(uint64_t(big.num_triangles())).c_str(), grouped(uint64_t(edges)).c_str(), extract_ms,
                         h.build_ms());
             record("edges", "sphere", "edges", double(edges), "");

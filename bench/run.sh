@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Runs the benchmark (forward and backward passes), then the backward-pass memory measurement.
+# Runs the benchmark (forward and backward passes), then the backward-pass memory measurement
+# and the secondary-edge samplers' equal-time comparison.
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
 # Without a path, looks for the binary in the usual build folders. Options go to the binary
 # (edgepath_bench --help lists them), e.g.  bench/run.sh --runs 9 --csv bench.csv
@@ -26,3 +27,5 @@ fi
 "$bin" "$@"
 # Memory of a large backward pass, in a process of its own (peak RSS is per process).
 "$bin" --backward-memory --size 1024 --spp 16
+# Secondary edges: the edge hierarchy against uniform sampling at equal time (about a minute).
+"$bin" --secondary-only --size 32 --spp 8 --seeds 16

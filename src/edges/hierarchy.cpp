@@ -3,48 +3,109 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <tbb/parallel_invoke.h>
 #include "scene/scene.h"
 
 namespace edgepath {
 
 namespace {
 
-constexpr float kHalfPi = 1.57079632679f;
-
-float angle_between(const Vec3f& a, const Vec3f& b) { return std::acos(std::clamp(dot(a, b), -1.f, 1.f)); }
+float sine(float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)); }
+// cos(max(0, angle - beta)) from cos(angle) and beta's cosine and sine: the largest cosine
+// between a direction and the directions within beta of another.
+float cos_minus(float cos_a, float cos_b, float sin_b) {
+    return cos_a >= cos_b ? 1.f : cos_a * cos_b + sine(cos_a) * sin_b;
+}
+// Ranges larger than this are split in parallel.
+constexpr int kParallelRange = 8192;
 
 }  // namespace
 
-int32_t EdgeHierarchy::build_node(std::vector<int32_t>& items, int begin, int end, int32_t parent,
-                                  const std::vector<Vec3f>& p0, const std::vector<Vec3f>& p1,
-                                  const std::vector<Vec3f>& n0, const std::vector<Vec3f>& n1,
-                                  const std::vector<uint8_t>& always, const std::vector<int32_t>& ids) {
-    const int32_t index = int32_t(nodes_.size());
-    nodes_.emplace_back();
-    nodes_[size_t(index)].parent = parent;
-    if (end - begin == 1) {
-        const int32_t i = items[size_t(begin)];
-        Node& n = nodes_[size_t(index)];
-        n.lo = min(p0[size_t(i)], p1[size_t(i)]);
-        n.hi = max(p0[size_t(i)], p1[size_t(i)]);
-        n.length = length(p1[size_t(i)] - p0[size_t(i)]);
-        n.edge = ids[size_t(i)];
-        n.always = always[size_t(i)] != 0;
-        const Vec3f s = n0[size_t(i)] + n1[size_t(i)];
-        if (n.always || !(length(s) > 1e-6f)) {
-            n.cone_axis = Vec3f(0.f, 0.f, 1.f);
-            n.cone_cos = -1.f;
-        } else {
-            n.cone_axis = normalize(s);
-            n.cone_cos = dot(n.cone_axis, n0[size_t(i)]);
-        }
-        leaf_of_[size_t(n.edge)] = index;
-        return index;
+// ---- the lobe bound ---------------------------------------------------------------------------
+
+LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float specular, float alpha) {
+    LobeBound b;
+    b.n = n;
+    const float co = dot(n, wo);
+    b.r = n * (2.f * co) - wo;
+    b.diffuse = std::max(0.f, diffuse) / kPi;
+    if (specular > 0.f) {
+        // GGX's peak D = 1 / (pi a^2), times F G / (4 cos_o); near the peak D falls as
+        // 1 / (1 + tan^2(theta_h) / a^2)^2 with tan^2(theta_h) ~ (1 - r.w) / 2.
+        const float a = std::max(alpha, 0.02f);
+        b.specular = specular / (4.f * kPi * a * a * std::max(co, 0.1f));
+        b.sharpness = 1.f / (2.f * a * a);
     }
-    // Median split of the centroids along the box's longest axis.
+    return b;
+}
+
+float LobeBound::eval(const Vec3f& w) const {
+    const float c = dot(n, w);
+    if (!(c > 0.f)) return 0.f;
+    float v = diffuse * c;
+    if (specular > 0.f) {
+        const float q = 1.f + sharpness * (1.f - dot(r, w));
+        v += specular / (q * q);
+    }
+    return v;
+}
+
+bool BoundsCone::towards(const Vec3f& p, const Vec3f& c, float r) {
+    const Vec3f v = c - p;
+    const float d = length(v);
+    if (!(d > r)) {
+        cos_half = -1.f;
+        half = kPi;
+        return false;
+    }
+    axis = v / d;
+    half = std::asin(std::min(1.f, r / d));
+    cos_half = std::cos(half);
+    return true;
+}
+
+// ---- building ---------------------------------------------------------------------------------
+
+struct EdgeHierarchy::Input {
+    std::vector<Vec3f> p0, p1, n0, n1;
+    std::vector<uint8_t> always;
+    const std::vector<int32_t>* ids;
+};
+
+// The subtree over items [begin, end) takes the 2 (end - begin) - 1 nodes from `index` on: its
+// root, then the left subtree, then the right one; so both halves can be built at once.
+void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index,
+                                int32_t parent) {
+    Node& node = nodes_[size_t(index)];
+    node.parent = parent;
+    if (end - begin == 1) {
+        const size_t i = size_t(items[size_t(begin)]);
+        node.lo = min(in.p0[i], in.p1[i]);
+        node.hi = max(in.p0[i], in.p1[i]);
+        node.length = length(in.p1[i] - in.p0[i]);
+        node.edge = (*in.ids)[i];
+        node.always = in.always[i] != 0;
+        node.center = (node.lo + node.hi) * 0.5f;
+        node.radius = length(node.hi - node.lo) * 0.5f;
+        node.a = in.p0[i];
+        node.b = in.p1[i];
+        node.n0 = in.n0[i];
+        node.n1 = in.n1[i];
+        const Vec3f s = in.n0[i] + in.n1[i];
+        if (!node.always && length(s) > 1e-6f) {
+            node.cone_axis = normalize(s);
+            node.cone_cos = std::clamp(dot(node.cone_axis, in.n0[i]), -1.f, 1.f);
+            node.cone_sin = sine(node.cone_cos);
+            node.dihedral = 2.f * std::acos(node.cone_cos);
+        }
+        leaf_of_[size_t(node.edge)] = index;
+        return;
+    }
+    // Median split of the centroids along the longest axis of their box.
     Vec3f lo(1e30f), hi(-1e30f);
     for (int k = begin; k < end; ++k) {
-        const Vec3f c = (p0[size_t(items[size_t(k)])] + p1[size_t(items[size_t(k)])]) * 0.5f;
+        const size_t i = size_t(items[size_t(k)]);
+        const Vec3f c = (in.p0[i] + in.p1[i]) * 0.5f;
         lo = min(lo, c);
         hi = max(hi, c);
     }
@@ -52,35 +113,71 @@ int32_t EdgeHierarchy::build_node(std::vector<int32_t>& items, int begin, int en
     const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
     const int mid = (begin + end) / 2;
     std::nth_element(items.begin() + begin, items.begin() + mid, items.begin() + end, [&](int32_t a, int32_t b) {
-        return (p0[size_t(a)][axis] + p1[size_t(a)][axis]) < (p0[size_t(b)][axis] + p1[size_t(b)][axis]);
+        return (in.p0[size_t(a)][axis] + in.p1[size_t(a)][axis]) < (in.p0[size_t(b)][axis] + in.p1[size_t(b)][axis]);
     });
-    const int32_t l = build_node(items, begin, mid, index, p0, p1, n0, n1, always, ids);
-    const int32_t r = build_node(items, mid, end, index, p0, p1, n0, n1, always, ids);
+    const int32_t l = index + 1, r = index + 2 * (mid - begin);
+    node.left = l;
+    node.right = r;
+    if (end - begin > kParallelRange)
+        tbb::parallel_invoke([&] { build_range(in, items, begin, mid, l, index); },
+                             [&] { build_range(in, items, mid, end, r, index); });
+    else {
+        build_range(in, items, begin, mid, l, index);
+        build_range(in, items, mid, end, r, index);
+    }
+    finish_inner(index);
+    if (!node.always) fit_cone(in, items, begin, end, index);
+}
+
+// A tight normal cone and the range of the plane equations at the centre, over the faces of the
+// node's (smooth) edges, items [begin, end): O(n) per node, O(n log n) in all.
+void EdgeHierarchy::fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index) {
     Node& n = nodes_[size_t(index)];
-    const Node &a = nodes_[size_t(l)], &b = nodes_[size_t(r)];
-    n.left = l;
-    n.right = r;
+    Vec3f sum(0.f);
+    for (int k = begin; k < end; ++k) {
+        const size_t i = size_t(items[size_t(k)]);
+        sum += in.n0[i] + in.n1[i];
+    }
+    n.cone_cos = -1.f;
+    n.cone_sin = 0.f;
+    if (length(sum) > 1e-6f) {
+        n.cone_axis = normalize(sum);
+        float lo = 1.f;
+        for (int k = begin; k < end; ++k) {
+            const size_t i = size_t(items[size_t(k)]);
+            lo = std::min(lo, std::min(dot(n.cone_axis, in.n0[i]), dot(n.cone_axis, in.n1[i])));
+        }
+        // A little slack for rounding.
+        n.cone_cos = std::max(-1.f, lo - 1e-5f);
+        n.cone_sin = sine(n.cone_cos);
+    } else {
+        n.cone_axis = Vec3f(0.f, 0.f, 1.f);
+    }
+    float plo = 1e30f, phi = -1e30f;
+    for (int k = begin; k < end; ++k) {
+        const size_t i = size_t(items[size_t(k)]);
+        const Vec3f to_c = n.center - in.p0[i];
+        const float a = dot(in.n0[i], to_c), b = dot(in.n1[i], to_c);
+        plo = std::min(plo, std::min(a, b));
+        phi = std::max(phi, std::max(a, b));
+    }
+    const float slack = 1e-5f * (n.radius + length(n.center));
+    n.plane_lo = plo - slack;
+    n.plane_hi = phi + slack;
+}
+
+void EdgeHierarchy::finish_inner(int32_t index) {
+    Node& n = nodes_[size_t(index)];
+    const Node &a = nodes_[size_t(n.left)], &b = nodes_[size_t(n.right)];
     n.lo = min(a.lo, b.lo);
     n.hi = max(a.hi, b.hi);
+    n.center = (n.lo + n.hi) * 0.5f;
+    n.radius = length(n.hi - n.lo) * 0.5f;
     n.length = a.length + b.length;
     n.always = a.always || b.always;
-    // The union of the two normal cones (conservative).
-    if (a.cone_cos <= -1.f || b.cone_cos <= -1.f) {
-        n.cone_axis = Vec3f(0.f, 0.f, 1.f);
-        n.cone_cos = -1.f;
-    } else {
-        const Vec3f s = a.cone_axis + b.cone_axis;
-        if (!(length(s) > 1e-6f)) {
-            n.cone_cos = -1.f;
-            n.cone_axis = Vec3f(0.f, 0.f, 1.f);
-        } else {
-            n.cone_axis = normalize(s);
-            const float half = std::max(angle_between(n.cone_axis, a.cone_axis) + std::acos(a.cone_cos),
-                                        angle_between(n.cone_axis, b.cone_axis) + std::acos(b.cone_cos));
-            n.cone_cos = half >= kPi ? -1.f : std::cos(half);
-        }
-    }
-    return index;
+    n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
+    n.cone_cos = -1.f;
+    n.cone_sin = 0.f;
 }
 
 void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges) {
@@ -89,106 +186,299 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
     const std::vector<Edge>& all = scene.edges();
     leaf_of_.assign(all.size(), -1);
     const size_t n = edges.size();
-    std::vector<Vec3f> p0(n), p1(n), n0(n), n1(n);
-    std::vector<uint8_t> always(n);
-    std::vector<int32_t> items(n);
+    Input in;
+    in.p0.resize(n);
+    in.p1.resize(n);
+    in.n0.assign(n, Vec3f(0.f));
+    in.n1.assign(n, Vec3f(0.f));
+    in.always.resize(n);
+    in.ids = &edges;
+    std::vector<int32_t> items;  // the discontinuities from everywhere first, then the smooth edges
+    items.reserve(n);
     for (size_t i = 0; i < n; ++i) {
         const Edge& e = all[size_t(edges[i])];
         const Mesh& m = scene.meshes[size_t(e.mesh)];
-        p0[i] = m.vertex(e.v0);
-        p1[i] = m.vertex(e.v1);
-        always[i] = e.kind != EdgeKind::Smooth;
-        if (!always[i]) {
-            n0[i] = normalize(m.face_normal(e.f0));
-            n1[i] = normalize(m.face_normal(e.f1));
+        in.p0[i] = m.vertex(e.v0);
+        in.p1[i] = m.vertex(e.v1);
+        in.always[i] = e.kind != EdgeKind::Smooth;
+        if (!in.always[i]) {
+            const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
+            // A face of zero area has no side: its edge is treated as a discontinuity.
+            if (length(a) > 0.f && length(b) > 0.f) {
+                in.n0[i] = normalize(a);
+                in.n1[i] = normalize(b);
+            } else {
+                in.always[i] = 1;
+            }
         }
-        items[i] = int32_t(i);
     }
+    for (size_t i = 0; i < n; ++i)
+        if (in.always[i]) items.push_back(int32_t(i));
+    const int split = int(items.size());
+    for (size_t i = 0; i < n; ++i)
+        if (!in.always[i]) items.push_back(int32_t(i));
     if (n > 0) {
-        nodes_.reserve(2 * n);
-        build_node(items, 0, int(n), -1, p0, p1, n0, n1, always, edges);
+        nodes_.resize(2 * n - 1);
+        if (split == 0 || split == int(n)) {
+            build_range(in, items, 0, int(n), 0, -1);
+        } else {
+            // Two trees under one root.
+            Node& root = nodes_[0];
+            root.left = 1;
+            root.right = 2 * split;
+            build_range(in, items, 0, split, root.left, 0);
+            build_range(in, items, split, int(n), root.right, 0);
+            finish_inner(0);  // holds discontinuities: never culled
+        }
     }
     build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
 }
 
-float EdgeHierarchy::importance(const Query& q, const Node& n) const {
-    // The box's bounding sphere seen from p: direction `dir`, angular radius beta.
-    const Vec3f c = (n.lo + n.hi) * 0.5f;
-    const float r = length(n.hi - n.lo) * 0.5f, d = length(c - q.p);
-    if (!(d > r)) {
-        // The point is inside the node's bounding sphere: only the length tells nodes apart.
-        return n.length / std::max(1e-12f, r * r);
-    }
-    const Vec3f dir = (c - q.p) / d;
-    const float sin_beta = r / d, cos_beta = std::sqrt(std::max(0.f, 1.f - sin_beta * sin_beta));
-    auto sine = [](float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)); };
-    // Silhouettes possible? Directions from the box to p lie within beta of -dir; faces with
-    // normals within theta of the cone axis all face p (or all face away) when the angle b
-    // between the axis and -dir satisfies b + theta + beta < pi/2 (or b - theta - beta > pi/2),
-    // i.e. when theta + beta < pi/2 and |cos b| > sin(theta + beta).
-    if (!n.always && n.cone_cos > -1.f) {
-        const float cos_t = n.cone_cos, sin_t = sine(cos_t);
-        const float cos_s = cos_t * cos_beta - sin_t * sin_beta, sin_s = sin_t * cos_beta + cos_t * sin_beta;
-        if (cos_s > 0.f && sin_s >= 0.f && std::abs(dot(n.cone_axis, dir)) > sin_s) return 0.f;
-    }
-    // Only directions towards the lights? Apart when their angle exceeds beta + the cone's.
-    if (q.cone && q.cone->cos_half > -1.f) {
-        const float cos_c = q.cone->cos_half, sin_c = sine(cos_c);
-        if (dot(dir, q.cone->axis) < cos_beta * cos_c - sin_beta * sin_c) return 0.f;
-    }
-    // A bound of the cosine at the point over the box's directions (the BSDF's support): the
-    // cosine of max(0, a - beta), a the angle between the normal and dir (or pi - a, two-sided).
-    float cos_a = dot(q.n, dir);
-    if (q.two_sided) cos_a = std::abs(cos_a);
-    float bound = 1.f;
-    if (cos_a < cos_beta) {  // a > beta
-        bound = cos_a * cos_beta + sine(cos_a) * sin_beta;
-        if (bound <= 0.f) return 0.f;
-    }
-    // Distance to the box.
-    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
-    const float d2 = std::max(length_squared(below + above), 1e-12f);
-    return n.length * bound / d2;
-}
+// ---- importance -------------------------------------------------------------------------------
 
-bool EdgeHierarchy::sample(const Query& q, float u, int32_t& edge, float& prob) const {
-    if (nodes_.empty()) return false;
-    int32_t at = 0;
-    prob = 1.f;
-    if (importance(q, nodes_[0]) <= 0.f) return false;
-    while (nodes_[size_t(at)].left >= 0) {
-        const Node& n = nodes_[size_t(at)];
-        const float il = importance(q, nodes_[size_t(n.left)]), ir = importance(q, nodes_[size_t(n.right)]);
-        if (!(il + ir > 0.f)) return false;
-        const float pl = il / (il + ir);
-        if (u < pl) {
-            u = std::min(u / pl, 0.99999994f);
-            prob *= pl;
-            at = n.left;
-        } else {
-            u = std::min((u - pl) / (1.f - pl), 0.99999994f);
-            prob *= 1.f - pl;
-            at = n.right;
+void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int refine) const {
+    out[0] = out[1] = 0.f;
+    const bool leaf = n.left < 0;
+    // A smooth edge is a silhouette only where p is in front of exactly one of its faces.
+    if (leaf && !n.always && n.cone_cos > -1.f) {
+        const Vec3f d = q.p - n.a;
+        if ((dot(d, n.n0) > 0.f) == (dot(d, n.n1) > 0.f)) return;
+    }
+    const Vec3f v = n.center - q.p;
+    const float dc2 = length_squared(v), r2 = n.radius * n.radius;
+    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
+    // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
+    // would be infinite for boxes that hold p).
+    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
+    // Nothing above the tangent plane (the BSDF's support, n on the side of wo): no light
+    // through the node's edges reaches p (edges in the plane itself are seen at grazing angles,
+    // where the cosine vanishes).
+    const Vec3f half = (n.hi - n.lo) * 0.5f, ln = q.lobe.n;
+    if (dot(ln, v) + std::abs(ln.x) * half.x + std::abs(ln.y) * half.y + std::abs(ln.z) * half.z <= 0.f) return;
+    if (leaf) {  // the segment itself: both ends below, or within 1e-5 rad above, the plane
+        const Vec3f ea = n.a - q.p, eb = n.b - q.p;
+        if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
+    }
+    if (!(dc2 > r2)) {
+        // p inside the bounding sphere: every direction. The children's bounds are tighter (a
+        // few levels down); at the end, the lobe's peak.
+        if (!leaf && refine > 0) {
+            float a[2], b[2];
+            importance(q, nodes_[size_t(n.left)], a, refine - 1);
+            importance(q, nodes_[size_t(n.right)], b, refine - 1);
+            out[0] = a[0] + b[0];
+            out[1] = a[1] + b[1];
+            return;
+        }
+        out[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
+        out[1] = q.cone ? out[0] : 0.f;
+        return;
+    }
+    const float d = std::sqrt(dc2);
+    const Vec3f dir = v / d;
+    const float sin_b = n.radius / d, cos_b = sine(sin_b);
+    // Silhouettes possible? The signed distance of p to a face's plane is
+    //   n_f . (p - x_f) = n_f . (p - c) + n_f . (c - x_f),
+    // the first term within d [cos(phi + theta), cos(phi - theta)] (phi: the angle between the
+    // normal cone's axis and p - c, theta: the cone's half angle), the second within the node's
+    // plane range. A smooth edge is a silhouette where its faces' distances have opposite signs:
+    // none if the range is all positive or all negative. Otherwise the share of silhouettes:
+    // the two faces of an edge differ by about d x dihedral, so about that over the range's
+    // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
+    // silhouettes happen to carry the contribution).
+    float fraction = 1.f;
+    if (!leaf && !n.always && n.cone_cos > -1.f) {
+        const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
+        const float ct = n.cone_cos, st = n.cone_sin;
+        const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
+        const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
+        if (!(lo < 0.f && hi > 0.f)) return;
+        fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
+    }
+    // The lobe over the node's directions.
+    const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
+    if (!(cn > 0.f)) return;
+    float bound = q.lobe.diffuse * cn;
+    if (q.lobe.specular > 0.f) {
+        const float s = 1.f + q.lobe.sharpness * (1.f - cos_minus(dot(q.lobe.r, dir), cos_b, sin_b));
+        bound += q.lobe.specular / (s * s);
+    }
+    out[0] = n.length * fraction * bound / d2;
+    // Towards the lights: apart when the angle between the axes exceeds beta + the cone's.
+    // Otherwise the share of the node inside the cone: the overlap of the two angular
+    // intervals along the line of their centres over the smaller one, times the ratio of their
+    // sizes when the node is the larger (silhouettes are curves: the ratio, not its square).
+    if (q.cone) {
+        const BoundsCone& c = *q.cone;
+        const float cos_g = dot(dir, c.axis);
+        const bool wraps = c.cos_half <= -cos_b;  // beta + the cone's half angle >= pi
+        if (wraps) {
+            out[1] = out[0];
+        } else if (cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) {
+            const float beta = std::asin(sin_b), gamma = std::acos(std::clamp(cos_g, -1.f, 1.f));
+            const float small = std::min(beta, c.half);
+            float share = small > 0.f ? std::clamp((beta + c.half - gamma) / (2.f * small), 0.f, 1.f) : 1.f;
+            if (beta > c.half) share *= c.half / beta;
+            out[1] = out[0] * share;
         }
     }
-    edge = nodes_[size_t(at)].edge;
-    return prob > 0.f;
 }
 
-float EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
-    if (size_t(edge) >= leaf_of_.size() || leaf_of_[size_t(edge)] < 0) return 0.f;
-    if (importance(q, nodes_[0]) <= 0.f) return 0.f;
-    float prob = 1.f;
+// ---- sampling ---------------------------------------------------------------------------------
+
+bool EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice& out) const {
+    out = Choice();
+    if (nodes_.empty() || (s == Lights && !q.cone)) return false;
+    float root[2];
+    importance(q, nodes_[0], root);
+    if (!(root[s] > 0.f)) return false;
+    out.prob[0] = root[0] > 0.f ? 1.f : 0.f;
+    out.prob[1] = root[1] > 0.f ? 1.f : 0.f;
+    int32_t at = 0;
+    while (nodes_[size_t(at)].left >= 0) {
+        const Node& n = nodes_[size_t(at)];
+        float il[2], ir[2];
+        importance(q, nodes_[size_t(n.left)], il);
+        importance(q, nodes_[size_t(n.right)], ir);
+        const float sum = il[s] + ir[s];
+        if (!(sum > 0.f)) return false;
+        const float pl = il[s] / sum;
+        const bool left = u < pl;
+        u = left ? u / pl : (u - pl) / (1.f - pl);
+        u = std::min(std::max(u, 0.f), 0.99999994f);
+        for (int k = 0; k < 2; ++k) {
+            const float tot = il[k] + ir[k];
+            out.prob[k] *= tot > 0.f ? (left ? il[k] : ir[k]) / tot : 0.f;
+        }
+        at = left ? n.left : n.right;
+    }
+    out.edge = nodes_[size_t(at)].edge;
+    return out.prob[s] > 0.f;
+}
+
+EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
+    Choice c;
+    c.edge = edge;
+    if (size_t(edge) >= leaf_of_.size() || leaf_of_[size_t(edge)] < 0) return c;
+    float root[2];
+    importance(q, nodes_[0], root);
+    c.prob[0] = root[0] > 0.f ? 1.f : 0.f;
+    c.prob[1] = root[1] > 0.f ? 1.f : 0.f;
     for (int32_t at = leaf_of_[size_t(edge)]; nodes_[size_t(at)].parent >= 0;) {
         const int32_t up = nodes_[size_t(at)].parent;
         const Node& n = nodes_[size_t(up)];
-        const float il = importance(q, nodes_[size_t(n.left)]), ir = importance(q, nodes_[size_t(n.right)]);
-        const float mine = at == n.left ? il : ir;
-        if (!(mine > 0.f)) return 0.f;
-        prob *= mine / (il + ir);
+        float il[2], ir[2];
+        importance(q, nodes_[size_t(n.left)], il);
+        importance(q, nodes_[size_t(n.right)], ir);
+        for (int k = 0; k < 2; ++k) {
+            const float tot = il[k] + ir[k];
+            c.prob[k] *= tot > 0.f ? (at == n.left ? il[k] : ir[k]) / tot : 0.f;
+        }
         at = up;
     }
-    return prob;
+    return c;
+}
+
+// ---- the point on the edge --------------------------------------------------------------------
+
+bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
+                             const BoundsCone* cone) {
+    const Vec3f e = v1 - v0;
+    len_ = length(e);
+    if (!(len_ > 0.f) || !std::isfinite(len_)) return false;
+    const Vec3f b = e / len_;
+    s_foot_ = dot(p - v0, b);
+    const Vec3f hv = v0 + b * s_foot_ - p;
+    h_ = length(hv);
+    if (!(h_ > 1e-7f * (len_ + length(v0 - p)))) return false;  // p on the edge's line
+    const Vec3f a = hv / h_;
+    phi0_ = std::atan(-s_foot_ / h_);
+    phi1_ = std::atan((len_ - s_foot_) / h_);
+    if (!(phi1_ - phi0_ > 1e-7f)) return false;
+    // The lobe bound along the edge, in angle, and its integral.
+    const float step = (phi1_ - phi0_) / float(kBins);
+    cdf_[0] = 0.f;
+    for (int k = 0; k <= kBins; ++k) {
+        const float phi = phi0_ + step * float(k);
+        g_[k] = lobe.eval(a * std::cos(phi) + b * std::sin(phi));
+        if (k > 0) cdf_[k] = cdf_[k - 1] + 0.5f * (g_[k - 1] + g_[k]) * step;
+    }
+    total_ = cdf_[kBins];
+    if (!(total_ > 0.f) || !std::isfinite(total_)) total_ = 0.f;
+    // The part inside the light cone: w(phi) . axis = R cos(phi - psi) >= cos_half.
+    cone0_ = cone1_ = 0.f;
+    if (cone) {
+        if (cone->cos_half <= 0.f) {  // a hemisphere or more: the whole edge
+            cone0_ = phi0_;
+            cone1_ = phi1_;
+        } else {
+            const float A = dot(a, cone->axis), B = dot(b, cone->axis), R = std::sqrt(A * A + B * B);
+            if (R > cone->cos_half) {
+                const float psi = std::atan2(B, A), half = std::acos(std::min(1.f, cone->cos_half / R));
+                float lo = psi - half, hi = psi + half;
+                if (hi < phi0_) lo += 2.f * kPi, hi += 2.f * kPi;
+                if (lo > phi1_) lo -= 2.f * kPi, hi -= 2.f * kPi;
+                cone0_ = std::max(lo, phi0_);
+                cone1_ = std::min(hi, phi1_);
+            }
+        }
+    }
+    return true;
+}
+
+float EdgePointSampler::angle(float t) const { return std::atan((t * len_ - s_foot_) / h_); }
+float EdgePointSampler::param(float phi) const {
+    return std::clamp((s_foot_ + h_ * std::tan(phi)) / len_, 0.f, 1.f);
+}
+
+bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {
+    if (s == EdgeHierarchy::Lights) {
+        if (!(cone1_ > cone0_)) return false;
+        const float t0 = param(cone0_), t1 = param(cone1_);
+        if (!(t1 > t0)) return false;
+        t = t0 + u * (t1 - t0);
+        return true;
+    }
+    if (u < kUniform || total_ <= 0.f) {
+        t = u < kUniform ? u / kUniform : (u - kUniform) / (1.f - kUniform);
+        return true;
+    }
+    // The piecewise-linear density in angle: the bin, then x in [0, 1] inside it with
+    //   g0 x + (g1 - g0) x^2 / 2 = c,
+    // by Newton's method kept inside a shrinking bracket (bisection when a step leaves it).
+    const float target = (u - kUniform) / (1.f - kUniform) * total_, step = (phi1_ - phi0_) / float(kBins);
+    int k = 0;
+    while (k < kBins - 1 && cdf_[k + 1] <= target) ++k;
+    const float g0 = g_[k], g1 = g_[k + 1], c = (target - cdf_[k]) / step;
+    float lo = 0.f, hi = 1.f, x = g0 + g1 > 0.f ? std::clamp(2.f * c / (g0 + g1), 0.f, 1.f) : 0.5f;
+    for (int it = 0; it < 20; ++it) {
+        const float F = g0 * x + 0.5f * (g1 - g0) * x * x - c, dF = g0 + (g1 - g0) * x;
+        if (F > 0.f) hi = x;
+        else lo = x;
+        float next = dF > 0.f ? x - F / dF : 0.5f * (lo + hi);
+        if (!(next > lo && next < hi)) next = 0.5f * (lo + hi);
+        const bool done = std::abs(next - x) < 1e-7f;
+        x = next;
+        if (done) break;
+    }
+    t = param(phi0_ + (float(k) + x) * step);
+    return true;
+}
+
+float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
+    if (!(t >= 0.f && t <= 1.f)) return 0.f;
+    if (s == EdgeHierarchy::Lights) {
+        if (!(cone1_ > cone0_)) return 0.f;
+        const float t0 = param(cone0_), t1 = param(cone1_);
+        return t1 > t0 && t >= t0 && t <= t1 ? 1.f / (t1 - t0) : 0.f;
+    }
+    if (total_ <= 0.f) return 1.f;
+    const float along = t * len_ - s_foot_;
+    const float dphi_dt = len_ * h_ / (h_ * h_ + along * along);
+    const float step = (phi1_ - phi0_) / float(kBins), f = (angle(t) - phi0_) / step;
+    const int k = std::clamp(int(f), 0, kBins - 1);
+    const float x = std::clamp(f - float(k), 0.f, 1.f), g = g_[k] + (g_[k + 1] - g_[k]) * x;
+    return kUniform + (1.f - kUniform) * g / total_ * dphi_dt;
 }
 
 }  // namespace edgepath

@@ -1,14 +1,31 @@
-// A bounding volume hierarchy over edges, for importance sampling the edges seen from a point
-// (section 5 of the docs). Each node keeps its box, the total length of its edges, and a cone
-// bounding the normals of the faces adjacent to its smooth edges, so that a node whose smooth
-// edges cannot be silhouettes from the point is rejected at once; boundary edges and creases
-// (silhouettes or shading jumps from everywhere) are flagged and never culled by the cone.
+// Importance sampling of the edges seen from a point (section 5 of the docs).
+//
+// EdgeHierarchy: a bounding volume hierarchy over edges, in two trees under one root: the edges
+// that are discontinuities from everywhere (boundaries, creases of flat-shaded meshes) and the
+// smooth edges (silhouettes only). Each node keeps its box and bounding sphere, the total length
+// of its edges, and a cone bounding the normals of the faces adjacent to its smooth edges, so
+// that a node whose smooth edges cannot be silhouettes from the point is rejected at once; a
+// leaf tests its edge exactly (the point in front of exactly one of the two faces).
 //
 // Sampling descends from the root, picking a child with probability proportional to an upper
-// bound of its contribution at the point: length / distance^2, times a bound of the cosine at
-// the point (the BSDF's support), zero without possible silhouettes; optionally restricted to
-// the cone of directions towards a box (the lights). pdf() gives the probability of any edge
-// under the same rules, for multiple importance sampling.
+// bound of its contribution at the point:
+//   length x (BSDF lobe bound over the node's directions) / distance^2,
+// zero without possible silhouettes. The lobe bound (LobeBound) is a cosine bound for the
+// diffuse part plus a spherical-Gaussian approximation of a GGX lobe around the mirror
+// direction, both evaluated at the angle between the node and the direction minus the node's
+// angular radius. Two strategies share one descent's arithmetic: over all edges, and restricted
+// to the cone of directions towards the lights (the edges that cast shadows; box-cone test), so
+// the probability of the chosen edge under both comes out of one traversal, for multiple
+// importance sampling.
+//
+// EdgePointSampler: the point on a chosen edge. Strategy All: a mixture of uniform by length
+// and a density in the angle phi the edge subtends at the point (directions w(phi) in the plane
+// through the point and the edge) proportional to the lobe bound (tabulated, piecewise linear,
+// its cumulative distribution inverted by Newton's method with a bisection safeguard). Strategy
+// Lights: uniform by length over the part of the edge inside the light cone (found in closed
+// form: w(phi) . axis = R cos(phi - psi) >= cos(half angle)).
+//
+// Built once per render call in O(n log n) (parallel median splits).
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -20,9 +37,23 @@ namespace edgepath {
 class Scene;
 
 struct BoundsCone {
-    Vec3f center;  // the cone of directions from a point towards a box: axis and cos(half angle)
-    Vec3f axis;
-    float cos_half = -1.f;  // -1: every direction
+    Vec3f axis;             // the cone of directions from a point towards a sphere (the lights)
+    float cos_half = -1.f;  // cos(half angle); -1: every direction
+    float half = 3.14159265f;  // the half angle
+    // The cone from p towards the sphere (c, r); false (and every direction) when p is inside.
+    bool towards(const Vec3f& p, const Vec3f& c, float r);
+};
+
+// What the BSDF at the point can do with light from a direction w: about
+//   diffuse x max(0, n.w) + specular x exp(sharpness (r.w - 1)),  zero where n.w <= 0.
+struct LobeBound {
+    Vec3f n = Vec3f(0.f, 0.f, 1.f);  // the normal on the side of the outgoing direction
+    Vec3f r = Vec3f(0.f, 0.f, 1.f);  // the outgoing direction mirrored about n
+    float diffuse = 1.f, specular = 0.f, sharpness = 0.f;
+    // From a BSDF's mean diffuse and specular albedo, GGX alpha and cos(n, wo) > 0.
+    static LobeBound make(const Vec3f& n, const Vec3f& wo, float diffuse, float specular, float alpha);
+    // The value at direction w (unit).
+    float eval(const Vec3f& w) const;
 };
 
 class EdgeHierarchy {
@@ -32,37 +63,75 @@ public:
     bool empty() const { return nodes_.empty(); }
     double build_ms() const { return build_ms_; }
 
-    // What the importance is evaluated against.
     struct Query {
-        Vec3f p, n;             // the point and its shading normal
-        bool two_sided = false; // directions below the surface count too
-        const BoundsCone* cone = nullptr;  // only edges inside this cone (lights), or all
+        Vec3f p;                           // the shading point
+        LobeBound lobe;
+        const BoundsCone* cone = nullptr;  // the lights; nullptr: no second strategy
     };
-    // Picks an edge (index into scene.edges()) with probability `prob`; false if none can
-    // contribute.
-    bool sample(const Query& q, float u, int32_t& edge, float& prob) const;
-    // The probability that sample() picks `edge` (an index into scene.edges()).
-    float pdf(const Query& q, int32_t edge) const;
+    enum Strategy { All = 0, Lights = 1 };
+    struct Choice {
+        int32_t edge = -1;        // index into scene.edges()
+        float prob[2] = {0, 0};   // its probability under each strategy
+    };
+    // Picks an edge with strategy `s` (Lights needs q.cone); also gives its probability under
+    // the other strategy. False if no edge can contribute.
+    bool sample(const Query& q, Strategy s, float u, Choice& out) const;
+    // The probabilities that sample() picks `edge` (an index into scene.edges()).
+    Choice pdf(const Query& q, int32_t edge) const;
 
 private:
     struct Node {
         Vec3f lo, hi;
+        Vec3f center;
+        float radius = 0.f;         // of the bounding sphere
         Vec3f cone_axis;
-        float cone_cos = 1.f;   // cos of the normal cone's half angle; -1: no culling
-        bool always = false;    // holds a boundary edge or a crease
+        float cone_cos = -1.f, cone_sin = 0.f;  // the normal cone; cos -1: no culling
+        float dihedral = 0.f;       // mean angle between the two faces' normals (smooth edges)
+        // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
+        float plane_lo = 0.f, plane_hi = 0.f;
         float length = 0.f;
-        int32_t left = -1, right = -1;  // children; leaf when left < 0
+        int32_t left = -1;          // children left, right; leaf when left < 0
+        int32_t right = -1;
         int32_t parent = -1;
-        int32_t edge = -1;      // leaf: index into scene.edges()
+        int32_t edge = -1;          // leaf: index into scene.edges()
+        Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
+        bool always = false;        // holds a boundary edge or a crease
     };
-    float importance(const Query& q, const Node& n) const;
-    int32_t build_node(std::vector<int32_t>& items, int begin, int end, int32_t parent,
-                       const std::vector<Vec3f>& p0, const std::vector<Vec3f>& p1,
-                       const std::vector<Vec3f>& n0, const std::vector<Vec3f>& n1, const std::vector<uint8_t>& always,
-                       const std::vector<int32_t>& ids);
+    // The node's importance under both strategies.
+    void importance(const Query& q, const Node& n, float out[2], int refine = 3) const;
+    struct Input;
+    void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
+    void finish_inner(int32_t index);
+    void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
+    bool descend(const Query& q, int32_t root, Strategy s, float u, Choice& out) const;
     std::vector<Node> nodes_;
     std::vector<int32_t> leaf_of_;  // scene edge index -> leaf node (-1: not in the hierarchy)
     double build_ms_ = 0.0;
+};
+
+class EdgePointSampler {
+public:
+    // The edge (v0, v1) seen from p. False when it is degenerate seen from p (p on its line, or
+    // a zero-length edge).
+    bool setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe, const BoundsCone* cone);
+    // A parameter t in [0, 1] (x = v0 + t (v1 - v0)) by strategy `s`; false if the strategy
+    // cannot sample this edge (Lights: no part of it inside the cone).
+    bool sample(EdgeHierarchy::Strategy s, float u, float& t) const;
+    // The density of t, per unit t, under each strategy.
+    float pdf(EdgeHierarchy::Strategy s, float t) const;
+    // The angle of parameter t and back.
+    float angle(float t) const;
+    float param(float phi) const;
+    static constexpr int kBins = 16;
+    static constexpr float kUniform = 0.25f;  // strategy All's share of uniform by length
+
+private:
+    float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;
+    float phi0_ = 0.f, phi1_ = 0.f;
+    float cone0_ = 0.f, cone1_ = 0.f;  // the part inside the light cone; empty when cone1 <= cone0
+    float g_[kBins + 1] = {};          // the lobe bound at the bins' ends
+    float cdf_[kBins + 1] = {};        // its integral (in angle) up to them
+    float total_ = 0.f;
 };
 
 }  // namespace edgepath

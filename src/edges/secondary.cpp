@@ -40,16 +40,24 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
         has_wanted_set_ = true;
     }
-    for (const Scene::EmissiveTriangle& l : scene.lights) {
-        const Mesh& m = scene.meshes[size_t(l.mesh)];
-        const int32_t* t = m.indices + 3 * l.prim;
-        for (int k = 0; k < 3; ++k) {
-            const Vec3f v = m.vertex(t[k]);
-            lights_lo_ = has_lights_ ? min(lights_lo_, v) : v;
-            lights_hi_ = has_lights_ ? max(lights_hi_, v) : v;
-            has_lights_ = true;
+    // A bounding sphere of the area lights: the box's centre, the farthest vertex.
+    Vec3f lo, hi;
+    for (int pass = 0; pass < 2; ++pass)
+        for (const Scene::EmissiveTriangle& l : scene.lights) {
+            const Mesh& m = scene.meshes[size_t(l.mesh)];
+            const int32_t* t = m.indices + 3 * l.prim;
+            for (int k = 0; k < 3; ++k) {
+                const Vec3f v = m.vertex(t[k]);
+                if (pass == 1) {
+                    lights_radius_ = std::max(lights_radius_, length(v - lights_center_));
+                    continue;
+                }
+                lo = has_lights_ ? min(lo, v) : v;
+                hi = has_lights_ ? max(hi, v) : v;
+                has_lights_ = true;
+            }
+            if (pass == 0) lights_center_ = (lo + hi) * 0.5f;
         }
-    }
 }
 
 Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
@@ -67,42 +75,42 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         const float t = rng.next_float();
         return evaluate(set.edges[k], t, float(set.total), sp, wo, bsdf, bounces_left, weight, rng, sink);
     }
-    const EdgeHierarchy& hierarchy = set.hierarchy;
-    EdgeHierarchy::Query all;
-    all.p = sp.p;
-    all.n = sp.ns;
-    all.two_sided = bsdf.two_sided;
+    // The lobe bound of the BSDF, on the side of wo (it is zero for every direction otherwise).
+    Vec3f n = sp.ns;
+    float co = dot(n, wo);
+    if (bsdf.two_sided && co < 0.f) {
+        n = -n;
+        co = -co;
+    }
+    if (!(co > 0.f)) return d_p;
+    auto mean = [](const Vec3f& c) { return (c.x + c.y + c.z) / 3.f; };
+    EdgeHierarchy::Query q;
+    q.p = sp.p;
+    q.lobe = LobeBound::make(n, wo, mean(bsdf.diffuse), mean(bsdf.specular), bsdf.alpha);
+    // Strategy All: over all edges; strategy Lights: the edges and the parts of them inside the
+    // cone towards the lights. Balance heuristic on the joint density of (edge, t).
     BoundsCone cone;
-    EdgeHierarchy::Query towards = all;
-    bool lights = false;
-    if (has_lights_) {
-        const Vec3f c = (lights_lo_ + lights_hi_) * 0.5f;
-        const float r = length(lights_hi_ - lights_lo_) * 0.5f, d = length(c - sp.p);
-        if (d > r) {  // inside the lights' bounding sphere the cone is everything: no second strategy
-            cone.axis = (c - sp.p) / d;
-            cone.cos_half = std::cos(std::asin(std::min(1.f, r / d)));
-            towards.cone = &cone;
-            lights = true;
-        }
-    }
-    // Strategy 1: all edges; strategy 2: edges towards the lights. Power heuristic.
-    const float u1 = rng.next_float(), t1 = rng.next_float(), u2 = rng.next_float(), t2 = rng.next_float();
+    // Inside the lights' bounding sphere the cone is everything: one strategy.
+    if (has_lights_ && cone.towards(sp.p, lights_center_, lights_radius_)) q.cone = &cone;
+    const float u[2] = {rng.next_float(), rng.next_float()}, ut[2] = {rng.next_float(), rng.next_float()};
     const Edge* edges = scene_.edges().data();
-    auto edge_length = [&](int32_t i) {
-        const Mesh& m = scene_.meshes[size_t(edges[i].mesh)];
-        return length(m.vertex(edges[i].v1) - m.vertex(edges[i].v0));
-    };
-    int32_t e;
-    float prob;
-    if (hierarchy.sample(all, u1, e, prob)) {
-        const float other = lights ? hierarchy.pdf(towards, e) : 0.f;
-        const float w = prob * prob / (prob * prob + other * other);
-        d_p += evaluate(e, t1, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
-    }
-    if (lights && hierarchy.sample(towards, u2, e, prob)) {
-        const float other = hierarchy.pdf(all, e);
-        const float w = prob * prob / (prob * prob + other * other);
-        d_p += evaluate(e, t2, w * edge_length(e) / prob, sp, wo, bsdf, bounces_left, weight, rng, sink);
+    for (int k = 0; k < (q.cone ? 2 : 1); ++k) {
+        const EdgeHierarchy::Strategy s = k == 0 ? EdgeHierarchy::All : EdgeHierarchy::Lights;
+        EdgeHierarchy::Choice choice;
+        if (!set.hierarchy.sample(q, s, u[k], choice)) continue;
+        const Edge& e = edges[choice.edge];
+        const Mesh& m = scene_.meshes[size_t(e.mesh)];
+        const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
+        EdgePointSampler points;
+        float t;
+        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone) || !points.sample(s, ut[k], t)) continue;
+        const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
+                    joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
+        const float mine = k == 0 ? joint_all : joint_lights;
+        if (!(mine > 0.f) || !std::isfinite(joint_all + joint_lights)) continue;
+        // scale: the MIS weight over the density per unit length, mine / length(v1 - v0).
+        const float scale = length(v1 - v0) / (joint_all + joint_lights);
+        d_p += evaluate(choice.edge, t, scale, sp, wo, bsdf, bounces_left, weight, rng, sink);
     }
     return d_p;
 }

@@ -11,9 +11,11 @@
 //
 // Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one sample over all
 // edges and, when the scene has area lights, one restricted to the cone towards them (the
-// edges that cast shadows), combined by multiple importance sampling (power heuristic). The
-// point on the edge is uniform by length. opt.edge_sampling == Uniform: one edge by length over
-// all edges instead (the baseline).
+// edges that cast shadows), combined by multiple importance sampling (balance heuristic on the
+// joint density of the edge and the point on it). The point on the edge is sampled by angle
+// (EdgePointSampler): weighted by a bound of the BSDF lobe, or uniformly inside the light cone.
+// opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
+// instead (the baseline).
 #pragma once
 #include <vector>
 #include "diff/gradients.h"
@@ -69,7 +71,8 @@ private:
     bool has_wanted_set_ = false;
     double total_ = 0.0;
     bool has_lights_ = false;
-    Vec3f lights_lo_, lights_hi_;  // bounds of the area lights
+    Vec3f lights_center_;  // a bounding sphere of the area lights
+    float lights_radius_ = 0.f;
 };
 
 }  // namespace edgepath

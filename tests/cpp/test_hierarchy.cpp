@@ -1,6 +1,8 @@
-// The edge hierarchy: sample() and pdf() agree, and the probabilities sum to one.
+// The edge hierarchy and the point sampler on an edge: sample() and pdf() agree with the
+// empirical frequencies, densities integrate to one, awkward geometry gives finite results.
 #include <gtest/gtest.h>
 
+#include <cmath>
 #include <map>
 #include <vector>
 
@@ -32,46 +34,241 @@ struct HierarchyScene {
     }
 };
 
-TEST(EdgeHierarchy, SampleAndPdfAgree) {
+BoundsCone cone_towards(const Vec3f& p, const Vec3f& c, float r) {
+    BoundsCone cone;
+    EXPECT_TRUE(cone.towards(p, c, r));
+    return cone;
+}
+
+// Both strategies, diffuse and glossy lobes: every probability sample() reports is pdf()'s, the
+// probabilities sum to at most one (the rest: descents that end where nothing can contribute),
+// and the empirical frequencies match them.
+TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
     std::vector<int32_t> ids(scene.edges().size());
     for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
     EdgeHierarchy h;
     h.build(scene, ids);
-    BoundsCone cone;
-    cone.axis = normalize(Vec3f(0.3f, 1, 0.1f));
-    cone.cos_half = 0.9f;
-    for (int with_cone = 0; with_cone < 2; ++with_cone) {
+    const Vec3f p(0.3f, 0.01f, 0.4f);
+    const BoundsCone cone = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.3f);
+    for (int glossy = 0; glossy < 2; ++glossy) {
         EdgeHierarchy::Query q;
-        q.p = Vec3f(0.3f, 0.01f, 0.4f);
-        q.n = Vec3f(0, 1, 0);
-        q.cone = with_cone ? &cone : nullptr;
-        // Descents that end where no edge can contribute fail; the rest of the mass is the
-        // edges' probabilities.
-        double sum = 0;
-        for (size_t e = 0; e < ids.size(); ++e) sum += h.pdf(q, int32_t(e));
-        EXPECT_GT(sum, 0.1) << "cone " << with_cone;
-        EXPECT_LE(sum, 1.0 + 1e-5) << "cone " << with_cone;
-        const int n = 200000;
-        std::map<int32_t, int> counts;
-        int failed = 0;
-        Rng rng(7, 1);
-        for (int i = 0; i < n; ++i) {
-            int32_t e;
-            float prob;
-            if (!h.sample(q, rng.next_float(), e, prob)) {
-                ++failed;
-                continue;
+        q.p = p;
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(-1, 1, 0)), glossy ? 0.1f : 0.5f, glossy ? 0.5f : 0.f,
+                                 0.1f);
+        q.cone = &cone;
+        for (int s = 0; s < 2; ++s) {
+            const auto strategy = EdgeHierarchy::Strategy(s);
+            double sum = 0;
+            for (size_t e = 0; e < ids.size(); ++e) sum += h.pdf(q, int32_t(e)).prob[s];
+            EXPECT_GT(sum, 0.1) << "strategy " << s;
+            EXPECT_LE(sum, 1.0 + 1e-5) << "strategy " << s;
+            const int n = 200000;
+            std::map<int32_t, int> counts;
+            int failed = 0;
+            Rng rng(7, 1);
+            for (int i = 0; i < n; ++i) {
+                EdgeHierarchy::Choice c;
+                if (!h.sample(q, strategy, rng.next_float(), c)) {
+                    ++failed;
+                    continue;
+                }
+                const EdgeHierarchy::Choice ref = h.pdf(q, c.edge);
+                EXPECT_NEAR(c.prob[0], ref.prob[0], 1e-5f * ref.prob[0] + 1e-12f);
+                EXPECT_NEAR(c.prob[1], ref.prob[1], 1e-5f * ref.prob[1] + 1e-12f);
+                counts[c.edge]++;
             }
-            EXPECT_NEAR(prob, h.pdf(q, e), 1e-5f * prob);
-            counts[e]++;
+            EXPECT_NEAR(failed, n * (1 - sum), 5 * std::sqrt(n * sum * (1 - sum)) + 1);
+            for (const auto& [e, c] : counts) {
+                const double pe = h.pdf(q, e).prob[s], sigma = std::sqrt(n * pe * (1 - pe)) + 1;
+                EXPECT_NEAR(c, n * pe, 5 * sigma) << "edge " << e << " strategy " << s << " glossy " << glossy;
+            }
+            // Whatever the light strategy picks, the strategy over all edges can pick too (it is
+            // the one that covers every edge in the multiple importance sampling).
+            if (s == 1) {
+                for (const auto& [e, c] : counts) EXPECT_GT(h.pdf(q, e).prob[0], 0.f) << "edge " << e;
+            }
         }
-        EXPECT_NEAR(failed, n * (1 - sum), 5 * std::sqrt(n * sum * (1 - sum)) + 1);
-        for (const auto& [e, c] : counts) {
-            const double p = h.pdf(q, e), sigma = std::sqrt(n * p * (1 - p)) + 1;
-            EXPECT_NEAR(c, n * p, 5 * sigma) << "edge " << e;
+    }
+}
+
+// A glossy lobe concentrates the probability on the edges near the mirror direction: from a
+// point on a (virtual) floor, the sphere in the mirror direction against the box 30 degrees off.
+TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    std::vector<int32_t> ids;  // the sphere's and the box's edges (no floor around the point)
+    for (size_t i = 0; i < scene.edges().size(); ++i)
+        if (scene.edges()[i].mesh != 2) ids.push_back(int32_t(i));
+    EdgeHierarchy h;
+    h.build(scene, ids);
+    const Vec3f p(-1.5f, 0.01f, 0.f), towards = normalize(Vec3f(0, 1, 0) - p);
+    const Vec3f wo = normalize(Vec3f(-towards.x, towards.y, -towards.z));
+    EdgeHierarchy::Query diffuse, glossy;
+    diffuse.p = glossy.p = p;
+    diffuse.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.5f, 0.f, 0.1f);
+    glossy.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.f, 0.5f, 0.1f);
+    double on_sphere[2] = {0, 0}, total[2] = {0, 0};
+    for (int32_t e : ids) {
+        const float pd = h.pdf(diffuse, e).prob[0], pg = h.pdf(glossy, e).prob[0];
+        total[0] += pd;
+        total[1] += pg;
+        if (scene.edges()[size_t(e)].mesh == 0) {
+            on_sphere[0] += pd;
+            on_sphere[1] += pg;
         }
+    }
+    const double diffuse_share = on_sphere[0] / total[0], glossy_share = on_sphere[1] / total[1];
+    std::printf("sphere's share: diffuse %.3f, glossy %.3f\n", diffuse_share, glossy_share);
+    // The box loses at least a third of its share.
+    EXPECT_LT(1 - glossy_share, 0.67 * (1 - diffuse_share));
+}
+
+// The point sampler: each strategy's density integrates to one over the edge (the light strategy
+// over the part inside the cone, and is zero elsewhere); samples follow it (the empirical
+// cumulative distribution matches the integral of pdf(), i.e. the inverse CDF is right).
+TEST(EdgePointSampler, DensityIntegratesToOneAndInverseMatches) {
+    const Vec3f p(0.2f, 0.f, 0.1f), v0(-1.f, 0.5f, -0.3f), v1(2.f, 0.8f, 0.4f);
+    const BoundsCone cone = cone_towards(p, Vec3f(0.3f, 1.f, 0.1f), 0.4f);
+    const LobeBound lobes[2] = {LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(1, 1, 0)), 0.5f, 0.f, 0.5f),
+                                LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(-0.2f, 1, 0)), 0.1f, 0.8f, 0.1f)};
+    for (const LobeBound& lobe : lobes) {
+        EdgePointSampler ps;
+        ASSERT_TRUE(ps.setup(p, v0, v1, lobe, &cone));
+        for (int s = 0; s < 2; ++s) {
+            const auto strategy = EdgeHierarchy::Strategy(s);
+            // Midpoint rule on a fine grid, with the running integral at the checkpoints.
+            const int grid = 200000, checks = 20;
+            std::vector<double> cdf(checks + 1, 0.0);
+            double integral = 0;
+            for (int i = 0; i < grid; ++i) {
+                const float t = (float(i) + 0.5f) / float(grid);
+                const float d = ps.pdf(strategy, t);
+                ASSERT_TRUE(std::isfinite(d) && d >= 0.f);
+                integral += double(d) / grid;
+                if ((i + 1) % (grid / checks) == 0) cdf[size_t((i + 1) / (grid / checks))] = integral;
+            }
+            EXPECT_NEAR(integral, 1.0, 2e-3) << "strategy " << s;
+            const int n = 100000;
+            std::vector<int> below(checks + 1, 0);
+            Rng rng(3, uint64_t(s));
+            for (int i = 0; i < n; ++i) {
+                float t;
+                ASSERT_TRUE(ps.sample(strategy, rng.next_float(), t));
+                ASSERT_TRUE(t >= 0.f && t <= 1.f);
+                EXPECT_GT(ps.pdf(strategy, t), 0.f);
+                for (int c = 1; c <= checks; ++c) below[size_t(c)] += t <= float(c) / checks;
+            }
+            for (int c = 1; c < checks; ++c) {
+                const double f = double(below[size_t(c)]) / n,
+                             sigma = std::sqrt(std::max(0.0, cdf[size_t(c)] * (1 - cdf[size_t(c)])) / n);
+                EXPECT_NEAR(f, cdf[size_t(c)], 5 * sigma + 2e-3) << "strategy " << s << " at t = " << float(c) / checks;
+            }
+        }
+    }
+    // A cone that misses the edge: the light strategy cannot sample it, its density is zero.
+    EdgePointSampler ps;
+    const BoundsCone away = cone_towards(p, Vec3f(0.2f, -3.f, 0.1f), 0.1f);
+    ASSERT_TRUE(ps.setup(p, v0, v1, lobes[0], &away));
+    float t;
+    EXPECT_FALSE(ps.sample(EdgeHierarchy::Lights, 0.5f, t));
+    EXPECT_EQ(ps.pdf(EdgeHierarchy::Lights, 0.5f), 0.f);
+}
+
+// Degenerate configurations: a zero-length edge, the point on the edge's line, on the edge
+// itself, at an end: no sample, never a NaN.
+TEST(EdgePointSampler, DegenerateEdgesGiveNoSample) {
+    const LobeBound lobe = LobeBound::make(Vec3f(0, 1, 0), Vec3f(0, 1, 0), 0.5f, 0.5f, 0.2f);
+    EdgePointSampler ps;
+    EXPECT_FALSE(ps.setup(Vec3f(0, 1, 0), Vec3f(1, 0, 0), Vec3f(1, 0, 0), lobe, nullptr));
+    EXPECT_FALSE(ps.setup(Vec3f(0.5f, 0, 0), Vec3f(0, 0, 0), Vec3f(1, 0, 0), lobe, nullptr));
+    EXPECT_FALSE(ps.setup(Vec3f(3, 0, 0), Vec3f(0, 0, 0), Vec3f(1, 0, 0), lobe, nullptr));
+    EXPECT_FALSE(ps.setup(Vec3f(0, 0, 0), Vec3f(0, 0, 0), Vec3f(1, 0, 0), lobe, nullptr));
+    // Just off the line: finite densities.
+    ASSERT_TRUE(ps.setup(Vec3f(0.5f, 1e-3f, 0), Vec3f(0, 0, 0), Vec3f(1, 0, 0), lobe, nullptr));
+    for (float u : {0.f, 0.3f, 0.7f, 0.99999f}) {
+        float t;
+        ASSERT_TRUE(ps.sample(EdgeHierarchy::All, u, t));
+        EXPECT_TRUE(std::isfinite(t) && std::isfinite(ps.pdf(EdgeHierarchy::All, t)));
+    }
+}
+
+// Edges shared by three faces, a sliver face with an edge of length 1e-6, and points on an edge: the
+// hierarchy's probabilities stay finite and consistent, and derivative images stay finite.
+TEST(EdgeHierarchy, AwkwardGeometryIsFinite) {
+    // Three fins on the edge (0,0,0)-(0,1,0), a sliver triangle (an edge of length 1e-6), a floor.
+    std::vector<float> v = {0, 0, 0, 0, 1, 0, 1, 0.5f, 0, -1, 0.5f, 0.5f, -1, 0.5f, -0.5f, 0.5f, 0.2f, 1, 0.5f, 0.200001f, 1,
+                            1, 0.8f, 1};
+    std::vector<int32_t> idx = {0, 1, 2, 1, 0, 3, 0, 1, 4, 5, 6, 7};
+    MeshData floor = make_quad(Vec3f(-3, -0.5f, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    std::vector<float> light_v = {-0.5f, 3, -0.5f, 0.5f, 3, -0.5f, 0.5f, 3, 0.5f, -0.5f, 3, 0.5f};
+    std::vector<int32_t> light_i = {0, 2, 1, 0, 3, 2};
+    std::vector<float> kd = {0.5f, 0.5f, 0.5f}, ks = {0.3f, 0.3f, 0.3f}, rough = {0.1f}, le = {5, 5, 5};
+    SceneDesc d;
+    d.camera.width = d.camera.height = 12;
+    d.camera.position[1] = 1.5f;
+    d.camera.position[2] = -4;
+    d.camera.fov = 60;
+    MaterialDesc m;
+    m.diffuse = {kd.data(), 1, 1, 3};
+    m.specular = {ks.data(), 1, 1, 3};
+    m.roughness = {rough.data(), 1, 1, 1};
+    d.materials.push_back(m);
+    MeshDesc fins;
+    fins.vertices = v.data();
+    fins.num_vertices = int64_t(v.size() / 3);
+    fins.indices = idx.data();
+    fins.num_triangles = int64_t(idx.size() / 3);
+    MeshDesc light;
+    light.vertices = light_v.data();
+    light.num_vertices = 4;
+    light.indices = light_i.data();
+    light.num_triangles = 2;
+    light.emission = {le.data(), 1, 1, 3};
+    d.meshes = {fins, floor.desc(0), light};
+    std::shared_ptr<const Scene> scene = build_scene(d);
+    std::vector<int32_t> ids(scene->edges().size());
+    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
+    EdgeHierarchy h;
+    h.build(*scene, ids);
+    const BoundsCone cone = cone_towards(Vec3f(0, 0.5f, 0), Vec3f(0, 3, 0), 0.75f);
+    // On the shared edge, at its end, on the zero-area face, on the floor.
+    for (const Vec3f& p : {Vec3f(0, 0.5f, 0), Vec3f(0, 0, 0), Vec3f(0.5f, 0.2f, 1), Vec3f(0.3f, -0.5f, 0.2f)}) {
+        EdgeHierarchy::Query q;
+        q.p = p;
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(0.3f, 1, -0.2f)), 0.5f, 0.3f, 0.1f);
+        q.cone = &cone;
+        Rng rng(11, 2);
+        for (int i = 0; i < 2000; ++i)
+            for (int s = 0; s < 2; ++s) {
+                EdgeHierarchy::Choice c;
+                if (!h.sample(q, EdgeHierarchy::Strategy(s), rng.next_float(), c)) continue;
+                ASSERT_TRUE(std::isfinite(c.prob[0]) && std::isfinite(c.prob[1]));
+                const Edge& e = scene->edges()[size_t(c.edge)];
+                const Mesh& mesh = scene->meshes[size_t(e.mesh)];
+                EdgePointSampler ps;
+                float t;
+                if (!ps.setup(p, mesh.vertex(e.v0), mesh.vertex(e.v1), q.lobe, q.cone)) continue;
+                if (!ps.sample(EdgeHierarchy::Strategy(s), rng.next_float(), t)) continue;
+                ASSERT_TRUE(std::isfinite(t) && std::isfinite(ps.pdf(EdgeHierarchy::All, t)) &&
+                            std::isfinite(ps.pdf(EdgeHierarchy::Lights, t)));
+            }
+    }
+    // Derivative images along the fins' vertices, both samplers: finite.
+    std::vector<float> dir(v.size(), 0.f);
+    for (size_t i = 0; i < dir.size(); i += 3) dir[i] = 1.f;
+    SceneGradients dirs;
+    dirs.meshes.resize(3);
+    dirs.meshes[0].vertices.dir = dir.data();
+    for (EdgeSampling sampling : {EdgeSampling::Importance, EdgeSampling::Uniform}) {
+        RenderOptions ro;
+        ro.spp = 8;
+        ro.max_bounces = 2;
+        ro.edge_sampling = sampling;
+        std::vector<float> out(12 * 12 * 3);
+        derivative_image(*scene, ro, dirs, out.data());
+        for (float x : out) ASSERT_TRUE(std::isfinite(x));
     }
 }
 

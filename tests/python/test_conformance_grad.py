@@ -168,18 +168,24 @@ def test_geometry_derivative_image_matches_mitsuba(name):
 
 # ---- shadows: the boundary term of secondary visibility ---------------------------------------
 
-# Passing today, at these sample counts. Not yet: translate_occluder_area_light (a 32k-triangle
-# sphere occluding a 32k-triangle light of radius 0.05: mean err 0.08 of 0.03 at 256 spp, the
-# variance the hierarchy's importance must still bring down) and
-# translate_self_shadowing_right_angle (mean err 0.0005 of 0.01, but max err 0.26 of 0.05).
+# Passing today, at these sample counts. translate_self_shadowing_right_angle (a wall's shadow
+# on a floor at a right angle, light grazing: max err 0.10 of 0.05 with uniform edge sampling at
+# 256 spp) passes with the hierarchy. Not yet: translate_occluder_area_light (a 32k-triangle
+# sphere occluding a 32k-triangle light of radius 0.05: at 512 spp, 21 s, mean err 0.027 of 0.03
+# but max err 4.1 of 1.75 and the image sum 16% off; at 128 spp mean err 0.049, max err 10.8,
+# with uniform sampling 0.145 and 132).
 SHADOWS = {"translate_plane_and_area_emitter": 256,
            "translate_textured_area_emitter_illuminating_plane": 256,
-           "translate_shadow_receiver_area_light": 256}
-# Configs where the interior and primary terms alone fail: the check sees the shadow's edge.
-SHADOW_NEEDED = {"translate_plane_and_area_emitter"}
+           "translate_shadow_receiver_area_light": 256,
+           "translate_self_shadowing_right_angle": 256}
+SHADOWS_SLOW = {"translate_shadow_receiver_area_light", "translate_self_shadowing_right_angle"}
+# Configs where the interior and primary terms alone fail (by the metric named): the check sees
+# the shadow's edge. (Without secondary edges the self-shadowing config's mean err is 0.002, its
+# max err 0.10.)
+SHADOW_NEEDED = {"translate_plane_and_area_emitter": "error_mean", "translate_self_shadowing_right_angle": "error_max"}
 
 
-@pytest.mark.parametrize("name", [pytest.param(n, id=n, marks=[pytest.mark.slow] if n == "translate_shadow_receiver_area_light" else [])
+@pytest.mark.parametrize("name", [pytest.param(n, id=n, marks=[pytest.mark.slow] if n in SHADOWS_SLOW else [])
                                   for n in SHADOWS])
 def test_shadow_derivative_image_matches_mitsuba(name):
     thresholds, theta, scene, param, ref, one = _config_case(name)
@@ -193,4 +199,6 @@ def test_shadow_derivative_image_matches_mitsuba(name):
     if name in SHADOW_NEEDED:
         without = ep.derivative_image(scene, theta, one, spp=SHADOWS[name], max_bounces=param.max_bounces,
                                       seed=SEED, secondary_edges=False)
-        assert C.image_error(without, ref, C.GRADIENT_FLOOR)[0] > thresholds["error_mean"]
+        mean_without, max_without = C.image_error(without, ref, C.GRADIENT_FLOOR)
+        metric = SHADOW_NEEDED[name]
+        assert (mean_without if metric == "error_mean" else max_without) > thresholds[metric]
