@@ -27,5 +27,5 @@ fi
 "$bin" "$@"
 # Memory of a large backward pass, in a process of its own (peak RSS is per process).
 "$bin" --backward-memory --size 1024 --spp 16
-# Secondary edges: the edge hierarchy against uniform sampling at equal time (about a minute).
-"$bin" --secondary-only --size 32 --spp 8 --seeds 16
+# Secondary edges: the edge hierarchy against uniform sampling at equal time (a minute or two).
+"$bin" --secondary-only --size 32 --spp 8 --seeds 48

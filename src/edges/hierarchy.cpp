@@ -307,7 +307,8 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
     // Towards the lights: apart when the angle between the axes exceeds beta + the cone's.
     // Otherwise the share of the node inside the cone: the overlap of the two angular
     // intervals along the line of their centres over the smaller one, times the ratio of their
-    // sizes when the node is the larger (silhouettes are curves: the ratio, not its square).
+    // sizes when the node is the larger (silhouettes are curves: the ratio, not its square); no
+    // less than a tenth (an estimate, not a bound).
     if (q.cone) {
         const BoundsCone& c = *q.cone;
         const float cos_g = dot(dir, c.axis);
@@ -319,6 +320,7 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
             const float small = std::min(beta, c.half);
             float share = small > 0.f ? std::clamp((beta + c.half - gamma) / (2.f * small), 0.f, 1.f) : 1.f;
             if (beta > c.half) share *= c.half / beta;
+            share = std::max(share, 0.1f);
             out[1] = out[0] * share;
         }
     }
