@@ -1,6 +1,7 @@
 #include "scene/scene.h"
 
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
@@ -236,8 +237,27 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     if (desc.has_envmap) {
         s->has_envmap = true;
         s->envmap.build(desc.envmap);
-        if (s->envmap.dist.valid() && s->envmap.scale > 0.f)
-            s->env_selection_probability = s->light_distribution.valid() ? 0.5f : 1.f;
+        if (s->envmap.dist.valid() && s->envmap.scale > 0.f) {
+            if (s->light_distribution.valid()) {
+                // The light weights are area x luminance (x 2 if two-sided): times pi, the power
+                // the area lights emit. The environment's share is the power it sends through
+                // the scene's bounding sphere, seen as a disc: mean radiance x pi x pi r^2.
+                Vec3d lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+                for (const Mesh& m : s->meshes)
+                    for (int64_t v = 0; v < m.num_vertices; ++v) {
+                        Vec3d p(m.vertex(v));
+                        lo = Vec3d(std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z));
+                        hi = Vec3d(std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z));
+                    }
+                double r = 0.5 * length(hi - lo);
+                s->env_power = s->envmap.mean_luminance * double(s->envmap.scale) * kPi * kPi * r * r;
+                s->area_light_power = s->light_distribution.total() * kPi;
+                s->env_selection_probability =
+                    env_selection_pmf(s->env_power, s->area_light_power);
+            } else {
+                s->env_selection_probability = 1.f;
+            }
+        }
     }
     return s;
 }

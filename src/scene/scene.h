@@ -98,6 +98,18 @@ struct LightSample {
     Hit hit;             // the point on an area light (mesh, triangle, barycentrics)
 };
 
+// Neither kind of light is picked with probability below this, however dim its estimate.
+constexpr float kMinLightSelection = 0.1f;
+
+// Probability of sampling the environment rather than the area lights, in proportion to the
+// estimates of the power each sends into the scene, kept in [kMinLightSelection,
+// 1 - kMinLightSelection] so that neither is starved when the estimate is poor.
+inline float env_selection_pmf(double env_power, double area_light_power) {
+    double total = env_power + area_light_power;
+    double p = total > 0.0 ? env_power / total : 0.5;
+    return float(std::clamp(p, double(kMinLightSelection), 1.0 - double(kMinLightSelection)));
+}
+
 class Scene {
 public:
     ~Scene();
@@ -123,7 +135,10 @@ public:
     };
     std::vector<EmissiveTriangle> lights;
     Distribution1D light_distribution;
-    float env_selection_probability = 0.f;  // probability that light sampling picks the envmap
+    // Probability that light sampling picks the environment rather than an area light: 1 with
+    // the environment alone, 0 without it; with both, env_selection_pmf of their powers.
+    float env_selection_probability = 0.f;
+    double env_power = 0.0, area_light_power = 0.0;  // the estimates it was chosen from (both lit)
 
     bool intersect(const Ray& ray, Hit& hit) const;
     bool occluded(const Ray& ray) const;
