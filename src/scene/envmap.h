@@ -14,7 +14,6 @@ struct Envmap {
     float scale = 1.f;
     int rows = 1, cols = 1;  // sampling cells
     Distribution2D dist;
-    double mean_luminance = 0.0;  // over the sphere (solid-angle weighted), before `scale`
 
     void build(const EnvmapDesc& d) {
         tex = Texture(d.values);
@@ -23,7 +22,6 @@ struct Envmap {
         rows = std::max(tex.height - 1, 1);
         cols = tex.width;
         std::vector<double> w(size_t(rows) * cols);
-        double sum_w = 0.0, sum_sin = 0.0;
         for (int r = 0; r < rows; ++r) {
             int r1 = std::min(r + 1, tex.height - 1);
             double sin_theta = std::sin((r + 0.5) / rows * 3.14159265358979);
@@ -32,11 +30,8 @@ struct Envmap {
                 double l = luminance(texel(r, c)) + luminance(texel(r, c1)) + luminance(texel(r1, c)) +
                            luminance(texel(r1, c1));
                 w[size_t(r) * cols + c] = std::max(0.0, l) * 0.25 * sin_theta;
-                sum_w += w[size_t(r) * cols + c];
-                sum_sin += sin_theta;
             }
         }
-        mean_luminance = sum_sin > 0.0 ? sum_w / sum_sin : 0.0;
         dist.build(w, rows, cols);
     }
 
