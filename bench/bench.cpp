@@ -7,7 +7,7 @@
 //
 // The Embree-only rays are generated before timing: camera rays exactly as the renderer makes
 // them (same film samples, same tile order); shadow rays from the camera rays' hit points to
-// emitter samples (Scene::sample_light: area light or sky) on the visible side of the surface;
+// emitter samples (Scene::sample_area_light or sample_env) on the visible side of the surface;
 // bounce rays from the same hit points in cosine-distributed directions. Their counts are the
 // renderer's RenderStats. Deeper path vertices are stood in for by first hits, so at several
 // bounces the Embree-only rays are somewhat more coherent than the renderer's.
