@@ -7,7 +7,7 @@
 //
 // The Embree-only rays are generated before timing: camera rays exactly as the renderer makes
 // them (same film samples, same tile order); shadow rays from the camera rays' hit points to
-// emitter samples (Scene::sample_light: area light or sky) on the visible side of the surface;
+// emitter samples (Scene::sample_area_light or sample_env) on the visible side of the surface;
 // bounce rays from the same hit points in cosine-distributed directions. Their counts are the
 // renderer's RenderStats. Deeper path vertices are stood in for by first hits, so at several
 // bounces the Embree-only rays are somewhat more coherent than the renderer's.
@@ -428,8 +428,9 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
     if (origins.empty()) return rs;
 
     // Shadow rays: towards points sampled on the emitters (area light or sky, as the renderer
-    // samples them), on the side of the surface the camera sees, as the renderer only traces
-    // shadow rays where the BSDF is non-zero.
+    // samples them: one of each per vertex when there are both, here alternately), on the side
+    // of the surface the camera sees, as the renderer only traces shadow rays where the BSDF is
+    // non-zero.
     Rng rng(opt.seed + 12345, 7);
     rs.shadow.reserve(stats.shadow_rays);
     for (uint64_t k = 0; k < stats.shadow_rays; ++k) {
@@ -437,7 +438,9 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
         LightSample ls, first;
         bool have = false;
         for (int attempt = 0; attempt < 16; ++attempt) {
-            if (!scene.sample_light(o.p, rng.next_float(), rng.next_float(), rng.next_float(), ls)) continue;
+            const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+            const bool env = scene.env_sampled && (!scene.light_distribution.valid() || k % 2 == 1);
+            if (!(env ? scene.sample_env(u1, u2, ls) : scene.sample_area_light(o.p, u0, u1, u2, ls))) continue;
             if (!have) first = ls, have = true;
             if (dot(ls.dir, o.front) > 0.f) {
                 first = ls;

@@ -208,30 +208,33 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         TBsdfParams<float> bp = bsdf_params_world(scene, sp);
         const Vec3f ns = bend_normal(sp.ns, sp.ng, wo);
         DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
-        // Next-event estimation: N = f(wo, w_l) Le_l scale
-        if (r.nee) {
-            Vec3f f = bsdf_eval_world(bp, ns, wo, r.nee_dir);
+        // Next-event estimation: N = f(wo, w_l) Le_l scale, for the area light and the
+        // environment samples.
+        for (const NeeRecord* nr : {&r.nee_area, &r.nee_env}) {
+            if (!nr->used) continue;
+            const bool env = nr == &r.nee_env;
+            Vec3f f = bsdf_eval_world(bp, ns, wo, nr->dir);
             Vec3f Le;
-            if (r.nee_env) {
-                Le = scene.envmap.eval(r.nee_dir);
-                if (env_wanted) d_envmap(scene.envmap, slots, r.nee_dir, ab * f * r.nee_scale, sink);
+            if (env) {
+                Le = scene.envmap.eval(nr->dir);
+                if (env_wanted) d_envmap(scene.envmap, slots, nr->dir, ab * f * nr->scale, sink);
             } else {
-                const Mesh& lm = scene.meshes[r.nee_hit.mesh];
-                const SceneGradients::MeshSlots* lms = mesh_slots(slots, r.nee_hit.mesh);
-                VertexGeometry lg(scene, r.nee_hit, sp.p, r.nee_dir);
-                Le = scene.emitted(lg.sp, -r.nee_dir);
-                Vec3f dLe = ab * f * r.nee_scale;
+                const Mesh& lm = scene.meshes[nr->hit.mesh];
+                const SceneGradients::MeshSlots* lms = mesh_slots(slots, nr->hit.mesh);
+                VertexGeometry lg(scene, nr->hit, sp.p, nr->dir);
+                Le = scene.emitted(lg.sp, -nr->dir);
+                Vec3f dLe = ab * f * nr->scale;
                 float d3[3] = {dLe.x, dLe.y, dLe.z};
                 HitAdjoint la;
                 d_texture(lm.emission, lms ? lms->emission : kNoSlot, lg.sp.uv, d3, sink,
                           lm.emission.is_constant() ? nullptr : &la.duv);
                 if (!lm.emission.is_constant()) {
                     Vec3f d_dir_unused(0.f);
-                    finish_hit(lg, la, lms, sink, sp.p, r.nee_dir, ha.dp, d_dir_unused);
+                    finish_hit(lg, la, lms, sink, sp.p, nr->dir, ha.dp, d_dir_unused);
                 }
             }
-            A_k += a * f * Le * r.nee_scale;
-            d_bsdf_eval_world(bp, ns, wo, r.nee_dir, ab * Le * r.nee_scale, db);
+            A_k += a * f * Le * nr->scale;
+            d_bsdf_eval_world(bp, ns, wo, nr->dir, ab * Le * nr->scale, db);
         }
         // Continuation: beta_next = beta T, T = f(wo, w_next) / pdf
         if (r.next && (k + 1 < K || rec.escaped)) {

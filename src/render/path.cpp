@@ -9,6 +9,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
     const bool use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
     const bool use_hits = opt.sampling != LightSampling::LightOnly;
     const bool mis = opt.sampling == LightSampling::MIS;
+    const bool both_lights = scene.light_distribution.valid() && scene.env_sampled;
 
     Vec3f L(0.f), beta(1.f);
     ++counters.camera;
@@ -45,28 +46,33 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         Frame frame(sp.ns);
         Vec3f wo = frame.to_local(-ray.dir);
 
-        // Next-event estimation.
+        // Next-event estimation: one sample on the area lights and one on the environment
+        // (the latter's two random numbers are drawn only when the scene has both).
         float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
-        LightSample ls;
-        if (use_nee && scene.sample_light(sp.p, ul0, ul1, ul2, ls)) {
+        float ue1 = ul1, ue2 = ul2;
+        if (both_lights) {
+            ue1 = rng.next_float();
+            ue2 = rng.next_float();
+        }
+        auto next_event = [&](const LightSample& ls, NeeRecord* nr) {
             Vec3f wi = frame.to_local(ls.dir);
             Vec3f f = bsdf_eval(bp, wo, wi);
-            if (!is_black(f)) {
-                Ray shadow = shadow_ray(sp.p, sp.ng, ls.dir, ls.dist);
-                ++counters.shadow;
-                if (!scene.occluded(shadow)) {
-                    float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
-                    L += beta * f * ls.radiance * (w / ls.pdf);
-                    if (rv) {
-                        rv->nee = true;
-                        rv->nee_env = !std::isfinite(ls.dist);
-                        rv->nee_dir = ls.dir;
-                        rv->nee_scale = w / ls.pdf;
-                        rv->nee_hit = ls.hit;
-                    }
-                }
+            if (is_black(f)) return;
+            Ray shadow = shadow_ray(sp.p, sp.ng, ls.dir, ls.dist);
+            ++counters.shadow;
+            if (scene.occluded(shadow)) return;
+            float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
+            L += beta * f * ls.radiance * (w / ls.pdf);
+            if (nr) {
+                nr->used = true;
+                nr->dir = ls.dir;
+                nr->scale = w / ls.pdf;
+                nr->hit = ls.hit;
             }
-        }
+        };
+        LightSample ls;
+        if (use_nee && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls, rv ? &rv->nee_area : nullptr);
+        if (use_nee && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
 
         // BSDF sampling.
         float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();

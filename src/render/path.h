@@ -11,6 +11,14 @@ struct RayCounters {
     uint64_t camera = 0, shadow = 0, bounce = 0;
 };
 
+// One next-event estimate at a path vertex (recorded only when it contributed).
+struct NeeRecord {
+    bool used = false;
+    Vec3f dir;          // towards the light
+    float scale = 0.f;  // MIS weight / pdf
+    Hit hit;            // the point on the light (area lights)
+};
+
 // What the gradient pass needs to replay one path: its vertices with the fixed directions and
 // the constant factors (1 / pdf, MIS weights) chosen when it was traced.
 struct PathVertexRecord {
@@ -18,11 +26,9 @@ struct PathVertexRecord {
     Vec3f origin, dir;            // the ray that found this vertex
     Vec3f beta;                   // throughput of the path up to this vertex
     float emission_weight = 0.f;  // MIS weight of the emission seen here (0: not counted)
-    // Next-event estimation at this vertex (only when it contributed).
-    bool nee = false, nee_env = false;
-    Vec3f nee_dir;
-    float nee_scale = 0.f;        // MIS weight / pdf
-    Hit nee_hit;                  // the point on the light (area lights)
+    // Next-event estimation at this vertex: one sample on the area lights, one on the
+    // environment.
+    NeeRecord nee_area, nee_env;
     // Continuation by BSDF sampling.
     bool next = false;
     Vec3f next_dir;

@@ -1,6 +1,7 @@
 #include "scene/scene.h"
 
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <sstream>
 #include <stdexcept>
@@ -236,8 +237,7 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     if (desc.has_envmap) {
         s->has_envmap = true;
         s->envmap.build(desc.envmap);
-        if (s->envmap.dist.valid() && s->envmap.scale > 0.f)
-            s->env_selection_probability = s->light_distribution.valid() ? 0.5f : 1.f;
+        s->env_sampled = s->envmap.dist.valid() && s->envmap.scale > 0.f;
     }
     return s;
 }
@@ -315,20 +315,22 @@ Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
     return eval_texture3(m.emission, sp.uv);
 }
 
-bool Scene::sample_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const {
-    if (u0 < env_selection_probability) {
-        Vec3f dir;
-        float pdf;
-        if (!envmap.sample(u1, u2, dir, pdf)) return false;
-        ls.dir = dir;
-        ls.dist = std::numeric_limits<float>::infinity();
-        ls.radiance = envmap.eval(dir);
-        ls.pdf = pdf * env_selection_probability;
-        return ls.pdf > 0.f;
-    }
+bool Scene::sample_env(float u1, float u2, LightSample& ls) const {
+    if (!env_sampled) return false;
+    Vec3f dir;
+    float pdf;
+    if (!envmap.sample(u1, u2, dir, pdf)) return false;
+    ls.dir = dir;
+    ls.dist = std::numeric_limits<float>::infinity();
+    ls.radiance = envmap.eval(dir);
+    ls.pdf = pdf;
+    ls.hit = Hit();
+    return ls.pdf > 0.f;
+}
+
+bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const {
     if (!light_distribution.valid()) return false;
-    float u = env_selection_probability < 1.f ? (u0 - env_selection_probability) / (1.f - env_selection_probability) : 0.f;
-    u = std::min(u, 0.99999994f);
+    float u = std::min(u0, 0.99999994f);
     int li = light_distribution.sample(u);
     const EmissiveTriangle& lt = lights[li];
     Vec2f b = square_to_triangle(u1, u2);
@@ -349,7 +351,7 @@ bool Scene::sample_light(const Vec3f& p, float u0, float u1, float u2, LightSamp
     ls.hit.b1 = b.x;
     ls.hit.b2 = b.y;
     ls.hit.t = dist;
-    ls.pdf = (1.f - env_selection_probability) * light_distribution.pmf(li) / lt.area * dist2 / cos_l;
+    ls.pdf = light_distribution.pmf(li) / lt.area * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }
 
@@ -361,7 +363,7 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);
     if (!(cos_l > 0.f)) return 0.f;
-    return (1.f - env_selection_probability) * light_distribution.pmf(int(li)) / lights[li].area * dist2 / cos_l;
+    return light_distribution.pmf(int(li)) / lights[li].area * dist2 / cos_l;
 }
 
 std::shared_ptr<const Scene> build_scene(const SceneDesc& desc) { return Scene::build(desc); }

@@ -94,7 +94,7 @@ struct LightSample {
     Vec3f dir;           // from the shading point towards the light, normalised
     float dist = 0.f;    // infinity for the environment
     Vec3f radiance;      // emitted radiance towards the shading point
-    float pdf = 0.f;     // solid angle, including the choice of light
+    float pdf = 0.f;     // solid angle, including the choice of the triangle
     Hit hit;             // the point on an area light (mesh, triangle, barycentrics)
 };
 
@@ -123,7 +123,7 @@ public:
     };
     std::vector<EmissiveTriangle> lights;
     Distribution1D light_distribution;
-    float env_selection_probability = 0.f;  // probability that light sampling picks the envmap
+    bool env_sampled = false;  // the environment has light to sample (not black)
 
     bool intersect(const Ray& ray, Hit& hit) const;
     bool occluded(const Ray& ray) const;
@@ -134,13 +134,19 @@ public:
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
 
-    bool has_lights() const { return light_distribution.valid() || env_selection_probability > 0.f; }
-    // Samples an emitter (area light or environment) as seen from p; u0 picks the emitter.
-    bool sample_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const;
-    // Solid-angle density with which sample_light would produce the direction from p to the
-    // emitting surface point `on_light`.
+    bool has_lights() const { return light_distribution.valid() || env_sampled; }
+    // Next-event estimation samples both kinds of emitters separately, each with its own
+    // sample: picking one of them at random would multiply a small lamp's nearly noiseless
+    // estimate by a random 0 or 1/p.
+    // Samples an area light as seen from p (u0 picks the triangle, by power).
+    bool sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const;
+    // Samples a direction towards the environment (by its radiance).
+    bool sample_env(float u1, float u2, LightSample& ls) const;
+    // Solid-angle density with which sample_area_light would produce the direction from p to
+    // the emitting surface point `on_light`.
     float light_pdf(const Vec3f& p, const SurfacePoint& on_light) const;
-    float env_pdf(const Vec3f& dir) const { return env_selection_probability * envmap.pdf(dir); }
+    // Solid-angle density with which sample_env would produce `dir`.
+    float env_pdf(const Vec3f& dir) const { return env_sampled ? envmap.pdf(dir) : 0.f; }
 
     RTCScene rtc_scene() const { return rtc_; }
 
