@@ -18,6 +18,10 @@ float cos_minus(float cos_a, float cos_b, float sin_b) {
 }
 // Ranges larger than this are split in parallel.
 constexpr int kParallelRange = 8192;
+// When a descent splits (EdgeHierarchy::splits): the light cone's cos(half angle) above which it
+// is narrow; children comparable when the smaller importance is at least this share of the
+// larger, large when together at least this share of the root's.
+constexpr float kNarrowCone = 0.95f, kComparable = 0.25f, kLarge = 0.25f;
 
 }  // namespace
 
@@ -236,7 +240,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
 
 // ---- importance -------------------------------------------------------------------------------
 
-void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int refine) const {
+void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int refine, int light_refine) const {
     out[0] = out[1] = 0.f;
     const bool leaf = n.left < 0;
     // A smooth edge is a silhouette only where p is in front of exactly one of its faces.
@@ -264,8 +268,8 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
         // few levels down); at the end, the lobe's peak.
         if (!leaf && refine > 0) {
             float a[2], b[2];
-            importance(q, nodes_[size_t(n.left)], a, refine - 1);
-            importance(q, nodes_[size_t(n.right)], b, refine - 1);
+            importance(q, nodes_[size_t(n.left)], a, refine - 1, light_refine);
+            importance(q, nodes_[size_t(n.right)], b, refine - 1, light_refine);
             out[0] = a[0] + b[0];
             out[1] = a[1] + b[1];
             return;
@@ -322,40 +326,105 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
             if (beta > c.half) share *= c.half / beta;
             share = std::max(share, 0.1f);
             out[1] = out[0] * share;
+            // A narrow cone meets few of a large node's edges, and which of them are
+            // silhouettes inside it the node's own bounds cannot tell: its children's (summed,
+            // a few levels down) can, and descents then rarely end where nothing contributes.
+            if (!leaf && light_refine > 0 && c.cos_half > kNarrowCone && beta > c.half) {
+                float a[2], b[2];
+                importance(q, nodes_[size_t(n.left)], a, 0, light_refine - 1);
+                importance(q, nodes_[size_t(n.right)], b, 0, light_refine - 1);
+                out[1] = a[1] + b[1];
+            }
         }
     }
 }
 
 // ---- sampling ---------------------------------------------------------------------------------
 
-bool EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice& out) const {
-    out = Choice();
-    if (nodes_.empty() || (s == Lights && !q.cone)) return false;
+bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2],
+                           int k, int used) const {
+    if (used >= kMaxSplits || !(il[k] > 0.f) || !(ir[k] > 0.f)) return false;
+    // p inside both boxes: the bounds (no better than the lobe's peak) cannot tell them apart.
+    const Node &l = nodes_[size_t(n.left)], &r = nodes_[size_t(n.right)];
+    auto inside = [&](const Node& c) {
+        return q.p.x >= c.lo.x && q.p.x <= c.hi.x && q.p.y >= c.lo.y && q.p.y <= c.hi.y && q.p.z >= c.lo.z &&
+               q.p.z <= c.hi.z;
+    };
+    if (inside(l) && inside(r)) return true;
+    // A narrow light cone: the few edges that cast the shadow are worth more than one look.
+    if (k == Lights && q.cone && q.cone->cos_half > kNarrowCone) return true;
+    // Both children comparable and large: choosing one throws away half of what matters.
+    const float lo = std::min(il[k], ir[k]), hi = std::max(il[k], ir[k]);
+    return lo >= kComparable * hi && il[k] + ir[k] >= kLarge * whole[k];
+}
+
+int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices]) const {
+    if (nodes_.empty() || (s == Lights && !q.cone)) return 0;
     float root[2];
     importance(q, nodes_[0], root);
-    if (!(root[s] > 0.f)) return false;
-    out.prob[0] = root[0] > 0.f ? 1.f : 0.f;
-    out.prob[1] = root[1] > 0.f ? 1.f : 0.f;
-    int32_t at = 0;
-    while (nodes_[size_t(at)].left >= 0) {
-        const Node& n = nodes_[size_t(at)];
-        float il[2], ir[2];
-        importance(q, nodes_[size_t(n.left)], il);
-        importance(q, nodes_[size_t(n.right)], ir);
-        const float sum = il[s] + ir[s];
-        if (!(sum > 0.f)) return false;
-        const float pl = il[s] / sum;
-        const bool left = u < pl;
-        u = left ? u / pl : (u - pl) / (1.f - pl);
-        u = std::min(std::max(u, 0.f), 0.99999994f);
-        for (int k = 0; k < 2; ++k) {
-            const float tot = il[k] + ir[k];
-            out.prob[k] *= tot > 0.f ? (left ? il[k] : ir[k]) / tot : 0.f;
+    if (!(root[s] > 0.f)) return 0;
+    // Pending descents: the node, its u, the expected counts so far and the splits made so far
+    // (under both strategies: the other strategy's count follows its own splitting rule).
+    struct Item {
+        int32_t at;
+        float u;
+        float prob[2];
+        int used[2];
+    };
+    Item stack[kMaxChoices + 1];
+    int top = 0, count = 0;
+    stack[top++] = Item{0, u, {root[0] > 0.f ? 1.f : 0.f, root[1] > 0.f ? 1.f : 0.f}, {0, 0}};
+    while (top > 0) {
+        Item it = stack[--top];
+        bool alive = true;
+        while (nodes_[size_t(it.at)].left >= 0) {
+            const Node& n = nodes_[size_t(it.at)];
+            float il[2], ir[2];
+            importance(q, nodes_[size_t(n.left)], il);
+            importance(q, nodes_[size_t(n.right)], ir);
+            const float sum = il[s] + ir[s];
+            if (!(sum > 0.f)) {
+                alive = false;
+                break;
+            }
+            bool split[2];
+            for (int k = 0; k < 2; ++k) split[k] = splits(q, n, il, ir, root, k, it.used[k]);
+            if (split[s]) {
+                // Both children, the same u in each (each descent is right on its own).
+                Item other = it;
+                other.at = n.right;
+                for (int k = 0; k < 2; ++k) {
+                    if (split[k]) continue;
+                    const float tot = il[k] + ir[k];
+                    it.prob[k] *= tot > 0.f ? il[k] / tot : 0.f;
+                    other.prob[k] *= tot > 0.f ? ir[k] / tot : 0.f;
+                }
+                for (int k = 0; k < 2; ++k) it.used[k] += split[k], other.used[k] += split[k];
+                it.at = n.left;
+                stack[top++] = other;
+                continue;
+            }
+            const float pl = il[s] / sum;
+            const bool left = it.u < pl;
+            it.u = left ? it.u / pl : (it.u - pl) / (1.f - pl);
+            it.u = std::min(std::max(it.u, 0.f), 0.99999994f);
+            for (int k = 0; k < 2; ++k) {
+                if (split[k]) {
+                    ++it.used[k];
+                    continue;
+                }
+                const float tot = il[k] + ir[k];
+                it.prob[k] *= tot > 0.f ? (left ? il[k] : ir[k]) / tot : 0.f;
+            }
+            it.at = left ? n.left : n.right;
         }
-        at = left ? n.left : n.right;
+        if (!alive || !(it.prob[s] > 0.f)) continue;
+        Choice& c = out[count++];
+        c.edge = nodes_[size_t(it.at)].edge;
+        c.prob[0] = it.prob[0];
+        c.prob[1] = it.prob[1];
     }
-    out.edge = nodes_[size_t(at)].edge;
-    return out.prob[s] > 0.f;
+    return count;
 }
 
 EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
@@ -366,17 +435,27 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
     importance(q, nodes_[0], root);
     c.prob[0] = root[0] > 0.f ? 1.f : 0.f;
     c.prob[1] = root[1] > 0.f ? 1.f : 0.f;
-    for (int32_t at = leaf_of_[size_t(edge)]; nodes_[size_t(at)].parent >= 0;) {
-        const int32_t up = nodes_[size_t(at)].parent;
-        const Node& n = nodes_[size_t(up)];
+    // The path from the root down (the splits depend on those made above).
+    int32_t path[128];
+    int depth = 0;
+    for (int32_t at = leaf_of_[size_t(edge)]; at >= 0 && depth < 128; at = nodes_[size_t(at)].parent) path[depth++] = at;
+    int used[2] = {0, 0};
+    for (int i = depth - 1; i > 0; --i) {
+        const Node& n = nodes_[size_t(path[i])];
+        const int32_t next = path[i - 1];
         float il[2], ir[2];
         importance(q, nodes_[size_t(n.left)], il);
         importance(q, nodes_[size_t(n.right)], ir);
         for (int k = 0; k < 2; ++k) {
+            const float mine = next == n.left ? il[k] : ir[k];
+            if (splits(q, n, il, ir, root, k, used[k])) {
+                ++used[k];
+                if (!(mine > 0.f)) c.prob[k] = 0.f;
+                continue;
+            }
             const float tot = il[k] + ir[k];
-            c.prob[k] *= tot > 0.f ? (at == n.left ? il[k] : ir[k]) / tot : 0.f;
+            c.prob[k] *= tot > 0.f ? mine / tot : 0.f;
         }
-        at = up;
     }
     return c;
 }

@@ -8,7 +8,7 @@
 // leaf tests its edge exactly (the point in front of exactly one of the two faces).
 //
 // Sampling descends from the root, picking a child with probability proportional to an upper
-// bound of its contribution at the point:
+// bound of its contribution at the point (or, at most twice, taking both: see sample()):
 //   length x (BSDF lobe bound over the node's directions) / distance^2,
 // zero without possible silhouettes. The lobe bound (LobeBound) is a cosine bound for the
 // diffuse part plus a spherical-Gaussian approximation of a GGX lobe around the mirror
@@ -71,12 +71,19 @@ public:
     enum Strategy { All = 0, Lights = 1 };
     struct Choice {
         int32_t edge = -1;        // index into scene.edges()
-        float prob[2] = {0, 0};   // its probability under each strategy
+        float prob[2] = {0, 0};   // the expected number of times each strategy picks it
     };
-    // Picks an edge with strategy `s` (Lights needs q.cone); also gives its probability under
-    // the other strategy. False if no edge can contribute.
-    bool sample(const Query& q, Strategy s, float u, Choice& out) const;
-    // The probabilities that sample() picks `edge` (an index into scene.edges()).
+    // A descent splits (goes down both children, one edge from each) at most kMaxSplits times:
+    // where p lies in both children's boxes, where both children's importances are comparable and
+    // a large part of the whole, and (strategy Lights) where the light cone is narrow. So a query
+    // gives up to kMaxChoices edges, each at most once.
+    static constexpr int kMaxSplits = 2, kMaxChoices = 1 << kMaxSplits;
+    // Picks edges with strategy `s` (Lights needs q.cone), writing up to kMaxChoices of them to
+    // `out`, each with its expected count under both strategies. Returns how many (0: no edge can
+    // contribute).
+    int sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices]) const;
+    // The expected numbers of times sample() picks `edge` (an index into scene.edges()), under
+    // each strategy.
     Choice pdf(const Query& q, int32_t edge) const;
 
 private:
@@ -98,12 +105,17 @@ private:
         bool always = false;        // holds a boundary edge or a crease
     };
     // The node's importance under both strategies.
-    void importance(const Query& q, const Node& n, float out[2], int refine = 3) const;
+    // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
+    // children scoring its share of a narrow light cone.
+    void importance(const Query& q, const Node& n, float out[2], int refine = 3, int light_refine = 4) const;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);
     void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
-    bool descend(const Query& q, int32_t root, Strategy s, float u, Choice& out) const;
+    // Whether a descent with strategy k that has split `used` times splits at n, whose children
+    // have importances il, ir; `whole`: the root's importances.
+    bool splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2], int k,
+                int used) const;
     std::vector<Node> nodes_;
     std::vector<int32_t> leaf_of_;  // scene edge index -> leaf node (-1: not in the hierarchy)
     double build_ms_ = 0.0;

@@ -6,6 +6,11 @@
 
 namespace edgepath {
 
+namespace {
+// The side rays of an edge sample pass this fraction of the distance either side of the edge.
+constexpr float kSideStep = 1e-4f;
+}  // namespace
+
 void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&)) {
     const std::vector<Edge>& all = scene_.edges();
     set.cumulative.assign(1, 0.0);
@@ -91,26 +96,38 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     // cone towards the lights. Balance heuristic on the joint density of (edge, t).
     BoundsCone cone;
     // Inside the lights' bounding sphere the cone is everything: one strategy.
-    if (has_lights_ && cone.towards(sp.p, lights_center_, lights_radius_)) q.cone = &cone;
-    const float u[2] = {rng.next_float(), rng.next_float()}, ut[2] = {rng.next_float(), rng.next_float()};
+    if (has_lights_ && cone.towards(sp.p, lights_center_, lights_radius_)) {
+        // Widened by a few times the side rays' offset (evaluate: kSideStep of the distance):
+        // an edge just outside the cone still sends one of them onto a light.
+        cone.half = std::min(cone.half + 4.f * kSideStep, kPi);
+        cone.cos_half = std::cos(cone.half);
+        q.cone = &cone;
+    }
+    // Each descent may split (up to EdgeHierarchy::kMaxChoices edges); the balance heuristic
+    // then weighs by the expected numbers of times each strategy picks the edge.
+    const float u[2] = {rng.next_float(), rng.next_float()};
     const Edge* edges = scene_.edges().data();
+    EdgeHierarchy::Choice choices[EdgeHierarchy::kMaxChoices];
     for (int k = 0; k < (q.cone ? 2 : 1); ++k) {
         const EdgeHierarchy::Strategy s = k == 0 ? EdgeHierarchy::All : EdgeHierarchy::Lights;
-        EdgeHierarchy::Choice choice;
-        if (!set.hierarchy.sample(q, s, u[k], choice)) continue;
-        const Edge& e = edges[choice.edge];
-        const Mesh& m = scene_.meshes[size_t(e.mesh)];
-        const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
-        EdgePointSampler points;
-        float t;
-        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone) || !points.sample(s, ut[k], t)) continue;
-        const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
-                    joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
-        const float mine = k == 0 ? joint_all : joint_lights;
-        if (!(mine > 0.f) || !std::isfinite(joint_all + joint_lights)) continue;
-        // scale: the MIS weight over the density per unit length, mine / length(v1 - v0).
-        const float scale = length(v1 - v0) / (joint_all + joint_lights);
-        d_p += evaluate(choice.edge, t, scale, sp, wo, bsdf, bounces_left, weight, rng, sink);
+        const int count = set.hierarchy.sample(q, s, u[k], choices);
+        for (int c = 0; c < count; ++c) {
+            const EdgeHierarchy::Choice& choice = choices[c];
+            const float ut = rng.next_float();
+            const Edge& e = edges[choice.edge];
+            const Mesh& m = scene_.meshes[size_t(e.mesh)];
+            const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
+            EdgePointSampler points;
+            float t;
+            if (!points.setup(sp.p, v0, v1, q.lobe, q.cone) || !points.sample(s, ut, t)) continue;
+            const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
+                        joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
+            const float mine = k == 0 ? joint_all : joint_lights;
+            if (!(mine > 0.f) || !std::isfinite(joint_all + joint_lights)) continue;
+            // scale: the MIS weight over the density per unit length, mine / length(v1 - v0).
+            const float scale = length(v1 - v0) / (joint_all + joint_lights);
+            d_p += evaluate(choice.edge, t, scale, sp, wo, bsdf, bounces_left, weight, rng, sink);
+        }
     }
     return d_p;
 }
@@ -148,8 +165,7 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     // Rays from p to points a small distance either side of x, off the plane: w_u with w_u . N > 0.
     // (At 3e-5 of the distance and below, rays passing that close outside a triangle's edge were
     // still reported as hitting it.)
-    constexpr float kStep = 1e-4f;
-    const Vec3f w_u = normalize(x + side * (kStep * dist) - p), w_l = normalize(x - side * (kStep * dist) - p);
+    const Vec3f w_u = normalize(x + side * (kSideStep * dist) - p), w_l = normalize(x - side * (kSideStep * dist) - p);
     const Vec3f f_u = bsdf_eval_world(bsdf, sp.ns, wo, w_u), f_l = bsdf_eval_world(bsdf, sp.ns, wo, w_l);
     if (is_black(f_u) && is_black(f_l)) return d_p;
     Ray ray_u, ray_l;

@@ -40,9 +40,9 @@ BoundsCone cone_towards(const Vec3f& p, const Vec3f& c, float r) {
     return cone;
 }
 
-// Both strategies, diffuse and glossy lobes: every probability sample() reports is pdf()'s, the
-// probabilities sum to at most one (the rest: descents that end where nothing can contribute),
-// and the empirical frequencies match them.
+// Both strategies, diffuse and glossy lobes: every expected count sample() reports is pdf()'s,
+// a descent gives each edge at most once and at most kMaxChoices edges, the expected counts sum
+// to the mean number of edges per descent, and the empirical frequencies match them.
 TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
@@ -51,38 +51,49 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     EdgeHierarchy h;
     h.build(scene, ids);
     const Vec3f p(0.3f, 0.01f, 0.4f);
-    const BoundsCone cone = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.3f);
-    for (int glossy = 0; glossy < 2; ++glossy) {
+    // A wide cone and a narrow one (cos half angle above 0.95: the light strategy splits).
+    const BoundsCone wide = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.3f),
+                     narrow = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.05f);
+    ASSERT_GT(narrow.cos_half, 0.95f);
+    int split_seen = 0;
+    for (int variant = 0; variant < 4; ++variant) {
+        const bool glossy = variant & 1;
         EdgeHierarchy::Query q;
         q.p = p;
         q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(-1, 1, 0)), glossy ? 0.1f : 0.5f, glossy ? 0.5f : 0.f,
                                  0.1f);
-        q.cone = &cone;
+        q.cone = variant & 2 ? &narrow : &wide;
         for (int s = 0; s < 2; ++s) {
             const auto strategy = EdgeHierarchy::Strategy(s);
             double sum = 0;
             for (size_t e = 0; e < ids.size(); ++e) sum += h.pdf(q, int32_t(e)).prob[s];
             EXPECT_GT(sum, 0.1) << "strategy " << s;
-            EXPECT_LE(sum, 1.0 + 1e-5) << "strategy " << s;
-            const int n = 200000;
+            EXPECT_LE(sum, EdgeHierarchy::kMaxChoices + 1e-4) << "strategy " << s;
+            const int n = 50000;
             std::map<int32_t, int> counts;
-            int failed = 0;
+            long picked = 0;
             Rng rng(7, 1);
             for (int i = 0; i < n; ++i) {
-                EdgeHierarchy::Choice c;
-                if (!h.sample(q, strategy, rng.next_float(), c)) {
-                    ++failed;
-                    continue;
+                EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+                const int m = h.sample(q, strategy, rng.next_float(), c);
+                ASSERT_GE(m, 0);
+                ASSERT_LE(m, EdgeHierarchy::kMaxChoices);
+                if (m > 1) ++split_seen;
+                for (int j = 0; j < m; ++j) {
+                    for (int k = 0; k < j; ++k) ASSERT_NE(c[j].edge, c[k].edge);
+                    const EdgeHierarchy::Choice ref = h.pdf(q, c[j].edge);
+                    EXPECT_NEAR(c[j].prob[0], ref.prob[0], 1e-5f * ref.prob[0] + 1e-12f);
+                    EXPECT_NEAR(c[j].prob[1], ref.prob[1], 1e-5f * ref.prob[1] + 1e-12f);
+                    EXPECT_LE(ref.prob[s], 1.f + 1e-5f);
+                    counts[c[j].edge]++;
                 }
-                const EdgeHierarchy::Choice ref = h.pdf(q, c.edge);
-                EXPECT_NEAR(c.prob[0], ref.prob[0], 1e-5f * ref.prob[0] + 1e-12f);
-                EXPECT_NEAR(c.prob[1], ref.prob[1], 1e-5f * ref.prob[1] + 1e-12f);
-                counts[c.edge]++;
+                picked += m;
             }
-            EXPECT_NEAR(failed, n * (1 - sum), 5 * std::sqrt(n * sum * (1 - sum)) + 1);
+            // At most kMaxChoices a descent: the variance of the total is at most n kMaxChoices^2 / 4.
+            EXPECT_NEAR(double(picked), n * sum, 5 * std::sqrt(double(n)) * EdgeHierarchy::kMaxChoices / 2 + 1);
             for (const auto& [e, c] : counts) {
                 const double pe = h.pdf(q, e).prob[s], sigma = std::sqrt(n * pe * (1 - pe)) + 1;
-                EXPECT_NEAR(c, n * pe, 5 * sigma) << "edge " << e << " strategy " << s << " glossy " << glossy;
+                EXPECT_NEAR(c, n * pe, 5 * sigma) << "edge " << e << " strategy " << s << " variant " << variant;
             }
             // Whatever the light strategy picks, the strategy over all edges can pick too (it is
             // the one that covers every edge in the multiple importance sampling).
@@ -91,6 +102,7 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
             }
         }
     }
+    EXPECT_GT(split_seen, 0);  // the splitting descents were exercised
 }
 
 // A glossy lobe concentrates the probability on the edges near the mirror direction: from a
@@ -242,8 +254,9 @@ TEST(EdgeHierarchy, AwkwardGeometryIsFinite) {
         Rng rng(11, 2);
         for (int i = 0; i < 2000; ++i)
             for (int s = 0; s < 2; ++s) {
-                EdgeHierarchy::Choice c;
-                if (!h.sample(q, EdgeHierarchy::Strategy(s), rng.next_float(), c)) continue;
+                EdgeHierarchy::Choice cs[EdgeHierarchy::kMaxChoices];
+                if (h.sample(q, EdgeHierarchy::Strategy(s), rng.next_float(), cs) == 0) continue;
+                const EdgeHierarchy::Choice& c = cs[0];
                 ASSERT_TRUE(std::isfinite(c.prob[0]) && std::isfinite(c.prob[1]));
                 const Edge& e = scene->edges()[size_t(c.edge)];
                 const Mesh& mesh = scene->meshes[size_t(e.mesh)];

@@ -170,15 +170,16 @@ def test_geometry_derivative_image_matches_mitsuba(name):
 
 # Passing today, at these sample counts. translate_self_shadowing_right_angle (a wall's shadow
 # on a floor at a right angle, light grazing: max err 0.10 of 0.05 with uniform edge sampling at
-# 256 spp) passes with the hierarchy. Not yet: translate_occluder_area_light (a 32k-triangle
-# sphere occluding a 32k-triangle light of radius 0.05: at 512 spp, 23 s, mean err 0.029 of 0.03
-# but max err 4.2 of 1.75 and the image sum 5% off; at 128 spp mean err 0.049, max err 10.3,
-# with uniform sampling 0.145 and 132).
+# 256 spp) passes with the hierarchy. translate_occluder_area_light: a 32k-triangle sphere
+# occluding a 32k-triangle light of radius 0.05 (a light cone of half angle 0.009 rad): rare
+# large samples dominate its error (with uniform sampling at 128 spp mean err 0.145, max err 132).
 SHADOWS = {"translate_plane_and_area_emitter": 256,
            "translate_textured_area_emitter_illuminating_plane": 256,
            "translate_shadow_receiver_area_light": 256,
-           "translate_self_shadowing_right_angle": 256}
-SHADOWS_SLOW = {"translate_shadow_receiver_area_light", "translate_self_shadowing_right_angle"}
+           "translate_self_shadowing_right_angle": 256,
+           "translate_occluder_area_light": 256}
+SHADOWS_SLOW = {"translate_shadow_receiver_area_light", "translate_self_shadowing_right_angle",
+                "translate_occluder_area_light"}
 # Configs where the interior and primary terms alone fail (by the metric named): the check sees
 # the shadow's edge. (Without secondary edges the self-shadowing config's mean err is 0.002, its
 # max err 0.10.)
