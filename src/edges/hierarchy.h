@@ -16,7 +16,8 @@
 // angular radius. Two strategies share one descent's arithmetic: over all edges, and restricted
 // to the cone of directions towards the lights (the edges that cast shadows; box-cone test), so
 // the probability of the chosen edge under both comes out of one traversal, for multiple
-// importance sampling.
+// importance sampling. A node's share of a narrow light cone (smaller than the node) is scored
+// by its children a few levels down.
 //
 // EdgePointSampler: the point on a chosen edge. Strategy All: a mixture of uniform by length
 // and a density in the angle phi the edge subtends at the point (directions w(phi) in the plane
