@@ -15,7 +15,7 @@ import torch
 
 from .io import imwrite, load_obj
 from .mitsuba import UNBOUNDED_MAX_BOUNCES, MitsubaScene, load_mitsuba
-from .render import SAMPLING, derivative_image, render
+from .render import CHANNELS, ID_CHANNELS, SAMPLING, derivative_image, render, render_channels
 from .scene import Camera, EnvironmentMap, Material, Scene
 
 
@@ -122,15 +122,45 @@ def render_in_chunks(loaded: MitsubaScene, chunk_spp: int, num_threads=None, sam
     return image / total
 
 
+def _parse_channels(text: Optional[str]) -> List[str]:
+    if not text:
+        return []
+    names = [n.strip() for n in text.split(",") if n.strip()]
+    unknown = [n for n in names if n not in CHANNELS or n == "radiance"]
+    if unknown or not names:
+        raise ValueError(f"--channels: unknown channel(s) {unknown or [text]}; choose from "
+                         f"{', '.join(n for n in CHANNELS if n != 'radiance')}")
+    return names
+
+
+def channel_path(output: str, name: str) -> str:
+    """Where ``edgepath render --channels`` writes channel ``name`` for the image ``output``:
+    beside it, ``<stem>.<name>.exr`` (EXR keeps depth, positions and ids exact)."""
+    return f"{os.path.splitext(output)[0]}.{name}.exr"
+
+
 def _cmd_render(args) -> None:
+    channels = _parse_channels(args.channels)
     loaded = _load_scene(args)
     start = time.perf_counter()
     image = render_in_chunks(loaded, args.chunk_spp, args.threads, args.sampling)
+    extra = {}
+    if channels:
+        # One pass at the file's spp: ids come from the pixel centres, so chunks would not help.
+        extra = render_channels(loaded.scene, channels, spp=loaded.spp, max_bounces=loaded.max_bounces,
+                                seed=loaded.seed, num_threads=args.threads, sampling=args.sampling)
     seconds = time.perf_counter() - start
     outputs = args.output or ["out.png"]
+    written = []
     for path in outputs:
         _make_parent(path)
         imwrite(image, path)
+        written.append(path)
+        for name, values in extra.items():
+            values = values.to(torch.float32) if name in ID_CHANNELS else values
+            imwrite(values, channel_path(path, name))
+            written.append(channel_path(path, name))
+    outputs = written
     height, width = image.shape[:2]
     print(f"rendered {width}x{height} at {loaded.spp} spp, max_bounces {loaded.max_bounces}, "
           f"in {seconds:.2f} s: {', '.join(outputs)}")
@@ -285,6 +315,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="output image, .png or .exr; repeat for several (default out.png)")
     r.add_argument("--chunk-spp", type=int, default=16,
                    help="samples per pixel per chunk (default 16; chunk k uses seed + k)")
+    r.add_argument("--channels", metavar="NAMES", default=None,
+                   help="also write these output channels, comma-separated (alpha, depth, "
+                        "position, geometry_normal, shading_normal, uv, albedo, mesh_id, "
+                        "triangle_id), each as OUTPUT_STEM.NAME.exr; ids as floats, -1 = no hit")
     r.set_defaults(run=_cmd_render)
 
     g = commands.add_parser(

@@ -194,3 +194,20 @@ def test_derivative_matches_finite_differences_of_a_linear_parameter(scene_file,
     assert float(d[..., 0].abs().max()) > 0.01
     assert torch.allclose(d, fd, atol=1e-4, rtol=1e-3)
     assert float(d[..., 1:].abs().max()) == 0.0
+
+
+def test_render_writes_output_channels(scene_file, tmp_path, capsys):
+    out = tmp_path / "image.png"
+    code, text, err = _run(["render", scene_file, "-o", out, "--channels", "alpha,depth,triangle_id"], capsys)
+    assert code == 0, err
+    loaded = ep.load_mitsuba(scene_file)
+    expected = ep.render_channels(loaded.scene, ["alpha", "depth", "triangle_id"], spp=4, max_bounces=2, seed=0)
+    for name, values in expected.items():
+        path = tmp_path / f"image.{name}.exr"
+        assert str(path) in text
+        written = ep.imread(path)
+        assert written.shape[:2] == values.shape[:2]
+        assert torch.equal(written[..., :1], values.to(torch.float32)[..., :1])
+    assert float(expected["alpha"].sum()) > 0 and int((expected["triangle_id"] >= 0).sum()) > 0
+    code, text, err = _run(["render", scene_file, "-o", out, "--channels", "alpha,colour"], capsys)
+    assert code != 0 and "--channels" in err and "colour" in err
