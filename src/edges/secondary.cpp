@@ -46,23 +46,22 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         has_wanted_set_ = true;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.
-    Vec3f lo, hi;
-    for (int pass = 0; pass < 2; ++pass)
+    auto each_light_vertex = [&](auto&& f) {
         for (const Scene::EmissiveTriangle& l : scene.lights) {
             const Mesh& m = scene.meshes[size_t(l.mesh)];
             const int32_t* t = m.indices + 3 * l.prim;
-            for (int k = 0; k < 3; ++k) {
-                const Vec3f v = m.vertex(t[k]);
-                if (pass == 1) {
-                    lights_radius_ = std::max(lights_radius_, length(v - lights_center_));
-                    continue;
-                }
-                lo = has_lights_ ? min(lo, v) : v;
-                hi = has_lights_ ? max(hi, v) : v;
-                has_lights_ = true;
-            }
-            if (pass == 0) lights_center_ = (lo + hi) * 0.5f;
+            for (int k = 0; k < 3; ++k) f(m.vertex(t[k]));
         }
+    };
+    Vec3f lo, hi;
+    each_light_vertex([&](const Vec3f& v) {
+        lo = has_lights_ ? min(lo, v) : v;
+        hi = has_lights_ ? max(hi, v) : v;
+        has_lights_ = true;
+    });
+    if (!has_lights_) return;
+    lights_center_ = (lo + hi) * 0.5f;
+    each_light_vertex([&](const Vec3f& v) { lights_radius_ = std::max(lights_radius_, length(v - lights_center_)); });
 }
 
 Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
