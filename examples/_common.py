@@ -85,16 +85,6 @@ def report(args, step: int, loss: float, every: Optional[int] = None, extra: str
         print(f"  step {step:4d}  loss {loss:.4g}{extra}")
 
 
-def box(center: Sequence[float] = (0.0, 0.0, 0.0), half: Sequence[float] = (0.5, 0.5, 0.5)):
-    """A box: 8 corners and 12 outward-facing triangles. Returns (vertices, indices)."""
-    vertices = torch.tensor([[c + s * h for c, s, h in zip(center, signs, half)]
-                             for signs in [(sx, sy, sz) for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)
-                                           for sz in (-1.0, 1.0)]])
-    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
-    indices = [tri for a, b, c, d in faces for tri in ([a, b, c], [a, c, d])]
-    return vertices, torch.tensor(indices, dtype=torch.int32)
-
-
 def rotation(axis_angle: torch.Tensor) -> torch.Tensor:
     """The rotation matrix of an axis-angle vector (differentiable: the matrix exponential of
     its cross-product matrix)."""

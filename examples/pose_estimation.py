@@ -12,15 +12,15 @@ import sys
 import torch
 
 import edgepath as ep
-from _common import box, output_dir, parser, plot, report, rotation, row, save_images
+from _common import output_dir, parser, plot, report, rotation, row, save_images
 
 TRUE_ROTATION = torch.tensor([0.4, -0.6, 0.2])
 TRUE_TRANSLATION = torch.tensor([0.2, -0.1, 0.0])
 START_ROTATION = torch.tensor([0.1, -0.2, 0.0])
 START_TRANSLATION = torch.tensor([-0.1, 0.1, 0.3])
 
-LONG_V, LONG_I = box(center=(0.0, 0.0, 0.0), half=(0.7, 0.2, 0.2))
-SHORT_V, SHORT_I = box(center=(0.5, 0.45, 0.0), half=(0.2, 0.25, 0.2))
+LONG_V, LONG_I = ep.shapes.box(center=(0.0, 0.0, 0.0), half=(0.7, 0.2, 0.2))
+SHORT_V, SHORT_I = ep.shapes.box(center=(0.5, 0.45, 0.0), half=(0.2, 0.25, 0.2))
 
 
 def make_scene(axis_angle: torch.Tensor, translation: torch.Tensor, size: int) -> ep.Scene:

@@ -21,7 +21,7 @@ import os
 import sys
 import time
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import torch
@@ -88,21 +88,10 @@ LAMP_HEIGHT = 3.0
 LAMP_HALF_SIZE = 0.35
 
 
-def _box(half: Sequence[float]) -> Tuple[torch.Tensor, torch.Tensor]:
-    """A box centred at the origin: 8 corners (corner 4 ix + 2 iy + iz at (±x, ±y, ±z)) and 12
-    outward-facing triangles."""
-    hx, hy, hz = half
-    vertices = torch.tensor([[sx * hx, sy * hy, sz * hz]
-                             for sx in (-1.0, 1.0) for sy in (-1.0, 1.0) for sz in (-1.0, 1.0)])
-    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
-    indices = [tri for a, b, c, d in faces for tri in ([a, b, c], [a, c, d])]
-    return vertices, torch.tensor(indices, dtype=torch.int32)
-
-
 def demo_scene(params: DemoParams, size: int = 128) -> Scene:
     """The demo's scene for the given unknowns (tensors; gradients flow back to them), seen
     on a ``size`` x ``size`` film."""
-    box_v, box_i = _box(BOX_HALF_SIZE)
+    box_v, box_i = shapes.box(half=BOX_HALF_SIZE)
     c, s = torch.cos(params.angle), torch.sin(params.angle)
     zero, one = torch.zeros_like(c), torch.ones_like(c)
     rotation = torch.stack([torch.stack([c, zero, s]), torch.stack([zero, one, zero]),

@@ -70,3 +70,16 @@ def quad(corners: Sequence[Sequence[float]]) -> Tuple[torch.Tensor, torch.Tensor
     the right-hand rule around them."""
     return (torch.tensor(corners, dtype=torch.float32),
             torch.tensor([[0, 1, 2], [0, 2, 3]], dtype=torch.int32))
+
+
+def box(center: Sequence[float] = (0.0, 0.0, 0.0),
+        half: Sequence[float] = (0.5, 0.5, 0.5)) -> Tuple[torch.Tensor, torch.Tensor]:
+    """A box with half-extents ``half`` about ``center``: 8 corners (corner ``4 ix + 2 iy + iz``
+    at ``center + (±hx, ±hy, ±hz)``, minus first) and 12 outward-facing triangles, flat (no uvs
+    or normals). Returns ``(vertices, indices)``."""
+    vertices = torch.tensor([[c + s * h for c, s, h in zip(center, signs, half)]
+                             for signs in [(sx, sy, sz) for sx in (-1.0, 1.0) for sy in (-1.0, 1.0)
+                                           for sz in (-1.0, 1.0)]])
+    faces = [[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]]
+    indices = [tri for a, b, c, d in faces for tri in ([a, b, c], [a, c, d])]
+    return vertices, torch.tensor(indices, dtype=torch.int32)

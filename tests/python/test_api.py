@@ -312,3 +312,18 @@ def test_python_api_page_names_every_public_name():
     page = (Path(__file__).resolve().parents[2] / "docs" / "python-api.md").read_text()
     missing = [name for name in ep.__all__ if f"`{name}`" not in page and f"`ep.{name}" not in page]
     assert not missing, f"docs/python-api.md does not name {missing}"
+
+
+def test_shapes_box_is_closed_and_outward_facing():
+    vertices, indices = ep.shapes.box(center=(1.0, 2.0, 3.0), half=(0.5, 0.25, 1.0))
+    assert vertices.shape == (8, 3) and indices.shape == (12, 3) and indices.dtype == torch.int32
+    assert torch.equal(vertices.min(0).values, torch.tensor([0.5, 1.75, 2.0]))
+    assert torch.equal(vertices.max(0).values, torch.tensor([1.5, 2.25, 4.0]))
+    tri = vertices[indices.long()]
+    normals = torch.linalg.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    outward = ((tri.mean(1) - torch.tensor([1.0, 2.0, 3.0])) * normals).sum(1)
+    assert bool((outward > 0).all())
+    # Closed: the area-weighted normals sum to zero, and every edge is shared by two triangles.
+    assert float(normals.sum(0).abs().max()) < 1e-5
+    edges = torch.cat([indices[:, [0, 1]], indices[:, [1, 2]], indices[:, [2, 0]]]).sort(1).values
+    assert bool((torch.unique(edges, dim=0, return_counts=True)[1] == 2).all())
