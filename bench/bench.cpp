@@ -83,6 +83,7 @@ struct Options {
     bool render_only = false;  // skip the Embree-only runs (for profilers)
     bool backward_memory = false;  // only: peak RSS of one backward pass (--size, --spp)
     bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
+    bool backward_only = false;    // only: the backward-pass timings (for profilers)
     int seeds = 8;                 // --secondary-only: renders per sampler
 };
 
@@ -92,7 +93,7 @@ struct Options {
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
                  "                      [--secondary-only [--seeds N]]  (alone: secondary-edge samplers' MSE)\n"
-                 "                      [--render-only]\n",
+                 "                      [--render-only] [--backward-only]\n",
                  msg);
     std::exit(status);
 }
@@ -124,6 +125,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--render-only") o.render_only = true;
         else if (a == "--backward-memory") o.backward_memory = true;
         else if (a == "--secondary-only") o.secondary_only = true;
+        else if (a == "--backward-only") o.backward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
@@ -729,11 +731,11 @@ void make_shadow_case(BenchScene& bs, int size) {
     d.camera.width = d.camera.height = size;
 }
 
-void make_glossy_case(BenchScene& bs, int size) {
+void make_glossy_case(BenchScene& bs, int size, float lift) {
     SceneDesc& d = bs.desc;
     const int glossy = bs.material(bs.constant({0.05f, 0.05f, 0.05f}), {0.8f, 0.8f, 0.8f}, 0.1f);
     const int matte = bs.material(bs.constant({0.5f, 0.5f, 0.5f}), {0.f, 0.f, 0.f}, 0.5f);
-    bs.add("box", make_box(Vec3f(-0.5f, 0.f, 1.f), Vec3f(0.5f, 1.f, 2.f)), matte);
+    bs.add("box", make_box(Vec3f(-0.5f, lift, 1.f), Vec3f(0.5f, lift + 1.f, 2.f)), matte);
     bs.add("floor", make_quad(Vec3f(-5, 0, -5), Vec3f(0, 0, 10), Vec3f(10, 0, 0)), glossy);
     MeshDesc& wall = bs.add("backdrop", make_quad(Vec3f(-4, 0, 4), Vec3f(0, 3, 0), Vec3f(8, 0, 0)), matte);
     wall.emission = bs.constant({2.f, 2.f, 2.f});
@@ -757,12 +759,13 @@ int secondary_only(const Options& o) {
                 o.size, o.size, o.spp, o.seeds, o.threads, 64 * o.spp);
     Table table({"scene", "sampler", "spp", "MSE", "secondary cpu ms", "whole cpu ms", "MSE x secondary ms", "MSE x whole ms"});
     std::vector<std::pair<std::string, std::pair<double, double>>> ratios;
-    for (int which = 0; which < 2; ++which) {
+    for (int which = 0; which < 3; ++which) {
         BenchScene bs;
         if (which == 0) make_shadow_case(bs, o.size);
-        else make_glossy_case(bs, o.size);
-        const std::string name = which == 0 ? "(a) shadow of a 50k-triangle sphere, small light"
-                                            : "(b) box reflected in a glossy floor (alpha 0.1)";
+        else make_glossy_case(bs, o.size, which == 1 ? 0.25f : 0.f);
+        const std::string name = which == 0   ? "(a) shadow of a 50k-triangle sphere, small light"
+                                 : which == 1 ? "(b) box reflected in a glossy floor (alpha 0.1)"
+                                              : "(b') the same box resting on the floor";
         std::shared_ptr<const Scene> scene = build_scene(bs.desc);
         const size_t n = size_t(o.size) * o.size * 3;
         std::vector<float> dir(size_t(bs.desc.meshes[0].num_vertices) * 3, 0.f);
@@ -825,6 +828,37 @@ int secondary_only(const Options& o) {
     return 0;
 }
 
+// The backward-pass table: the benchmark scene at each bounce count and the single triangle.
+void backward_section(const Options& o, BenchScene& bs,
+                      const std::function<void(const std::string&, const std::string&, const std::string&, double,
+                                               const std::string&)>& record) {
+    // Backward: the gradient pass with every parameter wanted, against the forward pass.
+    Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward",
+                    "no secondary ms", "secondary share", "interior only ms"});
+    std::vector<BackwardResult> back;
+    for (int bounces : o.bounces)
+        back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
+    const TriangleScene tri(256);
+    back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs));
+    for (const BackwardResult& r : back) {
+        const std::string config = r.scene + " threads=" + std::to_string(o.threads) + " bounces=" + std::to_string(r.bounces);
+        record("backward", config, "forward_ms", r.forward_ms, "ms");
+        record("backward", config, "backward_ms", r.backward_ms, "ms");
+        record("backward", config, "backward_over_forward", r.backward_ms / r.forward_ms, "");
+        record("backward", config, "backward_interior_only_ms", r.interior_ms, "ms");
+        record("backward", config, "backward_no_secondary_ms", r.no_secondary_ms, "ms");
+        const double share = (r.backward_ms - r.no_secondary_ms) / r.backward_ms;
+        record("backward", config, "secondary_share", share, "");
+        backward.add({r.scene, std::to_string(o.threads), std::to_string(r.bounces), fmt(r.forward_ms, 1),
+                      fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2), fmt(r.no_secondary_ms, 1),
+                      fmt(100.0 * share, 0) + "%", fmt(r.interior_ms, 1)});
+    }
+    backward.print("Backward pass (interior term, primary edges (one edge sample per pixel per spp) and secondary "
+                   "edges (one hierarchy descent, up to four edges, per scattering vertex); every parameter wanted, adjoint 1), " + std::to_string(o.spp) +
+                   " spp (single triangle: 4 spp, the scene of the classic comparison: 95 ms forward, 940 ms "
+                   "backward)");
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
     if (o.backward_memory) {
@@ -833,6 +867,13 @@ int main(int argc, char** argv) {
         return backward_memory(o, bs);
     }
     if (o.secondary_only) return secondary_only(o);
+    if (o.backward_only) {
+        BenchScene bs;
+        build_bench_scene(bs, o);
+        backward_section(o, bs, [](const std::string&, const std::string&, const std::string&, double,
+                                   const std::string&) {});
+        return 0;
+    }
     std::vector<Record> records;
     auto record = [&](const std::string& section, const std::string& config, const std::string& metric, double v,
                       const std::string& unit) { records.push_back({section, config, metric, v, unit}); };
@@ -992,31 +1033,8 @@ int main(int argc, char** argv) {
         if (!o.render_only)
             split.print("Embree-only time by ray kind, and the renderer's time outside Embree (per ray, per thread)");
 
-        // Backward: the gradient pass with every parameter wanted, against the forward pass.
-        Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward",
-                        "no secondary ms", "secondary share", "interior only ms"});
-        std::vector<BackwardResult> back;
-        for (int bounces : o.bounces)
-            back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
         TriangleScene tri(256);
-        back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs));
-        for (const BackwardResult& r : back) {
-            const std::string config = r.scene + " threads=" + std::to_string(o.threads) + " bounces=" + std::to_string(r.bounces);
-            record("backward", config, "forward_ms", r.forward_ms, "ms");
-            record("backward", config, "backward_ms", r.backward_ms, "ms");
-            record("backward", config, "backward_over_forward", r.backward_ms / r.forward_ms, "");
-            record("backward", config, "backward_interior_only_ms", r.interior_ms, "ms");
-            record("backward", config, "backward_no_secondary_ms", r.no_secondary_ms, "ms");
-            const double share = (r.backward_ms - r.no_secondary_ms) / r.backward_ms;
-            record("backward", config, "secondary_share", share, "");
-            backward.add({r.scene, std::to_string(o.threads), std::to_string(r.bounces), fmt(r.forward_ms, 1),
-                          fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2), fmt(r.no_secondary_ms, 1),
-                          fmt(100.0 * share, 0) + "%", fmt(r.interior_ms, 1)});
-        }
-        backward.print("Backward pass (interior term, primary edges (one edge sample per pixel per spp) and secondary "
-                       "edges (two per scattering vertex); every parameter wanted, adjoint 1), " + std::to_string(o.spp) +
-                       " spp (single triangle: 4 spp, the scene of the classic comparison: 95 ms forward, 940 ms "
-                       "backward)");
+        backward_section(o, bs, record);
 
         // Edge sampling against the baseline: the triangle's vertex gradients over 16 seeds.
         const EdgeVariance imp = edge_variance(tri.desc, EdgeSampling::Importance, o.threads, 16),

@@ -16,6 +16,19 @@ float sine(float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)
 float cos_minus(float cos_a, float cos_b, float sin_b) {
     return cos_a >= cos_b ? 1.f : cos_a * cos_b + sine(cos_a) * sin_b;
 }
+// The largest cosine between the unit vector u and the directions of the great-circle arc from
+// w0 to w1 (unit, less than pi apart): u's projection onto the arc's plane where that falls inside
+// the arc, else the nearer end.
+float max_cos_over_arc(const Vec3f& u, const Vec3f& w0, const Vec3f& w1) {
+    const float ends = std::max(dot(u, w0), dot(u, w1));
+    const Vec3f N = cross(w0, w1);
+    const float nn = length_squared(N);
+    if (!(nn > 1e-12f)) return ends;
+    const Vec3f in_plane = u - N * (dot(u, N) / nn);
+    if (dot(cross(w0, in_plane), N) >= 0.f && dot(cross(in_plane, w1), N) >= 0.f)
+        return std::max(ends, length(in_plane));
+    return ends;
+}
 // Ranges larger than this are split in parallel.
 constexpr int kParallelRange = 8192;
 // When a descent splits (EdgeHierarchy::splits): the light cone's cos(half angle) above which it
@@ -240,13 +253,13 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
 
 // ---- importance -------------------------------------------------------------------------------
 
-void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int refine, int light_refine) const {
-    out[0] = out[1] = 0.f;
+EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const {
+    Coarse out;
     const bool leaf = n.left < 0;
     // A smooth edge is a silhouette only where p is in front of exactly one of its faces.
     if (leaf && !n.always && n.cone_cos > -1.f) {
         const Vec3f d = q.p - n.a;
-        if ((dot(d, n.n0) > 0.f) == (dot(d, n.n1) > 0.f)) return;
+        if ((dot(d, n.n0) > 0.f) == (dot(d, n.n1) > 0.f)) return out;
     }
     const Vec3f v = n.center - q.p;
     const float dc2 = length_squared(v), r2 = n.radius * n.radius;
@@ -258,25 +271,18 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
     // through the node's edges reaches p (edges in the plane itself are seen at grazing angles,
     // where the cosine vanishes).
     const Vec3f half = (n.hi - n.lo) * 0.5f, ln = q.lobe.n;
-    if (dot(ln, v) + std::abs(ln.x) * half.x + std::abs(ln.y) * half.y + std::abs(ln.z) * half.z <= 0.f) return;
+    if (dot(ln, v) + std::abs(ln.x) * half.x + std::abs(ln.y) * half.y + std::abs(ln.z) * half.z <= 0.f) return out;
     if (leaf) {  // the segment itself: both ends below, or within 1e-5 rad above, the plane
         const Vec3f ea = n.a - q.p, eb = n.b - q.p;
-        if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
+        if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return out;
     }
     if (!(dc2 > r2)) {
-        // p inside the bounding sphere: every direction. The children's bounds are tighter (a
-        // few levels down); at the end, the lobe's peak.
-        if (!leaf && refine > 0) {
-            float a[2], b[2];
-            importance(q, nodes_[size_t(n.left)], a, refine - 1, light_refine);
-            importance(q, nodes_[size_t(n.right)], b, refine - 1, light_refine);
-            out[0] = a[0] + b[0];
-            out[1] = a[1] + b[1];
-            return;
-        }
-        out[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
-        out[1] = q.cone ? out[0] : 0.f;
-        return;
+        // p inside the bounding sphere: every direction; the lobe's peak. (importance() scores
+        // such a node by its children instead, a few levels down: their bounds are tighter.)
+        out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
+        out.value[1] = q.cone ? out.value[0] : 0.f;
+        out.inside = !leaf;
+        return out;
     }
     const float d = std::sqrt(dc2);
     const Vec3f dir = v / d;
@@ -296,18 +302,27 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
         const float ct = n.cone_cos, st = n.cone_sin;
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
-        if (!(lo < 0.f && hi > 0.f)) return;
+        if (!(lo < 0.f && hi > 0.f)) return out;
         fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
     }
-    // The lobe over the node's directions.
-    const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
-    if (!(cn > 0.f)) return;
+    // The lobe over the node's directions: over the cone around its sphere, or for a leaf, the
+    // largest cosines over the segment's own directions (exact).
+    float cn, cr;
+    if (leaf) {
+        const Vec3f w0 = normalize(n.a - q.p), w1 = normalize(n.b - q.p);
+        cn = max_cos_over_arc(q.lobe.n, w0, w1);
+        cr = q.lobe.specular > 0.f ? max_cos_over_arc(q.lobe.r, w0, w1) : 0.f;
+    } else {
+        cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
+        cr = q.lobe.specular > 0.f ? cos_minus(dot(q.lobe.r, dir), cos_b, sin_b) : 0.f;
+    }
+    if (!(cn > 0.f)) return out;
     float bound = q.lobe.diffuse * cn;
     if (q.lobe.specular > 0.f) {
-        const float s = 1.f + q.lobe.sharpness * (1.f - cos_minus(dot(q.lobe.r, dir), cos_b, sin_b));
+        const float s = 1.f + q.lobe.sharpness * (1.f - cr);
         bound += q.lobe.specular / (s * s);
     }
-    out[0] = n.length * fraction * bound / d2;
+    out.value[0] = n.length * fraction * bound / d2;
     // Towards the lights: apart when the angle between the axes exceeds beta + the cone's.
     // Otherwise the share of the node inside the cone: the overlap of the two angular
     // intervals along the line of their centres over the smaller one, times the ratio of their
@@ -318,24 +333,79 @@ void EdgeHierarchy::importance(const Query& q, const Node& n, float out[2], int 
         const float cos_g = dot(dir, c.axis);
         const bool wraps = c.cos_half <= -cos_b;  // beta + the cone's half angle >= pi
         if (wraps) {
-            out[1] = out[0];
+            out.value[1] = out.value[0];
         } else if (cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) {
             const float beta = std::asin(sin_b), gamma = std::acos(std::clamp(cos_g, -1.f, 1.f));
             const float small = std::min(beta, c.half);
             float share = small > 0.f ? std::clamp((beta + c.half - gamma) / (2.f * small), 0.f, 1.f) : 1.f;
             if (beta > c.half) share *= c.half / beta;
             share = std::max(share, 0.1f);
-            out[1] = out[0] * share;
+            out.value[1] = out.value[0] * share;
             // A narrow cone meets few of a large node's edges, and which of them are
-            // silhouettes inside it the node's own bounds cannot tell: its children's (summed,
-            // a few levels down) can, and descents then rarely end where nothing contributes.
-            if (!leaf && light_refine > 0 && c.cos_half > kNarrowCone && beta > c.half) {
-                float a[2], b[2];
-                importance(q, nodes_[size_t(n.left)], a, 0, light_refine - 1);
-                importance(q, nodes_[size_t(n.right)], b, 0, light_refine - 1);
-                out[1] = a[1] + b[1];
-            }
+            // silhouettes inside it the node's own bounds cannot tell: its children's can.
+            out.narrow = !leaf && c.cos_half > kNarrowCone && beta > c.half;
         }
+    }
+    return out;
+}
+
+const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t index) const {
+    if (q.memo) {
+        if (const Coarse* c = q.memo->find(index)) return *c;
+        if (Coarse* c = q.memo->insert(index)) return *c = coarse(q, nodes_[size_t(index)]);
+    }
+    thread_local Coarse scratch;
+    return scratch = coarse(q, nodes_[size_t(index)]);
+}
+
+void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
+    const Coarse c = coarse_memo(q, index);
+    const Node& n = nodes_[size_t(index)];
+    if (c.inside && refine > 0) {
+        // p inside the bounding sphere: the children's bounds are tighter (a few levels down).
+        float a[2], b[2];
+        importance(q, n.left, a, refine - 1, light_refine);
+        importance(q, n.right, b, refine - 1, light_refine);
+        out[0] = a[0] + b[0];
+        out[1] = a[1] + b[1];
+        return;
+    }
+    out[0] = c.value[0];
+    out[1] = c.value[1];
+    if (c.narrow && light_refine > 0) {
+        // The node's share of a narrow light cone, by its children (summed, a few levels down):
+        // descents then rarely end where nothing contributes.
+        float a[2], b[2];
+        importance(q, n.left, a, 0, light_refine - 1);
+        importance(q, n.right, b, 0, light_refine - 1);
+        out[1] = a[1] + b[1];
+    }
+}
+
+EdgeHierarchy::Coarse* EdgeHierarchy::Memo::insert(int32_t node) {
+    if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
+    for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1))
+        if (entries_[h].stamp != stamp_) {
+            entries_[h].stamp = stamp_;
+            entries_[h].node = node;
+            ++used_;
+            return &entries_[h].value;
+        }
+}
+
+const EdgeHierarchy::Coarse* EdgeHierarchy::Memo::find(int32_t node) const {
+    for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
+        const Entry& e = entries_[h];
+        if (e.stamp != stamp_) return nullptr;
+        if (e.node == node) return &e.value;
+    }
+}
+
+void EdgeHierarchy::Memo::reset() {
+    used_ = 0;
+    if (++stamp_ == 0) {  // wrapped: no entry may look current
+        for (Entry& e : entries_) e.stamp = 0;
+        stamp_ = 1;
     }
 }
 
@@ -361,7 +431,7 @@ bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], con
 int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices]) const {
     if (nodes_.empty() || (s == Lights && !q.cone)) return 0;
     float root[2];
-    importance(q, nodes_[0], root);
+    importance(q, 0, root);
     if (!(root[s] > 0.f)) return 0;
     // Pending descents: the node, its u, the expected counts so far and the splits made so far
     // (under both strategies: the other strategy's count follows its own splitting rule).
@@ -380,8 +450,8 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
         while (nodes_[size_t(it.at)].left >= 0) {
             const Node& n = nodes_[size_t(it.at)];
             float il[2], ir[2];
-            importance(q, nodes_[size_t(n.left)], il);
-            importance(q, nodes_[size_t(n.right)], ir);
+            importance(q, n.left, il);
+            importance(q, n.right, ir);
             const float sum = il[s] + ir[s];
             if (!(sum > 0.f)) {
                 alive = false;
@@ -432,7 +502,7 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
     c.edge = edge;
     if (size_t(edge) >= leaf_of_.size() || leaf_of_[size_t(edge)] < 0) return c;
     float root[2];
-    importance(q, nodes_[0], root);
+    importance(q, 0, root);
     c.prob[0] = root[0] > 0.f ? 1.f : 0.f;
     c.prob[1] = root[1] > 0.f ? 1.f : 0.f;
     // The path from the root down (the splits depend on those made above).
@@ -444,8 +514,8 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
         const Node& n = nodes_[size_t(path[i])];
         const int32_t next = path[i - 1];
         float il[2], ir[2];
-        importance(q, nodes_[size_t(n.left)], il);
-        importance(q, nodes_[size_t(n.right)], ir);
+        importance(q, n.left, il);
+        importance(q, n.right, ir);
         for (int k = 0; k < 2; ++k) {
             const float mine = next == n.left ? il[k] : ir[k];
             if (splits(q, n, il, ir, root, k, used[k])) {

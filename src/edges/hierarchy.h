@@ -8,7 +8,8 @@
 // leaf tests its edge exactly (the point in front of exactly one of the two faces).
 //
 // Sampling descends from the root, picking a child with probability proportional to an upper
-// bound of its contribution at the point (or, at most twice, taking both: see sample()):
+// bound of its contribution at the point (or, at most twice, taking both: see sample()). Node
+// bounds are computed once per query (Memo), however many descents and refinements visit them:
 //   length x (BSDF lobe bound over the node's directions) / distance^2,
 // zero without possible silhouettes. The lobe bound (LobeBound) is a cosine bound for the
 // diffuse part plus a spherical-Gaussian approximation of a GGX lobe around the mirror
@@ -64,10 +65,15 @@ public:
     bool empty() const { return nodes_.empty(); }
     double build_ms() const { return build_ms_; }
 
+    // The nodes' bounds at one point, kept across the descents of one query (both strategies,
+    // every split, and the levels of children that score a node): each is computed once.
+    // reset() before each new query.
+    class Memo;
     struct Query {
         Vec3f p;                           // the shading point
         LobeBound lobe;
         const BoundsCone* cone = nullptr;  // the lights; nullptr: no second strategy
+        Memo* memo = nullptr;              // optional
     };
     enum Strategy { All = 0, Lights = 1 };
     struct Choice {
@@ -105,10 +111,41 @@ private:
         Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
         bool always = false;        // holds a boundary edge or a crease
     };
-    // The node's importance under both strategies.
-    // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
-    // children scoring its share of a narrow light cone.
-    void importance(const Query& q, const Node& n, float out[2], int refine = 3, int light_refine = 4) const;
+public:
+    // A node's own bounds at a point: its importance under both strategies; whether p lies
+    // inside its bounding sphere, and whether the light cone is narrow beside it (then its
+    // children score it better).
+    struct Coarse {
+        float value[2] = {0.f, 0.f};
+        bool inside = false, narrow = false;
+    };
+    class Memo {
+    public:
+        void reset();
+        const Coarse* find(int32_t node) const;
+        Coarse* insert(int32_t node);  // nullptr when full
+
+    private:
+        static constexpr uint32_t kSize = 1024;  // a power of two
+        static uint32_t slot(int32_t node) { return (uint32_t(node) * 2654435761u) & (kSize - 1); }
+        struct Entry {
+            uint32_t stamp = 0;
+            int32_t node = -1;
+            Coarse value;
+        };
+        Entry entries_[kSize];
+        uint32_t stamp_ = 1;
+        uint32_t used_ = 0;
+    };
+
+private:
+    Coarse coarse(const Query& q, const Node& n) const;
+    const Coarse& coarse_memo(const Query& q, int32_t index) const;
+    // Node `index`'s importance under both strategies: its own bounds, or its children's where
+    // they are tighter. refine: levels of children scoring a node whose sphere holds p;
+    // light_refine: levels of children scoring its share of a narrow light cone.
+    void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
+    static constexpr int kRefine = 3, kLightRefine = 4;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);
@@ -136,7 +173,7 @@ public:
     float angle(float t) const;
     float param(float phi) const;
     static constexpr int kBins = 16;
-    static constexpr float kUniform = 0.25f;  // strategy All's share of uniform by length
+    static constexpr float kUniform = 0.1f;  // strategy All's share of uniform by length
 
 private:
     float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;

@@ -9,11 +9,12 @@
 // F_u, F_l are estimated by tracing the rest of the path from p a small angle to each side.
 // Gradients go to v0 and v1 and to p (and through p back along the path to the camera).
 //
-// Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one sample over all
-// edges and, when the scene has area lights, one restricted to the cone towards them (the
-// edges that cast shadows), combined by multiple importance sampling (balance heuristic on the
-// joint density of the edge and the point on it). The point on the edge is sampled by angle
-// (EdgePointSampler): weighted by a bound of the BSDF lobe, or uniformly inside the light cone.
+// Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one descent per vertex,
+// over all edges or, when the scene has area lights, restricted to the cone towards them (the
+// edges that cast shadows), the strategy picked at random and the two combined by one-sample
+// multiple importance sampling (balance heuristic on the joint density of the edge and the point
+// on it). The point on the edge is sampled by angle (EdgePointSampler): weighted by a bound of
+// the BSDF lobe, or uniformly inside the light cone.
 // opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
 // instead (the baseline).
 #pragma once
