@@ -8,10 +8,10 @@
 // leaf tests its edge exactly (the point in front of exactly one of the two faces).
 //
 // Sampling descends from the root, picking a child with probability proportional to an upper
-// bound of its contribution at the point (or, at most twice, taking both: see sample()). Node
-// bounds are computed once per query (Memo), however many descents and refinements visit them:
+// bound of its contribution at the point (or, at most twice, taking both: see sample()):
 //   length x (BSDF lobe bound over the node's directions) / distance^2,
-// zero without possible silhouettes. The lobe bound (LobeBound) is a cosine bound for the
+// zero without possible silhouettes (a node's bounds are computed once per query, however many
+// descents and refinements visit it: Memo). The lobe bound (LobeBound) is a cosine bound for the
 // diffuse part plus a spherical-Gaussian approximation of a GGX lobe around the mirror
 // direction, both evaluated at the angle between the node and the direction minus the node's
 // angular radius. Two strategies share one descent's arithmetic: over all edges, and restricted

@@ -105,6 +105,47 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     EXPECT_GT(split_seen, 0);  // the splitting descents were exercised
 }
 
+// The memo of node bounds changes nothing: with and without it (and with one memo kept across
+// both strategies and many descents, as a render keeps it per vertex), sample() picks the same
+// edges with the same expected counts, bit for bit.
+TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    std::vector<int32_t> ids(scene.edges().size());
+    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
+    EdgeHierarchy h;
+    h.build(scene, ids);
+    Rng rng(11, 2);
+    EdgeHierarchy::Memo memo;
+    int compared = 0;
+    for (int i = 0; i < 400; ++i) {
+        const Vec3f p(rng.next_float() * 4.f - 2.f, rng.next_float() * 0.5f, rng.next_float() * 4.f - 2.f);
+        const BoundsCone cone = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.02f + 0.3f * rng.next_float());
+        EdgeHierarchy::Query plain;
+        plain.p = p;
+        plain.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1, 0.3f)), 0.3f,
+                                     i % 2 ? 0.6f : 0.f, 0.05f + 0.3f * rng.next_float());
+        plain.cone = &cone;
+        EdgeHierarchy::Query kept = plain;
+        kept.memo = &memo;
+        memo.reset();
+        for (int k = 0; k < 6; ++k) {
+            const auto strategy = EdgeHierarchy::Strategy(k % 2);
+            const float u = rng.next_float();
+            EdgeHierarchy::Choice a[EdgeHierarchy::kMaxChoices], b[EdgeHierarchy::kMaxChoices];
+            const int na = h.sample(plain, strategy, u, a), nb = h.sample(kept, strategy, u, b);
+            ASSERT_EQ(na, nb);
+            for (int j = 0; j < na; ++j) {
+                EXPECT_EQ(a[j].edge, b[j].edge);
+                EXPECT_EQ(a[j].prob[0], b[j].prob[0]);
+                EXPECT_EQ(a[j].prob[1], b[j].prob[1]);
+                ++compared;
+            }
+        }
+    }
+    EXPECT_GT(compared, 1000);
+}
+
 // A glossy lobe concentrates the probability on the edges near the mirror direction: from a
 // point on a (virtual) floor, the sphere in the mirror direction against the box 30 degrees off.
 TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
