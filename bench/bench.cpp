@@ -85,6 +85,7 @@ struct Options {
     bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
     bool backward_only = false;    // only: the backward-pass timings (for profilers)
     int seeds = 8;                 // --secondary-only: renders per sampler
+    int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b')
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -92,7 +93,7 @@ struct Options {
                  "%s\nusage: edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]\n"
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
-                 "                      [--secondary-only [--seeds N]]  (alone: secondary-edge samplers' MSE)\n"
+                 "                      [--secondary-only [--seeds N] [--case 0|1|2]]  (alone: secondary-edge samplers' MSE)\n"
                  "                      [--render-only] [--backward-only]\n",
                  msg);
     std::exit(status);
@@ -127,6 +128,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--secondary-only") o.secondary_only = true;
         else if (a == "--backward-only") o.backward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
+        else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 2);
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -760,6 +762,7 @@ int secondary_only(const Options& o) {
     Table table({"scene", "sampler", "spp", "MSE", "secondary cpu ms", "whole cpu ms", "MSE x secondary ms", "MSE x whole ms"});
     std::vector<std::pair<std::string, std::pair<double, double>>> ratios;
     for (int which = 0; which < 3; ++which) {
+        if (o.only_case >= 0 && which != o.only_case) continue;
         BenchScene bs;
         if (which == 0) make_shadow_case(bs, o.size);
         else make_glossy_case(bs, o.size, which == 1 ? 0.25f : 0.f);
