@@ -85,7 +85,7 @@ struct Options {
     bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
     bool backward_only = false;    // only: the backward-pass timings (for profilers)
     int seeds = 8;                 // --secondary-only: renders per sampler
-    int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b')
+    int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -93,7 +93,7 @@ struct Options {
                  "%s\nusage: edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]\n"
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
-                 "                      [--secondary-only [--seeds N] [--case 0|1|2]]  (alone: secondary-edge samplers' MSE)\n"
+                 "                      [--secondary-only [--seeds N] [--case 0-3]]  (alone: secondary-edge samplers' MSE)\n"
                  "                      [--render-only] [--backward-only]\n",
                  msg);
     std::exit(status);
@@ -128,7 +128,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--secondary-only") o.secondary_only = true;
         else if (a == "--backward-only") o.backward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
-        else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 2);
+        else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -715,7 +715,10 @@ int backward_memory(const Options& o, BenchScene& bs) {
 
 // (a) a small area light, a large floor, a sphere of about 50k triangles casting the shadow;
 // the sphere moves along x. (b) a glossy floor (GGX alpha 0.1) reflecting a box that moves along
-// x in front of a bright emissive backdrop.
+// x in front of a bright emissive backdrop, a quarter of its height above the floor; (b') the box
+// resting on the floor: where it touches, the derivative grows as 1/distance to the contact, and
+// its variance over the pixel's area (whichever edge sampler) dominates the MSE; (c) a sphere of
+// about 50k triangles in the box's place, floating.
 void make_shadow_case(BenchScene& bs, int size) {
     SceneDesc& d = bs.desc;
     const int floor = bs.material(bs.constant({0.7f, 0.7f, 0.7f}), {0.f, 0.f, 0.f}, 0.5f);
@@ -733,11 +736,12 @@ void make_shadow_case(BenchScene& bs, int size) {
     d.camera.width = d.camera.height = size;
 }
 
-void make_glossy_case(BenchScene& bs, int size, float lift) {
+void make_glossy_case(BenchScene& bs, int size, float lift, bool sphere) {
     SceneDesc& d = bs.desc;
     const int glossy = bs.material(bs.constant({0.05f, 0.05f, 0.05f}), {0.8f, 0.8f, 0.8f}, 0.1f);
     const int matte = bs.material(bs.constant({0.5f, 0.5f, 0.5f}), {0.f, 0.f, 0.f}, 0.5f);
-    bs.add("box", make_box(Vec3f(-0.5f, lift, 1.f), Vec3f(0.5f, lift + 1.f, 2.f)), matte);
+    if (sphere) bs.add("sphere", make_sphere(Vec3f(0.f, lift + 0.5f, 1.5f), 0.5f, 125, 200), matte);
+    else bs.add("box", make_box(Vec3f(-0.5f, lift, 1.f), Vec3f(0.5f, lift + 1.f, 2.f)), matte);
     bs.add("floor", make_quad(Vec3f(-5, 0, -5), Vec3f(0, 0, 10), Vec3f(10, 0, 0)), glossy);
     MeshDesc& wall = bs.add("backdrop", make_quad(Vec3f(-4, 0, 4), Vec3f(0, 3, 0), Vec3f(8, 0, 0)), matte);
     wall.emission = bs.constant({2.f, 2.f, 2.f});
@@ -761,14 +765,15 @@ int secondary_only(const Options& o) {
                 o.size, o.size, o.spp, o.seeds, o.threads, 64 * o.spp);
     Table table({"scene", "sampler", "spp", "MSE", "secondary cpu ms", "whole cpu ms", "MSE x secondary ms", "MSE x whole ms"});
     std::vector<std::pair<std::string, std::pair<double, double>>> ratios;
-    for (int which = 0; which < 3; ++which) {
+    for (int which = 0; which < 4; ++which) {
         if (o.only_case >= 0 && which != o.only_case) continue;
         BenchScene bs;
         if (which == 0) make_shadow_case(bs, o.size);
-        else make_glossy_case(bs, o.size, which == 1 ? 0.25f : 0.f);
+        else make_glossy_case(bs, o.size, which == 2 ? 0.f : 0.25f, which == 3);
         const std::string name = which == 0   ? "(a) shadow of a 50k-triangle sphere, small light"
                                  : which == 1 ? "(b) box reflected in a glossy floor (alpha 0.1)"
-                                              : "(b') the same box resting on the floor";
+                                 : which == 2 ? "(b') the same box resting on the floor"
+                                              : "(c) a 50k-triangle sphere in its place";
         std::shared_ptr<const Scene> scene = build_scene(bs.desc);
         const size_t n = size_t(o.size) * o.size * 3;
         std::vector<float> dir(size_t(bs.desc.meshes[0].num_vertices) * 3, 0.f);

@@ -54,13 +54,27 @@ public:
         }
         if (!slot.grad) return;
         float* p = slot.grad + i;
-        Entry& e = cache_[(reinterpret_cast<uintptr_t>(p) >> 2) & (kCacheSize - 1)];
-        if (e.ptr != p) {
-            if (e.ptr) atomic_add(e.ptr, float(e.value));
-            e.ptr = p;
-            e.value = 0.0;
+        // Up to kWays entries from the home one: two hot parameters whose addresses collide
+        // (a camera parameter and a vertex, say) then both stay in double precision, instead
+        // of flushing each other at every sample (float atomic adds of partial sums, in an
+        // order that depends on the threads' timing).
+        const size_t home = (reinterpret_cast<uintptr_t>(p) >> 2) & (kCacheSize - 1);
+        Entry* free_entry = nullptr;
+        for (int k = 0; k < kWays; ++k) {
+            Entry& e = cache_[(home + size_t(k)) & (kCacheSize - 1)];
+            if (e.ptr == p) {
+                e.value += v;
+                return;
+            }
+            if (!e.ptr && !free_entry) free_entry = &e;
         }
-        e.value += v;
+        Entry* e = free_entry;
+        if (!e) {
+            e = &cache_[(home + (evict_++ % kWays)) & (kCacheSize - 1)];
+            atomic_add(e->ptr, float(e->value));
+        }
+        e->ptr = p;
+        e->value = v;
     }
     void add3(const GradSlot& slot, int64_t i, float x, float y, float z) {
         add(slot, 3 * i, x);
@@ -82,7 +96,8 @@ public:
     }
 
 private:
-    static constexpr int kCacheSize = 256;
+    static constexpr int kCacheSize = 256, kWays = 4;
+    unsigned evict_ = 0;
     struct Entry {
         float* ptr;
         double value;

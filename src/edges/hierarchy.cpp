@@ -10,6 +10,7 @@ namespace edgepath {
 
 namespace {
 
+constexpr double kPiD = 3.14159265358979323846;
 float sine(float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)); }
 // cos(max(0, angle - beta)) from cos(angle) and beta's cosine and sine: the largest cosine
 // between a direction and the directions within beta of another.
@@ -67,6 +68,54 @@ float LobeBound::eval(const Vec3f& w) const {
     return v;
 }
 
+double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
+    // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1], with b along the edge and
+    // a towards the foot of the perpendicular from p; h the distance to the edge's line.
+    const Vec3d q(p.x, p.y, p.z), x0(v0.x, v0.y, v0.z), x1(v1.x, v1.y, v1.z);
+    const Vec3d e = x1 - x0;
+    const double len = length(e);
+    if (h_out) *h_out = 0.0;
+    if (!(len > 0.0)) return 0.0;
+    const Vec3d b = e / len;
+    const double foot = dot(q - x0, b);
+    const Vec3d hv = x0 + b * foot - q;
+    const double h = length(hv);
+    if (h_out) *h_out = h;
+    if (!(h > 1e-12 * (len + length(x0 - q)))) return 0.0;
+    const Vec3d a = hv / h;
+    const double phi0 = std::atan(-foot / h), phi1 = std::atan((len - foot) / h);
+    const Vec3d nn(n.x, n.y, n.z), rr(r.x, r.y, r.z);
+    double total = 0.0;
+    // Diffuse: n . w = N cos(phi - psi), counted where positive (psi +- pi/2, shifted by 2 pi).
+    if (diffuse > 0.f) {
+        const double A = dot(nn, a), B = dot(nn, b), N = std::sqrt(A * A + B * B), psi = std::atan2(B, A);
+        double sum = 0.0;
+        for (int k = -1; k <= 1; ++k) {
+            const double c = psi + 2.0 * k * kPiD, lo = std::max(phi0, c - 0.5 * kPiD), hi = std::min(phi1, c + 0.5 * kPiD);
+            if (hi > lo) sum += N * (std::sin(hi - c) - std::sin(lo - c));
+        }
+        total += diffuse * sum;
+    }
+    // Glossy: 1 / (1 + s (1 - r . w))^2 = 1 / (A + B cos x)^2, A = 1 + s, B = -s R, x = phi - psi;
+    // its antiderivative (A > |B|), with atan's branch unwrapped across x = +-pi:
+    //   (-B sin x / (A + B cos x) + A (2 / k) atan(c tan(x / 2))) / k^2,  k^2 = A^2 - B^2,
+    //   c = sqrt((A - B) / (A + B)).
+    if (specular > 0.f) {
+        const double s = sharpness, Ar = dot(rr, a), Br = dot(rr, b), R = std::min(1.0, std::sqrt(Ar * Ar + Br * Br));
+        const double psi = std::atan2(Br, Ar), A = 1.0 + s, B = -s * R;
+        const double k2 = (1.0 + s * (1.0 - R)) * (1.0 + s * (1.0 + R)), k = std::sqrt(k2);
+        const double c = std::sqrt((1.0 + s * (1.0 + R)) / (1.0 + s * (1.0 - R)));
+        auto F = [&](double x) {
+            const double turns = std::floor((x + kPiD) / (2.0 * kPiD));
+            const double xr = x - 2.0 * kPiD * turns;  // in [-pi, pi)
+            const double i1 = (2.0 / k) * (std::atan(c * std::tan(0.5 * xr)) + kPiD * turns);
+            return (-B * std::sin(x) / (A + B * std::cos(x)) + A * i1) / k2;
+        };
+        total += specular * std::max(0.0, F(phi1 - psi) - F(phi0 - psi));
+    }
+    return total;
+}
+
 bool BoundsCone::towards(const Vec3f& p, const Vec3f& c, float r) {
     const Vec3f v = c - p;
     const float d = length(v);
@@ -86,6 +135,7 @@ bool BoundsCone::towards(const Vec3f& p, const Vec3f& c, float r) {
 struct EdgeHierarchy::Input {
     std::vector<Vec3f> p0, p1, n0, n1;
     std::vector<uint8_t> always;
+    std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
     const std::vector<int32_t>* ids;
 };
 
@@ -101,6 +151,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         node.hi = max(in.p0[i], in.p1[i]);
         node.length = length(in.p1[i] - in.p0[i]);
         node.edge = (*in.ids)[i];
+        node.count = 1;
         node.always = in.always[i] != 0;
         node.center = (node.lo + node.hi) * 0.5f;
         node.radius = length(node.hi - node.lo) * 0.5f;
@@ -108,6 +159,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         node.b = in.p1[i];
         node.n0 = in.n0[i];
         node.n1 = in.n1[i];
+        node.dark_behind = in.dark_behind[i] != 0;
         const Vec3f s = in.n0[i] + in.n1[i];
         if (!node.always && length(s) > 1e-6f) {
             node.cone_axis = normalize(s);
@@ -143,7 +195,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         build_range(in, items, mid, end, r, index);
     }
     finish_inner(index);
-    if (!node.always) fit_cone(in, items, begin, end, index);
+    if (!node.always || node.dark_behind) fit_cone(in, items, begin, end, index);
 }
 
 // A tight normal cone and the range of the plane equations at the centre, over the faces of the
@@ -191,7 +243,9 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.center = (n.lo + n.hi) * 0.5f;
     n.radius = length(n.hi - n.lo) * 0.5f;
     n.length = a.length + b.length;
+    n.count = a.count + b.count;
     n.always = a.always || b.always;
+    n.dark_behind = a.dark_behind && b.dark_behind;
     n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
     n.cone_cos = -1.f;
     n.cone_sin = 0.f;
@@ -209,6 +263,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
     in.n0.assign(n, Vec3f(0.f));
     in.n1.assign(n, Vec3f(0.f));
     in.always.resize(n);
+    in.dark_behind.assign(n, 0);
     in.ids = &edges;
     std::vector<int32_t> items;  // the discontinuities from everywhere first, then the smooth edges
     items.reserve(n);
@@ -218,7 +273,12 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
         in.p0[i] = m.vertex(e.v0);
         in.p1[i] = m.vertex(e.v1);
         in.always[i] = e.kind != EdgeKind::Smooth;
-        if (!in.always[i]) {
+        // A crease between faces that are black seen from behind (a one-sided material, no
+        // emission from the back): from a point behind both, either side of it looks black (or
+        // both sides see what hides it), so it adds nothing there.
+        const Material& mat = scene.materials[size_t(m.material)];
+        in.dark_behind[i] = e.kind == EdgeKind::Crease && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+        if (!in.always[i] || in.dark_behind[i]) {
             const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
             // A face of zero area has no side: its edge is treated as a discontinuity.
             if (length(a) > 0.f && length(b) > 0.f) {
@@ -226,6 +286,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
                 in.n1[i] = normalize(b);
             } else {
                 in.always[i] = 1;
+                in.dark_behind[i] = 0;
             }
         }
     }
@@ -256,10 +317,12 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
 EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const {
     Coarse out;
     const bool leaf = n.left < 0;
-    // A smooth edge is a silhouette only where p is in front of exactly one of its faces.
-    if (leaf && !n.always && n.cone_cos > -1.f) {
+    // A smooth edge is a silhouette only where p is in front of exactly one of its faces; a
+    // crease dark from behind counts only where p is in front of one of them at least.
+    if (leaf && ((!n.always && n.cone_cos > -1.f) || n.dark_behind)) {
         const Vec3f d = q.p - n.a;
-        if ((dot(d, n.n0) > 0.f) == (dot(d, n.n1) > 0.f)) return out;
+        const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
+        if (n.always ? !(front0 || front1) : front0 == front1) return out;
     }
     const Vec3f v = n.center - q.p;
     const float dc2 = length_squared(v), r2 = n.radius * n.radius;
@@ -297,32 +360,42 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
     // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
     // silhouettes happen to carry the contribution).
     float fraction = 1.f;
-    if (!leaf && !n.always && n.cone_cos > -1.f) {
+    if (!leaf && (!n.always || n.dark_behind) && n.cone_cos > -1.f) {
         const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
         const float ct = n.cone_cos, st = n.cone_sin;
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
-        if (!(lo < 0.f && hi > 0.f)) return out;
-        fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
+        if (n.always) {
+            if (!(hi > 0.f)) return out;  // p behind every face of the node's creases
+        } else {
+            if (!(lo < 0.f && hi > 0.f)) return out;
+            fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
+        }
     }
     // The lobe over the node's directions: over the cone around its sphere, or for a leaf, the
     // largest cosines over the segment's own directions (exact).
-    float cn, cr;
     if (leaf) {
-        const Vec3f w0 = normalize(n.a - q.p), w1 = normalize(n.b - q.p);
-        cn = max_cos_over_arc(q.lobe.n, w0, w1);
-        cr = q.lobe.specular > 0.f ? max_cos_over_arc(q.lobe.r, w0, w1) : 0.f;
+        // The edge's term is at most the integral over the arc it subtends of the lobe over the
+        // distance h to its line (the rate at which the arc sweeps as the edge moves): about
+        // the lobe's largest value over the arc times the arc's angle, or for the glossy part
+        // the lobe's own width (pi alpha) where that is less.
+        double h = 0.0;
+        const double integral = q.lobe.integral(q.p, n.a, n.b, &h);
+        out.value[0] = float(integral / std::max(h, 1e-3 * double(n.length)));
     } else {
-        cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
-        cr = q.lobe.specular > 0.f ? cos_minus(dot(q.lobe.r, dir), cos_b, sin_b) : 0.f;
+        const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
+        if (!(cn > 0.f)) return out;
+        float bound = q.lobe.diffuse * cn;
+        if (q.lobe.specular > 0.f) {
+            const float s = 1.f + q.lobe.sharpness * (1.f - cos_minus(dot(q.lobe.r, dir), cos_b, sin_b));
+            bound += q.lobe.specular / (s * s);
+        }
+        out.value[0] = n.length * fraction * bound / d2;
     }
-    if (!(cn > 0.f)) return out;
-    float bound = q.lobe.diffuse * cn;
-    if (q.lobe.specular > 0.f) {
-        const float s = 1.f + q.lobe.sharpness * (1.f - cr);
-        bound += q.lobe.specular / (s * s);
+    if (!(out.value[0] > 0.f) || !std::isfinite(out.value[0])) {
+        out.value[0] = 0.f;
+        return out;
     }
-    out.value[0] = n.length * fraction * bound / d2;
     // Towards the lights: apart when the angle between the axes exceeds beta + the cone's.
     // Otherwise the share of the node inside the cone: the overlap of the two angular
     // intervals along the line of their centres over the smaller one, times the ratio of their
@@ -359,8 +432,17 @@ const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t 
 }
 
 void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
-    const Coarse c = coarse_memo(q, index);
     const Node& n = nodes_[size_t(index)];
+    if (n.left >= 0 && n.count <= kExactLeaves) {
+        // A small subtree: the sum of its leaves' own values.
+        float a[2], b[2];
+        importance(q, n.left, a, 0, 0);
+        importance(q, n.right, b, 0, 0);
+        out[0] = a[0] + b[0];
+        out[1] = a[1] + b[1];
+        return;
+    }
+    const Coarse c = coarse_memo(q, index);
     if (c.inside && refine > 0) {
         // p inside the bounding sphere: the children's bounds are tighter (a few levels down).
         float a[2], b[2];
@@ -547,12 +629,16 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
     phi1_ = std::atan((len_ - s_foot_) / h_);
     if (!(phi1_ - phi0_ > 1e-7f)) return false;
     // The lobe bound along the edge, in angle, and its integral.
-    const float step = (phi1_ - phi0_) / float(kBins);
+    // (cos, sin) of the bins' ends by rotation, one step at a time.
+    const float step = (phi1_ - phi0_) / float(kBins), cs = std::cos(step), ss = std::sin(step);
+    float c = std::cos(phi0_), sn = std::sin(phi0_);
     cdf_[0] = 0.f;
     for (int k = 0; k <= kBins; ++k) {
-        const float phi = phi0_ + step * float(k);
-        g_[k] = lobe.eval(a * std::cos(phi) + b * std::sin(phi));
+        g_[k] = lobe.eval(a * c + b * sn);
         if (k > 0) cdf_[k] = cdf_[k - 1] + 0.5f * (g_[k - 1] + g_[k]) * step;
+        const float next_c = c * cs - sn * ss;
+        sn = sn * cs + c * ss;
+        c = next_c;
     }
     total_ = cdf_[kBins];
     if (!(total_ > 0.f) || !std::isfinite(total_)) total_ = 0.f;

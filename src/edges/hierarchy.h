@@ -56,6 +56,10 @@ struct LobeBound {
     static LobeBound make(const Vec3f& n, const Vec3f& wo, float diffuse, float specular, float alpha);
     // The value at direction w (unit).
     float eval(const Vec3f& w) const;
+    // Its integral over the arc of directions from p to the segment (v0, v1), in angle (closed
+    // form; the glossy part is not cut off below the horizon); *h: the distance from p to the
+    // segment's line.
+    double integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h = nullptr) const;
 };
 
 class EdgeHierarchy {
@@ -104,12 +108,14 @@ private:
         // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
         float plane_lo = 0.f, plane_hi = 0.f;
         float length = 0.f;
+        int32_t count = 0;          // edges under it
         int32_t left = -1;          // children left, right; leaf when left < 0
         int32_t right = -1;
         int32_t parent = -1;
         int32_t edge = -1;          // leaf: index into scene.edges()
         Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
         bool always = false;        // holds a boundary edge or a crease
+        bool dark_behind = false;   // holds only creases whose faces are black seen from behind
     };
 public:
     // A node's own bounds at a point: its importance under both strategies; whether p lies
@@ -146,6 +152,8 @@ private:
     // light_refine: levels of children scoring its share of a narrow light cone.
     void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
+    // A subtree of at most this many edges is scored by the sum of its leaves.
+    static constexpr int kExactLeaves = 8;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);

@@ -7,6 +7,7 @@
 #include <functional>
 #include <vector>
 
+#include "diff/gradients.h"
 #include "edgepath.h"
 #include "scene/scene.h"
 #include "scene/shapes.h"
@@ -296,6 +297,32 @@ TEST(Gradients, ReverseModeEqualsForwardMode) {
         for (size_t i = 0; i < dir.size(); ++i) g_dot_dir += double(buf[i]) * dir[i];
         EXPECT_NEAR(a_dot_d, g_dot_dir, 1e-3 * (std::abs(a_dot_d) + 1e-3)) << p.name;
     }
+}
+
+}  // namespace
+}  // namespace edgepath
+
+namespace edgepath {
+namespace {
+
+// Two parameters whose addresses share a cache entry, both hit by every sample (a camera
+// parameter and a vertex, say): each keeps its sum in double precision until the flush, rather
+// than the two evicting each other and adding every partial sum to the float buffer.
+TEST(GradSink, CollidingParametersKeepDoublePrecision) {
+    std::vector<float> buffer(1024, 0.f);
+    GradSlot a, b;
+    a.grad = buffer.data();
+    b.grad = buffer.data() + 256;  // 1 KiB on: the same home entry
+    {
+        GradSink sink(false);
+        for (int i = 0; i < 200000; ++i) {
+            sink.add(a, 0, 0.1f);
+            sink.add(b, 0, -0.1f);
+        }
+    }
+    // Float sums of 200000 terms of 0.1 drift by far more than this.
+    EXPECT_NEAR(buffer[0], 200000 * double(0.1f), 0.01);
+    EXPECT_NEAR(buffer[256], -200000 * double(0.1f), 0.01);
 }
 
 }  // namespace
