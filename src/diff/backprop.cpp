@@ -138,7 +138,7 @@ TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp)
 }  // namespace
 
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
-                   GradSink& sink, const SecondaryEdges* secondary) {
+                   GradSink& sink, const SecondaryEdges* secondary, EdgeTermLog* log) {
     const auto& V = rec.vertices;
     const bool env_wanted = slots.envmap.wanted() || slots.envmap_rotation.wanted();
     if (rec.camera_missed) {
@@ -154,6 +154,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         return;
     }
     const int K = int(V.size());
+    if (log && !log->replaying) log->start(size_t(K));
     Vec3f A_next(0.f);   // adjoint of the throughput after vertex k
     Vec3f dp_next(0.f);  // adjoint of vertex k's position from the ray that leaves it
     if (rec.escaped) {
@@ -255,11 +256,19 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         // Edges seen from this vertex (it scatters: k < max_bounces), with the vertex's own
         // random stream, the same for every call on this record.
         if (secondary && k < secondary->max_bounces()) {
-            SurfacePoint bent = sp;
-            bent.ns = ns;
-            ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab,
-                                    k >= 64 || ((moves >> k) & 1) != 0, Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0),
-                                    sink);
+            if (log && log->replaying) {
+                const size_t b = log->begin[size_t(k)];
+                ha.dp += secondary->replay(log->terms.data() + b, log->end[size_t(k)] - b, ab, sink);
+            } else {
+                SurfacePoint bent = sp;
+                bent.ns = ns;
+                if (log) log->begin[size_t(k)] = uint32_t(log->terms.size());
+                ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab,
+                                        k >= 64 || ((moves >> k) & 1) != 0,
+                                        Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0), sink,
+                                        log ? &log->terms : nullptr);
+                if (log) log->end[size_t(k)] = uint32_t(log->terms.size());
+            }
         }
         dwo += db.wo;
 

@@ -65,7 +65,8 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
 }
 
 Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
-                          const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink) const {
+                          const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink,
+                          std::vector<EdgeTerm>* record) const {
     Vec3f d_p(0.f);
     if (!active()) return d_p;
     const EdgeSet& set = (position_matters || !has_wanted_set_) ? all_ : wanted_;
@@ -77,7 +78,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
                                          set.cumulative.begin()) - 1,
                                   set.edges.size() - 1);
         const float t = rng.next_float();
-        return evaluate(set.edges[k], t, float(set.total), sp, wo, bsdf, bounces_left, weight, rng, sink);
+        return evaluate(set.edges[k], t, float(set.total), sp, wo, bsdf, bounces_left, weight, rng, sink, record);
     }
     // The lobe bound of the BSDF, on the side of wo (it is zero for every direction otherwise).
     Vec3f n = sp.ns;
@@ -135,14 +136,14 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         if (!(mixture > 0.f) || !std::isfinite(mixture)) continue;
         // scale: the inverse of the mixture's density per unit length.
         const float scale = length(v1 - v0) / mixture;
-        d_p += evaluate(choice.edge, t, scale, sp, wo, bsdf, bounces_left, weight, rng, sink);
+        d_p += evaluate(choice.edge, t, scale, sp, wo, bsdf, bounces_left, weight, rng, sink, record);
     }
     return d_p;
 }
 
 Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const SurfacePoint& sp, const Vec3f& wo,
                                const TBsdfParams<float>& bsdf, int bounces_left, const Vec3f& weight, Rng& rng,
-                               GradSink& sink) const {
+                               GradSink& sink, std::vector<EdgeTerm>* record) const {
     Vec3f d_p(0.f);
     const Edge& e = scene_.edges()[size_t(edge)];
     const Mesh& m = scene_.meshes[size_t(e.mesh)];
@@ -194,15 +195,32 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     // times `scale` (the inverse of the density per unit edge length, and the MIS weight).
     const Vec3f along = v1 - v0;
     const float arc = length(along - w * dot(w, along)) / (dist * length(along));
-    const float s = dot(weight, delta) * scale * arc / n_len;
-    if (s == 0.f || !std::isfinite(s)) return d_p;
-    const EdgeSideGradient g = edge_side_gradient(v0, v1, p, w);
+    EdgeTerm term;
+    term.edge = edge;
+    term.u = delta * (scale * arc / n_len);
+    if (!std::isfinite(term.u.x + term.u.y + term.u.z) || is_black(term.u)) return d_p;
+    term.g = edge_side_gradient(v0, v1, p, w);
+    if (record) record->push_back(term);
+    return apply(term, weight, sink);
+}
+
+Vec3f SecondaryEdges::apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const {
+    const float s = dot(weight, term.u);
+    if (s == 0.f || !std::isfinite(s)) return Vec3f(0.f);
+    const Edge& e = scene_.edges()[size_t(term.edge)];
+    const EdgeSideGradient& g = term.g;
     if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {
         const GradSlot& vs = slots_.meshes[size_t(e.mesh)].vertices;
         sink.add3(vs, e.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
         sink.add3(vs, e.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
     }
     return g.d_o * s;
+}
+
+Vec3f SecondaryEdges::replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const {
+    Vec3f d_p(0.f);
+    for (size_t i = 0; i < count; ++i) d_p += apply(terms[i], weight, sink);
+    return d_p;
 }
 
 }  // namespace edgepath

@@ -28,6 +28,29 @@
 
 namespace edgepath {
 
+// One edge sample's term at a vertex, without the adjoint: the adjoint weight w makes it
+//   s = w . u,  gradients s g.d_e0, s g.d_e1 to the edge's ends and s g.d_o to the vertex.
+struct EdgeTerm {
+    int32_t edge;
+    Vec3f u;
+    EdgeSideGradient g;
+};
+
+// The edge terms of one path's vertices, kept by the first of several sweeps over the same path
+// and replayed by the others (forward-mode derivative images sweep once per colour): which edges
+// and points are sampled, and what the side rays see, do not depend on the adjoint.
+struct EdgeTermLog {
+    std::vector<EdgeTerm> terms;
+    std::vector<uint32_t> begin, end;  // vertex k's terms: [begin[k], end[k])
+    bool replaying = false;
+    void start(size_t vertices) {
+        terms.clear();
+        begin.assign(vertices, 0);
+        end.assign(vertices, 0);
+        replaying = false;
+    }
+};
+
 class SecondaryEdges {
 public:
     // Empty (nothing to do) unless the option is on and vertices or the camera are wanted.
@@ -45,15 +68,22 @@ public:
     // (the camera, or a mesh the path has met so far); if not, only edges of meshes whose
     // vertices are wanted can contribute, and only those are sampled. Adds the edge vertices'
     // gradients to `sink` and returns the adjoint of the vertex position p.
+    // With `record`, also appends the terms (EdgeTerm) it adds.
     Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
-              const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink) const;
+              const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink,
+              std::vector<EdgeTerm>* record = nullptr) const;
+    // Adds recorded terms again, with the adjoint weight `weight`; returns the adjoint of p.
+    Vec3f replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
 
 private:
     // One edge sample: edge `edge` (index into scene.edges()) at parameter t, the estimate
     // scaled by `scale` (MIS weight x edge length / probability of the edge).
     Vec3f evaluate(int32_t edge, float t, float scale, const SurfacePoint& sp, const Vec3f& wo,
                    const TBsdfParams<float>& bsdf, int bounces_left, const Vec3f& weight, Rng& rng,
-                   GradSink& sink) const;
+                   GradSink& sink, std::vector<EdgeTerm>* record) const;
+    // A term's gradients for the adjoint weight `weight`: to the edge's ends into `sink`; returns
+    // the adjoint of the vertex position.
+    Vec3f apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const;
 
     // A set of edges with its samplers: by length (uniform) or the hierarchy.
     struct EdgeSet {

@@ -75,18 +75,25 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
     const SecondaryEdges secondary(scene, opt, radiance ? dirs : none);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
     tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(true); });
+    tbb::enumerable_thread_specific<EdgeTermLog> logs;
     for_each_sample(
         scene, opt, radiance,
         [&](int x, int y, const PathRecord& rec) {
             GradSink& sink = sinks.local();
             float* o = out + (int64_t(y) * scene.out_width + x) * nv;  // each pixel belongs to one tile: no race
-            if (radiance)
+            if (radiance) {
+                // One sweep per colour; the edge terms are sampled by the first and replayed by
+                // the others.
+                EdgeTermLog& log = logs.local();
+                log.replaying = false;
                 for (int c = 0; c < 3; ++c) {
                     Vec3f e(0.f);
                     e[c] = inv_spp;
-                    backprop_path(scene, dirs, rec, e, sink, sec);
+                    backprop_path(scene, dirs, rec, e, sink, sec, sec ? &log : nullptr);
+                    log.replaying = true;
                     o[ro + c] += float(sink.take_projection());
                 }
+            }
             if (hit_values && !rec.camera_missed) {
                 const PathVertexRecord& v = rec.vertices[0];
                 Ray ray;
