@@ -30,6 +30,11 @@ float max_cos_over_arc(const Vec3f& u, const Vec3f& w0, const Vec3f& w1) {
         return std::max(ends, length(in_plane));
     return ends;
 }
+// A crease seen with both faces on the same side of p: its share of a silhouette's importance,
+// the angle between the faces' normals (radians), no less than kMinCreaseWeight (texture seams
+// and nearly flat creases still get sampled).
+constexpr float kMinCreaseWeight = 0.05f;
+float crease_weight(float dihedral) { return std::clamp(dihedral, kMinCreaseWeight, 1.f); }
 // Ranges larger than this are split in parallel.
 constexpr int kParallelRange = 8192;
 // When a descent splits (EdgeHierarchy::splits): the light cone's cos(half angle) above which it
@@ -135,6 +140,7 @@ bool BoundsCone::towards(const Vec3f& p, const Vec3f& c, float r) {
 struct EdgeHierarchy::Input {
     std::vector<Vec3f> p0, p1, n0, n1;
     std::vector<uint8_t> always;
+    std::vector<uint8_t> crease;       // a crease (with two faces of nonzero area)
     std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
     const std::vector<int32_t>* ids;
 };
@@ -160,8 +166,9 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         node.n0 = in.n0[i];
         node.n1 = in.n1[i];
         node.dark_behind = in.dark_behind[i] != 0;
+        node.crease = in.crease[i] != 0;
         const Vec3f s = in.n0[i] + in.n1[i];
-        if (!node.always && length(s) > 1e-6f) {
+        if ((!node.always || node.crease) && length(s) > 1e-6f) {
             node.cone_axis = normalize(s);
             node.cone_cos = std::clamp(dot(node.cone_axis, in.n0[i]), -1.f, 1.f);
             node.cone_sin = sine(node.cone_cos);
@@ -195,7 +202,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         build_range(in, items, mid, end, r, index);
     }
     finish_inner(index);
-    if (!node.always || node.dark_behind) fit_cone(in, items, begin, end, index);
+    if (!node.always || node.crease) fit_cone(in, items, begin, end, index);
 }
 
 // A tight normal cone and the range of the plane equations at the centre, over the faces of the
@@ -246,6 +253,7 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.count = a.count + b.count;
     n.always = a.always || b.always;
     n.dark_behind = a.dark_behind && b.dark_behind;
+    n.crease = a.crease && b.crease;
     n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
     n.cone_cos = -1.f;
     n.cone_sin = 0.f;
@@ -264,6 +272,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
     in.n1.assign(n, Vec3f(0.f));
     in.always.resize(n);
     in.dark_behind.assign(n, 0);
+    in.crease.assign(n, 0);
     in.ids = &edges;
     std::vector<int32_t> items;  // the discontinuities from everywhere first, then the smooth edges
     items.reserve(n);
@@ -277,8 +286,9 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
         // emission from the back): from a point behind both, either side of it looks black (or
         // both sides see what hides it), so it adds nothing there.
         const Material& mat = scene.materials[size_t(m.material)];
-        in.dark_behind[i] = e.kind == EdgeKind::Crease && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
-        if (!in.always[i] || in.dark_behind[i]) {
+        in.crease[i] = e.kind == EdgeKind::Crease;
+        in.dark_behind[i] = in.crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+        if (!in.always[i] || in.crease[i]) {
             const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
             // A face of zero area has no side: its edge is treated as a discontinuity.
             if (length(a) > 0.f && length(b) > 0.f) {
@@ -287,6 +297,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
             } else {
                 in.always[i] = 1;
                 in.dark_behind[i] = 0;
+                in.crease[i] = 0;
             }
         }
     }
@@ -317,12 +328,17 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
 EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const {
     Coarse out;
     const bool leaf = n.left < 0;
-    // A smooth edge is a silhouette only where p is in front of exactly one of its faces; a
-    // crease dark from behind counts only where p is in front of one of them at least.
-    if (leaf && ((!n.always && n.cone_cos > -1.f) || n.dark_behind)) {
+    // A smooth edge is a silhouette only where p is in front of exactly one of its faces. A
+    // crease is one there too; elsewhere its faces meet at a shading jump only, about as large
+    // as the angle between them (nothing where both are dark from behind).
+    float weight = 1.f;
+    if (leaf && (n.crease || (!n.always && n.cone_cos > -1.f))) {
         const Vec3f d = q.p - n.a;
         const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
-        if (n.always ? !(front0 || front1) : front0 == front1) return out;
+        if (front0 == front1) {
+            if (!n.always || (!front0 && n.dark_behind)) return out;
+            weight = crease_weight(n.dihedral);
+        }
     }
     const Vec3f v = n.center - q.p;
     const float dc2 = length_squared(v), r2 = n.radius * n.radius;
@@ -360,13 +376,15 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
     // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
     // silhouettes happen to carry the contribution).
     float fraction = 1.f;
-    if (!leaf && (!n.always || n.dark_behind) && n.cone_cos > -1.f) {
+    if (!leaf && (!n.always || n.crease) && n.cone_cos > -1.f) {
         const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
         const float ct = n.cone_cos, st = n.cone_sin;
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
-        if (n.always) {
-            if (!(hi > 0.f)) return out;  // p behind every face of the node's creases
+        if (n.always) {  // creases: silhouettes where the range straddles 0, shading jumps elsewhere
+            if (n.dark_behind && !(hi > 0.f)) return out;  // p behind every face
+            const float silhouettes = lo < 0.f && hi > 0.f ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
+            fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
         } else {
             if (!(lo < 0.f && hi > 0.f)) return out;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
@@ -381,7 +399,7 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
         // the lobe's own width (pi alpha) where that is less.
         double h = 0.0;
         const double integral = q.lobe.integral(q.p, n.a, n.b, &h);
-        out.value[0] = float(integral / std::max(h, 1e-3 * double(n.length)));
+        out.value[0] = weight * float(integral / std::max(h, 1e-3 * double(n.length)));
     } else {
         const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
         if (!(cn > 0.f)) return out;

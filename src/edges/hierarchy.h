@@ -115,6 +115,7 @@ private:
         int32_t edge = -1;          // leaf: index into scene.edges()
         Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
         bool always = false;        // holds a boundary edge or a crease
+        bool crease = false;        // holds only creases
         bool dark_behind = false;   // holds only creases whose faces are black seen from behind
     };
 public:
@@ -152,8 +153,9 @@ private:
     // light_refine: levels of children scoring its share of a narrow light cone.
     void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
-    // A subtree of at most this many edges is scored by the sum of its leaves.
-    static constexpr int kExactLeaves = 8;
+    // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
+    // where no leaf can contribute).
+    static constexpr int kExactLeaves = 16;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);
