@@ -452,12 +452,24 @@ const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t 
 void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
     const Node& n = nodes_[size_t(index)];
     if (n.left >= 0 && n.count <= kExactLeaves) {
-        // A small subtree: the sum of its leaves' own values.
+        // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
+        // node's own bounds, which are never needed).
+        if (q.memo)
+            if (const Coarse* kept = q.memo->find(index)) {
+                out[0] = kept->value[0];
+                out[1] = kept->value[1];
+                return;
+            }
         float a[2], b[2];
         importance(q, n.left, a, 0, 0);
         importance(q, n.right, b, 0, 0);
         out[0] = a[0] + b[0];
         out[1] = a[1] + b[1];
+        if (q.memo)
+            if (Coarse* kept = q.memo->insert(index)) {
+                kept->value[0] = out[0];
+                kept->value[1] = out[1];
+            }
         return;
     }
     const Coarse c = coarse_memo(q, index);

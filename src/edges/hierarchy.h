@@ -155,7 +155,7 @@ private:
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).
-    static constexpr int kExactLeaves = 16;
+    static constexpr int kExactLeaves = 8;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     void finish_inner(int32_t index);
