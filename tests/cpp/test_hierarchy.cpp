@@ -34,6 +34,15 @@ struct HierarchyScene {
     }
 };
 
+// A hierarchy over every edge of `scene`.
+EdgeHierarchy hierarchy_of_all(const Scene& scene) {
+    std::vector<int32_t> ids(scene.edges().size());
+    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
+    EdgeHierarchy h;
+    h.build(scene, ids);
+    return h;
+}
+
 BoundsCone cone_towards(const Vec3f& p, const Vec3f& c, float r) {
     BoundsCone cone;
     EXPECT_TRUE(cone.towards(p, c, r));
@@ -46,10 +55,8 @@ BoundsCone cone_towards(const Vec3f& p, const Vec3f& c, float r) {
 TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
-    std::vector<int32_t> ids(scene.edges().size());
-    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
-    EdgeHierarchy h;
-    h.build(scene, ids);
+    const EdgeHierarchy h = hierarchy_of_all(scene);
+    const size_t edges = scene.edges().size();
     const Vec3f p(0.3f, 0.01f, 0.4f);
     // A wide cone and a narrow one (cos half angle above 0.95: the light strategy splits).
     const BoundsCone wide = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.3f),
@@ -66,7 +73,7 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
         for (int s = 0; s < 2; ++s) {
             const auto strategy = EdgeHierarchy::Strategy(s);
             double sum = 0;
-            for (size_t e = 0; e < ids.size(); ++e) sum += h.pdf(q, int32_t(e)).prob[s];
+            for (size_t e = 0; e < edges; ++e) sum += h.pdf(q, int32_t(e)).prob[s];
             EXPECT_GT(sum, 0.1) << "strategy " << s;
             EXPECT_LE(sum, EdgeHierarchy::kMaxChoices + 1e-4) << "strategy " << s;
             const int n = 50000;
@@ -110,11 +117,7 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
 // edges with the same expected counts, bit for bit.
 TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
     HierarchyScene hs;
-    const Scene& scene = *hs.scene;
-    std::vector<int32_t> ids(scene.edges().size());
-    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
-    EdgeHierarchy h;
-    h.build(scene, ids);
+    const EdgeHierarchy h = hierarchy_of_all(*hs.scene);
     Rng rng(11, 2);
     EdgeHierarchy::Memo memo;
     int compared = 0;
@@ -281,10 +284,7 @@ TEST(EdgeHierarchy, AwkwardGeometryIsFinite) {
     light.emission = {le.data(), 1, 1, 3};
     d.meshes = {fins, floor.desc(0), light};
     std::shared_ptr<const Scene> scene = build_scene(d);
-    std::vector<int32_t> ids(scene->edges().size());
-    for (size_t i = 0; i < ids.size(); ++i) ids[i] = int32_t(i);
-    EdgeHierarchy h;
-    h.build(*scene, ids);
+    const EdgeHierarchy h = hierarchy_of_all(*scene);
     const BoundsCone cone = cone_towards(Vec3f(0, 0.5f, 0), Vec3f(0, 3, 0), 0.75f);
     // On the shared edge, at its end, on the zero-area face, on the floor.
     for (const Vec3f& p : {Vec3f(0, 0.5f, 0), Vec3f(0, 0, 0), Vec3f(0.5f, 0.2f, 1), Vec3f(0.3f, -0.5f, 0.2f)}) {
