@@ -14,7 +14,11 @@
 // descents and refinements visit it: Memo). The lobe bound (LobeBound) is a cosine bound for the
 // diffuse part plus a spherical-Gaussian approximation of a GGX lobe around the mirror
 // direction, both evaluated at the angle between the node and the direction minus the node's
-// angular radius. Two strategies share one descent's arithmetic: over all edges, and restricted
+// angular radius. A leaf is scored by the lobe bound's integral over the arc its edge subtends
+// (closed form) over the distance to the edge's line, a small subtree by the sum of its leaves.
+// A crease counts in full where it is a silhouette, by the angle between its faces where p sees
+// both from one side (a shading jump), not at all where p is behind both faces of a one-sided
+// material. Two strategies share one descent's arithmetic: over all edges, and restricted
 // to the cone of directions towards the lights (the edges that cast shadows; box-cone test), so
 // the probability of the chosen edge under both comes out of one traversal, for multiple
 // importance sampling. A node's share of a narrow light cone (smaller than the node) is scored
@@ -149,8 +153,9 @@ private:
     Coarse coarse(const Query& q, const Node& n) const;
     const Coarse& coarse_memo(const Query& q, int32_t index) const;
     // Node `index`'s importance under both strategies: its own bounds, or its children's where
-    // they are tighter. refine: levels of children scoring a node whose sphere holds p;
-    // light_refine: levels of children scoring its share of a narrow light cone.
+    // they are tighter, or for a subtree of at most kExactLeaves edges the sum of its leaves.
+    // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
+    // children scoring its share of a narrow light cone.
     void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
