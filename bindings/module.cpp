@@ -326,34 +326,57 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
     return g;
 }
 
+edgepath::ChannelLayout channel_layout(const std::vector<std::string>& names);  // below
+
+// What the gradient entry points share, in this order: the scene description, the options, the
+// channel layout (given `channels`; else radiance), the slots (reverse mode: gradient buffers,
+// forward mode: directions), then the built scene. Not copyable: the slots point into the views.
+struct GradientCall {
+    Described d;
+    edgepath::RenderOptions opt;
+    edgepath::ChannelLayout layout = edgepath::ChannelLayout::radiance();
+    SlotViews views;
+    edgepath::SceneGradients slots;
+    std::shared_ptr<const edgepath::Scene> scene;
+
+    GradientCall(bool reverse, const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                 nb::object envmap, const nb::dict& options, const std::vector<std::string>* channels,
+                 const nb::dict& slot_dict)
+        : views{reverse, {}, {}} {
+        describe(d, camera, materials, meshes, envmap);
+        opt = render_options(options);
+        if (channels) layout = channel_layout(*channels);
+        slots = gradient_slots(views, slot_dict, d.desc);
+        scene = build(d.desc);
+    }
+    GradientCall(const GradientCall&) = delete;
+    GradientCall& operator=(const GradientCall&) = delete;
+
+    // The adjoint: (H, W, values per pixel) float32, as the scene renders.
+    FloatView adjoint(nb::handle obj, const char* like) const {
+        FloatView a;
+        if (!nb::try_cast(obj, a, false) || a.ndim() != 3 || a.shape(2) != size_t(layout.num_values) ||
+            a.shape(0) != size_t(edgepath::image_height(*scene)) ||
+            a.shape(1) != size_t(edgepath::image_width(*scene)))
+            fail("adjoint", std::string("expected a C-contiguous float32 CPU array shaped like ") + like);
+        return a;
+    }
+};
+
 void render_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options) {
-    Described d;
-    describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
-    SlotViews views{true, {}, {}};
-    const edgepath::SceneGradients slots = gradient_slots(views, grads, d.desc);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
-    FloatView a;
-    if (!nb::try_cast(adjoint, a, false) || a.ndim() != 3 || a.shape(2) != 3 ||
-        a.shape(0) != size_t(edgepath::image_height(*scene)) ||
-        a.shape(1) != size_t(edgepath::image_width(*scene)))
-        fail("adjoint", "expected a C-contiguous float32 CPU array shaped like the image");
+    const GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads);
+    const FloatView a = c.adjoint(adjoint, "the image");
     nb::gil_scoped_release release;
-    edgepath::render_gradients(*scene, opt, a.data(), slots);
+    edgepath::render_gradients(*c.scene, c.opt, a.data(), c.slots);
 }
 
 void derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options) {
-    Described d;
-    describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
-    SlotViews views{false, {}, {}};
-    const edgepath::SceneGradients slots = gradient_slots(views, directions, d.desc);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
-    const ImageOut out = image_buffer(image, *scene, "image");
+    const GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions);
+    const ImageOut out = image_buffer(image, *c.scene, "image");
     nb::gil_scoped_release release;
-    edgepath::derivative_image(*scene, opt, slots, out.data());
+    edgepath::derivative_image(*c.scene, c.opt, c.slots, out.data());
 }
 
 // ---- output channels -------------------------------------------------------------------------
@@ -407,35 +430,19 @@ nb::dict render_channels(const nb::dict& camera, const nb::list& materials, cons
 void channel_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                        nb::object envmap, const std::vector<std::string>& channels, nb::handle adjoint,
                        const nb::dict& grads, const nb::dict& options) {
-    Described d;
-    describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
-    const edgepath::ChannelLayout layout = channel_layout(channels);
-    SlotViews views{true, {}, {}};
-    const edgepath::SceneGradients slots = gradient_slots(views, grads, d.desc);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
-    FloatView a;
-    if (!nb::try_cast(adjoint, a, false) || a.ndim() != 3 || a.shape(2) != size_t(layout.num_values) ||
-        a.shape(0) != size_t(edgepath::image_height(*scene)) ||
-        a.shape(1) != size_t(edgepath::image_width(*scene)))
-        fail("adjoint", "expected a C-contiguous float32 CPU array shaped like the channels' values");
+    const GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads);
+    const FloatView a = c.adjoint(adjoint, "the channels' values");
     nb::gil_scoped_release release;
-    edgepath::channel_gradients(*scene, opt, layout, a.data(), slots);
+    edgepath::channel_gradients(*c.scene, c.opt, c.layout, a.data(), c.slots);
 }
 
 void channel_derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                               nb::object envmap, const std::vector<std::string>& channels,
                               const nb::dict& directions, nb::handle values, const nb::dict& options) {
-    Described d;
-    describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
-    const edgepath::ChannelLayout layout = channel_layout(channels);
-    SlotViews views{false, {}, {}};
-    const edgepath::SceneGradients slots = gradient_slots(views, directions, d.desc);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
-    const ImageOut out = channel_buffer<ImageOut>(values, *scene, layout.num_values, "values", "float32");
+    const GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions);
+    const ImageOut out = channel_buffer<ImageOut>(values, *c.scene, c.layout.num_values, "values", "float32");
     nb::gil_scoped_release release;
-    edgepath::channel_derivative_image(*scene, opt, layout, slots, out.data());
+    edgepath::channel_derivative_image(*c.scene, c.opt, c.layout, c.slots, out.data());
 }
 
 // Moves `values` into a numpy array of the given shape (owned by a capsule).

@@ -99,25 +99,24 @@ def test_load_ply_quads_and_empty_faces(tmp_path):
         ep.load_ply(lines)
 
 
+# (file contents, the error message expected)
+PLY_ERRORS = [
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+     "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+     "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n", r"bad\.ply: vertex index 5 out of range for 3 vertices"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1 2\n", "bad.ply"),
+    ("solid cube\n", "not a PLY file"),
+    ("ply\nformat ascii 1.0\nelement vertex many\nend_header\n", "header line 3: bad element count"),
+    ("ply\nformat ascii 1.0\nelement vertex 0\nproperty fancy x\nend_header\n", "header line 4"),
+]
+
+
 def test_load_ply_errors(tmp_path):
     bad = tmp_path / "bad.ply"
-    bad.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
-                   "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
-                   "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n")
-    with pytest.raises(ValueError, match=r"bad\.ply: vertex index 5 out of range for 3 vertices"):
-        ep.load_ply(bad)
-    bad.write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1 2\n")
-    with pytest.raises(ValueError, match="bad.ply"):
-        ep.load_ply(bad)
-    bad.write_text("solid cube\n")
-    with pytest.raises(ValueError, match="not a PLY file"):
-        ep.load_ply(bad)
-    bad.write_text("ply\nformat ascii 1.0\nelement vertex many\nend_header\n")
-    with pytest.raises(ValueError, match="header line 3: bad element count"):
-        ep.load_ply(bad)
-    bad.write_text("ply\nformat ascii 1.0\nelement vertex 0\nproperty fancy x\nend_header\n")
-    with pytest.raises(ValueError, match="header line 4"):
-        ep.load_ply(bad)
+    for text, message in PLY_ERRORS:
+        bad.write_text(text)
+        with pytest.raises(ValueError, match=message):
+            ep.load_ply(bad)
     with pytest.raises(FileNotFoundError):
         ep.load_ply(tmp_path / "missing.ply")
 
