@@ -17,19 +17,6 @@ float sine(float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)
 float cos_minus(float cos_a, float cos_b, float sin_b) {
     return cos_a >= cos_b ? 1.f : cos_a * cos_b + sine(cos_a) * sin_b;
 }
-// The largest cosine between the unit vector u and the directions of the great-circle arc from
-// w0 to w1 (unit, less than pi apart): u's projection onto the arc's plane where that falls inside
-// the arc, else the nearer end.
-float max_cos_over_arc(const Vec3f& u, const Vec3f& w0, const Vec3f& w1) {
-    const float ends = std::max(dot(u, w0), dot(u, w1));
-    const Vec3f N = cross(w0, w1);
-    const float nn = length_squared(N);
-    if (!(nn > 1e-12f)) return ends;
-    const Vec3f in_plane = u - N * (dot(u, N) / nn);
-    if (dot(cross(w0, in_plane), N) >= 0.f && dot(cross(in_plane, w1), N) >= 0.f)
-        return std::max(ends, length(in_plane));
-    return ends;
-}
 // A crease seen with both faces on the same side of p: its share of a silhouette's importance,
 // the angle between the faces' normals (radians), no less than kMinCreaseWeight (texture seams
 // and nearly flat creases still get sampled).
@@ -440,13 +427,12 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
     return out;
 }
 
-const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t index) const {
+EdgeHierarchy::Coarse EdgeHierarchy::coarse_memo(const Query& q, int32_t index) const {
     if (q.memo) {
         if (const Coarse* c = q.memo->find(index)) return *c;
         if (Coarse* c = q.memo->insert(index)) return *c = coarse(q, nodes_[size_t(index)]);
     }
-    thread_local Coarse scratch;
-    return scratch = coarse(q, nodes_[size_t(index)]);
+    return coarse(q, nodes_[size_t(index)]);
 }
 
 void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {

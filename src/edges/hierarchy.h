@@ -151,7 +151,7 @@ public:
 
 private:
     Coarse coarse(const Query& q, const Node& n) const;
-    const Coarse& coarse_memo(const Query& q, int32_t index) const;
+    Coarse coarse_memo(const Query& q, int32_t index) const;
     // Node `index`'s importance under both strategies: its own bounds, or its children's where
     // they are tighter, or for a subtree of at most kExactLeaves edges the sum of its leaves.
     // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
