@@ -61,8 +61,10 @@ float LobeBound::eval(const Vec3f& w) const {
 }
 
 double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
-    // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1], with b along the edge and
-    // a towards the foot of the perpendicular from p; h the distance to the edge's line.
+    // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1] (less than pi apart), with b
+    // along the edge and a towards the foot of the perpendicular from p; h the distance to the
+    // edge's line. Everything below needs only w and dw/dphi = -a sin(phi) + b cos(phi) at the
+    // two ends (no angles): the antiderivatives are written in those.
     const Vec3d q(p.x, p.y, p.z), x0(v0.x, v0.y, v0.z), x1(v1.x, v1.y, v1.z);
     const Vec3d e = x1 - x0;
     const double len = length(e);
@@ -75,35 +77,42 @@ double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, dou
     if (h_out) *h_out = h;
     if (!(h > 1e-12 * (len + length(x0 - q)))) return 0.0;
     const Vec3d a = hv / h;
-    const double phi0 = std::atan(-foot / h), phi1 = std::atan((len - foot) / h);
-    const Vec3d nn(n.x, n.y, n.z), rr(r.x, r.y, r.z);
+    // The ends: cos and sin of phi0, phi1.
+    const double r0 = std::sqrt(h * h + foot * foot), r1 = std::sqrt(h * h + (len - foot) * (len - foot));
+    const double c0 = h / r0, s0 = -foot / r0, c1 = h / r1, s1 = (len - foot) / r1;
+    const Vec3d w0 = a * c0 + b * s0, w1 = a * c1 + b * s1, d0 = b * c0 - a * s0, d1 = b * c1 - a * s1;
     double total = 0.0;
-    // Diffuse: n . w = N cos(phi - psi), counted where positive (psi +- pi/2, shifted by 2 pi).
+    // Diffuse: the antiderivative of n . w is -n . dw/dphi, counted where n . w > 0: an arc
+    // shorter than pi meets that half circle in one piece, entered (n . w rising through 0)
+    // where the antiderivative is -|n_plane| and left where it is +|n_plane|.
     if (diffuse > 0.f) {
-        const double A = dot(nn, a), B = dot(nn, b), N = std::sqrt(A * A + B * B), psi = std::atan2(B, A);
-        double sum = 0.0;
-        for (int k = -1; k <= 1; ++k) {
-            const double c = psi + 2.0 * k * kPiD, lo = std::max(phi0, c - 0.5 * kPiD), hi = std::min(phi1, c + 0.5 * kPiD);
-            if (hi > lo) sum += N * (std::sin(hi - c) - std::sin(lo - c));
-        }
-        total += diffuse * sum;
+        const Vec3d nn(n.x, n.y, n.z);
+        const double A = dot(nn, a), B = dot(nn, b), N = std::sqrt(A * A + B * B);
+        const bool in0 = dot(nn, w0) > 0.0, in1 = dot(nn, w1) > 0.0;
+        if (in0 || in1) total += diffuse * ((in1 ? -dot(nn, d1) : N) - (in0 ? -dot(nn, d0) : -N));
     }
-    // Glossy: 1 / (1 + s (1 - r . w))^2 = 1 / (A + B cos x)^2, A = 1 + s, B = -s R, x = phi - psi;
-    // its antiderivative (A > |B|), with atan's branch unwrapped across x = +-pi:
-    //   (-B sin x / (A + B cos x) + A (2 / k) atan(c tan(x / 2))) / k^2,  k^2 = A^2 - B^2,
-    //   c = sqrt((A - B) / (A + B)).
+    // Glossy: with r . w = R cos(x), x = phi - psi, the integrand 1 / (1 + s (1 - r . w))^2 is
+    // 1 / (A + B cos x)^2, A = 1 + s, B = -s R, whose antiderivative (A > |B|) is
+    //   (-B sin x / (A + B cos x) + (2 A / k) atan(c tan(x / 2))) / k^2,
+    //   k^2 = A^2 - B^2,  c = sqrt((A - B) / (A + B)).
+    // The first term is -s (r . dw/dphi) / (1 + s (1 - r . w)). The second's change along the arc
+    // is the angle turned by (cos(x / 2), c sin(x / 2)) as x / 2 goes from x0 / 2 to
+    // x0 / 2 + (phi1 - phi0) / 2 (less than pi / 2, so less than pi after the map).
     if (specular > 0.f) {
+        const Vec3d rr(r.x, r.y, r.z);
         const double s = sharpness, Ar = dot(rr, a), Br = dot(rr, b), R = std::min(1.0, std::sqrt(Ar * Ar + Br * Br));
-        const double psi = std::atan2(Br, Ar), A = 1.0 + s, B = -s * R;
         const double k2 = (1.0 + s * (1.0 - R)) * (1.0 + s * (1.0 + R)), k = std::sqrt(k2);
         const double c = std::sqrt((1.0 + s * (1.0 + R)) / (1.0 + s * (1.0 - R)));
-        auto F = [&](double x) {
-            const double turns = std::floor((x + kPiD) / (2.0 * kPiD));
-            const double xr = x - 2.0 * kPiD * turns;  // in [-pi, pi)
-            const double i1 = (2.0 / k) * (std::atan(c * std::tan(0.5 * xr)) + kPiD * turns);
-            return (-B * std::sin(x) / (A + B * std::cos(x)) + A * i1) / k2;
-        };
-        total += specular * std::max(0.0, F(phi1 - psi) - F(phi0 - psi));
+        const double rw0 = dot(rr, w0), rw1 = dot(rr, w1);
+        const double first = -s * dot(rr, d1) / (1.0 + s * (1.0 - rw1)) + s * dot(rr, d0) / (1.0 + s * (1.0 - rw0));
+        // Half of x0: cos x0 = r . w0 / R, sin x0 = -r . dw0 / R (any x0 where R = 0).
+        const double cx = R > 0.0 ? std::clamp(rw0 / R, -1.0, 1.0) : 1.0, sx = R > 0.0 ? -dot(rr, d0) : 0.0;
+        const double ch = std::sqrt(0.5 * (1.0 + cx)), sh = std::copysign(std::sqrt(0.5 * (1.0 - cx)), sx);
+        // Half the arc's angle: cos(phi1 - phi0) = w0 . w1.
+        const double cd = std::clamp(dot(w0, w1), -1.0, 1.0), chd = std::sqrt(0.5 * (1.0 + cd)), shd = std::sqrt(0.5 * (1.0 - cd));
+        const double ch1 = ch * chd - sh * shd, sh1 = sh * chd + ch * shd;
+        const double turned = std::atan2(c * shd, ch * ch1 + c * c * sh * sh1);
+        total += specular * std::max(0.0, (first + (2.0 * (1.0 + s) / k) * turned) / k2);
     }
     return total;
 }
@@ -129,6 +138,7 @@ struct EdgeHierarchy::Input {
     std::vector<uint8_t> always;
     std::vector<uint8_t> crease;       // a crease (with two faces of nonzero area)
     std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
+    std::vector<uint8_t> emissive;     // an edge of an emitter
     const std::vector<int32_t>* ids;
 };
 
@@ -153,6 +163,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         node.n0 = in.n0[i];
         node.n1 = in.n1[i];
         node.dark_behind = in.dark_behind[i] != 0;
+        node.emissive = in.emissive[i] != 0;
         node.crease = in.crease[i] != 0;
         const Vec3f s = in.n0[i] + in.n1[i];
         if ((!node.always || node.crease) && length(s) > 1e-6f) {
@@ -240,6 +251,7 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.count = a.count + b.count;
     n.always = a.always || b.always;
     n.dark_behind = a.dark_behind && b.dark_behind;
+    n.emissive = a.emissive || b.emissive;
     n.crease = a.crease && b.crease;
     n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
     n.cone_cos = -1.f;
@@ -259,6 +271,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
     in.n1.assign(n, Vec3f(0.f));
     in.always.resize(n);
     in.dark_behind.assign(n, 0);
+    in.emissive.assign(n, 0);
     in.crease.assign(n, 0);
     in.ids = &edges;
     std::vector<int32_t> items;  // the discontinuities from everywhere first, then the smooth edges
@@ -275,6 +288,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
         const Material& mat = scene.materials[size_t(m.material)];
         in.crease[i] = e.kind == EdgeKind::Crease;
         in.dark_behind[i] = in.crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+        in.emissive[i] = m.is_emitter();
         if (!in.always[i] || in.crease[i]) {
             const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
             // A face of zero area has no side: its edge is treated as a discontinuity.
@@ -323,7 +337,7 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
         const Vec3f d = q.p - n.a;
         const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
         if (front0 == front1) {
-            if (!n.always || (!front0 && n.dark_behind)) return out;
+            if (!n.always || (!front0 && n.dark_behind) || (q.direct_only && !n.emissive)) return out;
             weight = crease_weight(n.dihedral);
         }
     }
@@ -370,8 +384,14 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
         if (n.always) {  // creases: silhouettes where the range straddles 0, shading jumps elsewhere
             if (n.dark_behind && !(hi > 0.f)) return out;  // p behind every face
-            const float silhouettes = lo < 0.f && hi > 0.f ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
-            fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
+            const bool straddles = lo < 0.f && hi > 0.f;
+            if (q.direct_only && !n.emissive) {  // silhouettes only, as for smooth edges
+                if (!straddles) return out;
+                fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
+            } else {
+                const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
+                fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
+            }
         } else {
             if (!(lo < 0.f && hi > 0.f)) return out;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);

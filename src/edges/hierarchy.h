@@ -82,6 +82,10 @@ public:
         LobeBound lobe;
         const BoundsCone* cone = nullptr;  // the lights; nullptr: no second strategy
         Memo* memo = nullptr;              // optional
+        // Only light arriving straight from emitters counts (the vertex's last bounce): a crease
+        // of a mesh that does not emit, seen with both faces on one side, has the same (no)
+        // emission either side and adds nothing.
+        bool direct_only = false;
     };
     enum Strategy { All = 0, Lights = 1 };
     struct Choice {
@@ -121,6 +125,7 @@ private:
         bool always = false;        // holds a boundary edge or a crease
         bool crease = false;        // holds only creases
         bool dark_behind = false;   // holds only creases whose faces are black seen from behind
+        bool emissive = false;      // holds an edge of an emitter
     };
 public:
     // A node's own bounds at a point: its importance under both strategies; whether p lies

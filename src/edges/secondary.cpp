@@ -94,6 +94,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     memo.reset();
     q.memo = &memo;
     q.p = sp.p;
+    q.direct_only = bounces_left == 0;
     q.lobe = LobeBound::make(n, wo, mean(bsdf.diffuse), mean(bsdf.specular), bsdf.alpha);
     // Strategy All: over all edges; strategy Lights: the edges and the parts of them inside the
     // cone towards the lights. Balance heuristic on the joint density of (edge, t).

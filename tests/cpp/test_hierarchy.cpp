@@ -112,6 +112,73 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     EXPECT_GT(split_seen, 0);  // the splitting descents were exercised
 }
 
+// A vertex's last bounce sees only emission, so a crease of a mesh that does not emit adds
+// nothing where the point is in front of both its faces: such creases are never picked then
+// (and still are otherwise), while silhouettes, and creases of an emitter, still are. (The
+// boxes' face diagonals are creases of no angle.)
+TEST(EdgeHierarchy, LastBounceSkipsCreasesThatCannotChangeEmission) {
+    MeshData dark = make_box(Vec3f(-1.f, 1.f, -0.5f), Vec3f(-0.2f, 1.8f, 0.5f)),
+             bright = make_box(Vec3f(0.4f, 1.f, -0.5f), Vec3f(1.2f, 1.8f, 0.5f));
+    std::vector<float> kd = {0.5f, 0.5f, 0.5f}, ks = {0, 0, 0}, rough = {0.5f}, glow = {1.f, 1.f, 1.f};
+    SceneDesc d;
+    d.camera.width = d.camera.height = 8;
+    d.camera.position[2] = -5;
+    MaterialDesc m;
+    m.diffuse = {kd.data(), 1, 1, 3};
+    m.specular = {ks.data(), 1, 1, 3};
+    m.roughness = {rough.data(), 1, 1, 1};
+    d.materials.push_back(m);
+    d.meshes = {dark.desc(0), bright.desc(0)};
+    d.meshes[1].emission = {glow.data(), 1, 1, 3};
+    const std::shared_ptr<const Scene> scene = build_scene(d);
+    const EdgeHierarchy h = hierarchy_of_all(*scene);
+    EdgeHierarchy::Query q;
+    q.p = Vec3f(0.1f, 0.2f, -1.2f);  // below both boxes and in front of them
+    q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(0, 1, -1)), 0.5f, 0.f, 0.5f);
+    int culled = 0, kept_dark = 0, kept_bright = 0;
+    for (size_t i = 0; i < scene->edges().size(); ++i) {
+        const Edge& e = scene->edges()[i];
+        ASSERT_EQ(e.kind, EdgeKind::Crease);
+        const Mesh& mesh = scene->meshes[size_t(e.mesh)];
+        const Vec3f x = mesh.vertex(e.v0);
+        const bool front0 = dot(q.p - x, mesh.face_normal(e.f0)) > 0.f, front1 = dot(q.p - x, mesh.face_normal(e.f1)) > 0.f;
+        q.direct_only = false;
+        const float every = h.pdf(q, int32_t(i)).prob[0];
+        q.direct_only = true;
+        const float last = h.pdf(q, int32_t(i)).prob[0];
+        // Behind both faces (one-sided, no emission from the back): never, in either mode.
+        if (!front0 && !front1) {
+            EXPECT_EQ(every, 0.f) << "edge " << i;
+            EXPECT_EQ(last, 0.f) << "edge " << i;
+            continue;
+        }
+        EXPECT_GT(every, 0.f) << "edge " << i;
+        if (front0 && front1 && e.mesh == 0) {
+            EXPECT_EQ(last, 0.f) << "edge " << i;
+            ++culled;
+        } else {
+            EXPECT_GT(last, 0.f) << "edge " << i;
+            (e.mesh == 0 ? kept_dark : kept_bright)++;
+        }
+    }
+    EXPECT_GT(culled, 0);
+    EXPECT_GT(kept_dark, 0);  // the dark box's silhouette
+    EXPECT_GT(kept_bright, 0);
+    // sample() agrees: it never picks a culled crease, and its counts are pdf()'s.
+    q.direct_only = true;
+    Rng rng(5, 2);
+    for (int i = 0; i < 2000; ++i) {
+        EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+        const int n = h.sample(q, EdgeHierarchy::All, rng.next_float(), c);
+        ASSERT_GT(n, 0);
+        for (int j = 0; j < n; ++j) {
+            const float want = h.pdf(q, c[j].edge).prob[0];
+            EXPECT_GT(want, 0.f);
+            EXPECT_NEAR(c[j].prob[0], want, 1e-5f * want);
+        }
+    }
+}
+
 // The memo of node bounds changes nothing: with and without it (and with one memo kept across
 // both strategies and many descents, as a render keeps it per vertex), sample() picks the same
 // edges with the same expected counts, bit for bit.
@@ -334,7 +401,7 @@ namespace {
 
 // LobeBound::integral (closed form) against a fine midpoint rule over the arc's angle, for
 // diffuse, glossy and mixed lobes, edges above the horizon (the closed form does not cut the
-// glossy part off below it), sharp lobes included.
+// glossy part off below it) or, for diffuse lobes, across it; sharp lobes included.
 TEST(LobeBound, IntegralMatchesQuadrature) {
     Rng rng(3, 9);
     int checked = 0;
@@ -344,8 +411,10 @@ TEST(LobeBound, IntegralMatchesQuadrature) {
         const float alpha = 0.02f + 0.5f * rng.next_float();
         const int kind = i % 3;
         const LobeBound lobe = LobeBound::make(n, wo, kind == 1 ? 0.f : 0.6f, kind == 0 ? 0.f : 0.8f, alpha);
+        // Diffuse lobes: edges crossing the horizon too (the cosine is cut off at it).
+        const float low = kind == 0 ? -1.f : 0.05f;
         auto point = [&] {
-            return Vec3f(4.f * rng.next_float() - 2.f, 0.05f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+            return Vec3f(4.f * rng.next_float() - 2.f, low + (2.05f - low) * rng.next_float(), 4.f * rng.next_float() - 2.f);
         };
         const Vec3f v0 = point(), v1 = point();
         double h = 0.0;
