@@ -45,6 +45,7 @@ LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float 
         const float a = std::max(alpha, 0.02f);
         b.specular = specular / (4.f * kPi * a * a * std::max(co, 0.1f));
         b.sharpness = 1.f / (2.f * a * a);
+        b.width = kPi * a;  // the integral of 1 / (1 + x^2 / (2 a^2))^2 over the line
     }
     return b;
 }
@@ -377,6 +378,7 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
     // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
     // silhouettes happen to carry the contribution).
     float fraction = 1.f;
+    bool silhouettes_only = false;
     if (!leaf && (!n.always || n.crease) && n.cone_cos > -1.f) {
         const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
         const float ct = n.cone_cos, st = n.cone_sin;
@@ -387,6 +389,7 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
             const bool straddles = lo < 0.f && hi > 0.f;
             if (q.direct_only && !n.emissive) {  // silhouettes only, as for smooth edges
                 if (!straddles) return out;
+                silhouettes_only = true;
                 fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
             } else {
                 const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
@@ -394,6 +397,7 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
             }
         } else {
             if (!(lo < 0.f && hi > 0.f)) return out;
+            silhouettes_only = true;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
         }
     }
@@ -408,12 +412,32 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
         const double integral = q.lobe.integral(q.p, n.a, n.b, &h);
         out.value[0] = weight * float(integral / std::max(h, 1e-3 * double(n.length)));
     } else {
-        const float cn = cos_minus(dot(q.lobe.n, dir), cos_b, sin_b);
+        // The largest cosine between a lobe axis and the node's directions; for silhouettes,
+        // also no more than that to the band of directions a silhouette can have: a direction w
+        // along which p sees a silhouette is perpendicular to some normal between the edge's two
+        // faces', so within the cone's half angle theta of the great circle perpendicular to its
+        // axis (for theta below pi / 2).
+        const bool band = silhouettes_only && n.cone_cos > 0.f;
+        auto largest = [&](const Vec3f& axis) {
+            float c = cos_minus(dot(axis, dir), cos_b, sin_b);
+            if (band) {
+                const float x = std::abs(dot(axis, n.cone_axis));
+                if (x > n.cone_sin) c = std::min(c, sine(x) * n.cone_cos + x * n.cone_sin);
+            }
+            return c;
+        };
+        const float cn = largest(q.lobe.n);
         if (!(cn > 0.f)) return out;
         float bound = q.lobe.diffuse * cn;
         if (q.lobe.specular > 0.f) {
-            const float s = 1.f + q.lobe.sharpness * (1.f - cos_minus(dot(q.lobe.r, dir), cos_b, sin_b));
-            bound += q.lobe.specular / (s * s);
+            // Silhouettes are curves: one crosses the node's directions along a chord of about
+            // twice its angular radius, over which the lobe averages at most its width over
+            // the chord's length times its largest value (an estimate, as a leaf's value is the
+            // lobe's integral along its edge; without it, nodes wider than the lobe would all
+            // score the lobe's peak).
+            const float s = 1.f + q.lobe.sharpness * (1.f - largest(q.lobe.r));
+            const float chord = std::min(1.f, q.lobe.width / (2.f * std::max(sin_b, 1e-6f)));
+            bound += q.lobe.specular * chord / (s * s);
         }
         out.value[0] = n.length * fraction * bound / d2;
     }

@@ -56,6 +56,9 @@ struct LobeBound {
     Vec3f n = Vec3f(0.f, 0.f, 1.f);  // the normal on the side of the outgoing direction
     Vec3f r = Vec3f(0.f, 0.f, 1.f);  // the outgoing direction mirrored about n
     float diffuse = 1.f, specular = 0.f, sharpness = 0.f;
+    // The glossy part's integral along a great circle through its peak, in angle, over its peak
+    // value: about pi alpha.
+    float width = 0.f;
     // From a BSDF's mean diffuse and specular albedo, GGX alpha and cos(n, wo) > 0.
     static LobeBound make(const Vec3f& n, const Vec3f& wo, float diffuse, float specular, float alpha);
     // The value at direction w (unit).

@@ -179,6 +179,45 @@ TEST(EdgeHierarchy, LastBounceSkipsCreasesThatCannotChangeEmission) {
     }
 }
 
+// What culls a node (its normal cone and planes, the band of directions its silhouettes can
+// have, the lobe's horizon, creases at a last bounce) never culls an edge that can contribute:
+// from points all around a smooth sphere, a box and a floor, with diffuse, glossy and sharp
+// lobes, every silhouette (and boundary edge) with an end clearly above the point's horizon
+// has a nonzero probability.
+TEST(EdgeHierarchy, EveryEdgeThatCanContributeCanBePicked) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    const EdgeHierarchy h = hierarchy_of_all(scene);
+    Rng rng(11, 4);
+    int checked = 0;
+    for (int i = 0; i < 240; ++i) {
+        EdgeHierarchy::Query q;
+        q.p = Vec3f(4.f * rng.next_float() - 2.f, 0.01f + 2.5f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+        const Vec3f n = normalize(Vec3f(rng.next_float() - 0.5f, 1.f, rng.next_float() - 0.5f));
+        const Vec3f wo = normalize(n + Vec3f(rng.next_float() - 0.5f, 0.f, rng.next_float() - 0.5f) * 1.5f);
+        const int kind = i % 3;
+        q.lobe = LobeBound::make(n, wo, kind == 1 ? 0.f : 0.5f, kind == 0 ? 0.f : 0.8f, kind == 2 ? 0.02f : 0.2f);
+        q.direct_only = (i / 3) % 2 == 1;
+        for (size_t e = 0; e < scene.edges().size(); ++e) {
+            const Edge& edge = scene.edges()[e];
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f v0 = m.vertex(edge.v0), v1 = m.vertex(edge.v1);
+            const bool above = dot(v0 - q.p, n) > 0.05f * length(v0 - q.p) || dot(v1 - q.p, n) > 0.05f * length(v1 - q.p);
+            if (!above || length(v1 - v0) == 0.f) continue;
+            bool silhouette = edge.kind == EdgeKind::Boundary;
+            if (edge.kind != EdgeKind::Boundary) {
+                const Vec3f n0 = m.face_normal(edge.f0), n1 = m.face_normal(edge.f1);
+                if (length(n0) == 0.f || length(n1) == 0.f) continue;
+                silhouette = is_silhouette(q.p, v0, normalize(n0), normalize(n1), EdgeKind::Smooth);
+            }
+            if (!silhouette) continue;
+            EXPECT_GT(h.pdf(q, int32_t(e)).prob[0], 0.f) << "query " << i << " edge " << e;
+            ++checked;
+        }
+    }
+    EXPECT_GT(checked, 2000);  // about 2400
+}
+
 // The memo of node bounds changes nothing: with and without it (and with one memo kept across
 // both strategies and many descents, as a render keeps it per vertex), sample() picks the same
 // edges with the same expected counts, bit for bit.
@@ -217,7 +256,9 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
 }
 
 // A glossy lobe concentrates the probability on the edges near the mirror direction: from a
-// point on a (virtual) floor, the sphere in the mirror direction against the box 30 degrees off.
+// point on a (virtual) floor, the mirror direction grazes the top of the sphere's outline (its
+// silhouette), with the box 30 degrees off. The share of the sphere's edges follows the
+// leaves' own values (the lobe's integral along each silhouette, over the distance to it).
 TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
@@ -226,26 +267,47 @@ TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
         if (scene.edges()[i].mesh != 2) ids.push_back(int32_t(i));
     EdgeHierarchy h;
     h.build(scene, ids);
-    const Vec3f p(-1.5f, 0.01f, 0.f), towards = normalize(Vec3f(0, 1, 0) - p);
+    const Vec3f p(-1.5f, 0.01f, 0.f), c(0, 1, 0);
+    // The direction to the sphere's centre, turned up by the outline's angular radius.
+    const Vec3f to_c = normalize(c - p), up = normalize(Vec3f(0, 1, 0) - to_c * to_c.y);
+    const float beta = std::asin(0.5f / length(c - p));
+    const Vec3f towards = to_c * std::cos(beta) + up * std::sin(beta);
     const Vec3f wo = normalize(Vec3f(-towards.x, towards.y, -towards.z));
-    EdgeHierarchy::Query diffuse, glossy;
-    diffuse.p = glossy.p = p;
-    diffuse.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.5f, 0.f, 0.1f);
-    glossy.lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.f, 0.5f, 0.1f);
-    double on_sphere[2] = {0, 0}, total[2] = {0, 0};
-    for (int32_t e : ids) {
-        const float pd = h.pdf(diffuse, e).prob[0], pg = h.pdf(glossy, e).prob[0];
-        total[0] += pd;
-        total[1] += pg;
-        if (scene.edges()[size_t(e)].mesh == 0) {
-            on_sphere[0] += pd;
-            on_sphere[1] += pg;
+    EdgeHierarchy::Query queries[2];  // diffuse, glossy
+    for (EdgeHierarchy::Query& q : queries) q.p = p;
+    queries[0].lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.5f, 0.f, 0.1f);
+    queries[1].lobe = LobeBound::make(Vec3f(0, 1, 0), wo, 0.f, 0.5f, 0.1f);
+    double share[2], leaf_share[2];
+    for (int k = 0; k < 2; ++k) {
+        const EdgeHierarchy::Query& q = queries[k];
+        double on_sphere = 0, total = 0, leaf_sphere = 0, leaf_total = 0;
+        for (int32_t e : ids) {
+            const Edge& edge = scene.edges()[size_t(e)];
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const float pe = h.pdf(q, e).prob[0];
+            total += pe;
+            // A leaf's value: a silhouette's (or a crease's: its faces meet at right angles)
+            // lobe integral over the distance to its line.
+            const Vec3f v0 = m.vertex(edge.v0), v1 = m.vertex(edge.v1);
+            const bool counts = edge.kind == EdgeKind::Crease ||
+                                is_silhouette(p, v0, normalize(m.face_normal(edge.f0)), normalize(m.face_normal(edge.f1)),
+                                              EdgeKind::Smooth);
+            double dist = 0.0;
+            const double leaf = counts ? q.lobe.integral(p, v0, v1, &dist) / dist : 0.0;
+            leaf_total += leaf;
+            if (edge.mesh == 0) {
+                on_sphere += pe;
+                leaf_sphere += leaf;
+            }
         }
+        share[k] = on_sphere / total;
+        leaf_share[k] = leaf_sphere / leaf_total;
+        EXPECT_NEAR(share[k], leaf_share[k], 0.05) << (k ? "glossy" : "diffuse");
     }
-    const double diffuse_share = on_sphere[0] / total[0], glossy_share = on_sphere[1] / total[1];
-    std::printf("sphere's share: diffuse %.3f, glossy %.3f\n", diffuse_share, glossy_share);
+    std::printf("sphere's share: diffuse %.3f (leaves %.3f), glossy %.3f (leaves %.3f)\n", share[0], leaf_share[0],
+                share[1], leaf_share[1]);
     // The box loses at least a third of its share.
-    EXPECT_LT(1 - glossy_share, 0.67 * (1 - diffuse_share));
+    EXPECT_LT(1 - share[1], 0.67 * (1 - share[0]));
 }
 
 // The point sampler: each strategy's density integrates to one over the edge (the light strategy
