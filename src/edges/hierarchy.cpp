@@ -259,7 +259,22 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.cone_sin = 0.f;
 }
 
-void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges) {
+void EdgeHierarchy::build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end,
+                                int32_t index, int32_t parent) {
+    if (split == begin || split == end) {
+        build_range(in, items, begin, end, index, parent);
+        return;
+    }
+    Node& node = nodes_[size_t(index)];
+    node.parent = parent;
+    node.left = index + 1;
+    node.right = index + 2 * (split - begin);
+    build_range(in, items, begin, split, node.left, index);
+    build_range(in, items, split, end, node.right, index);
+    finish_inner(index);  // holds discontinuities: never culled
+}
+
+void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges, size_t group) {
     const auto start = std::chrono::steady_clock::now();
     nodes_.clear();
     const std::vector<Edge>& all = scene.edges();
@@ -275,7 +290,9 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
     in.emissive.assign(n, 0);
     in.crease.assign(n, 0);
     in.ids = &edges;
-    std::vector<int32_t> items;  // the discontinuities from everywhere first, then the smooth edges
+    // The group's edges, then the others; in each, the discontinuities from everywhere first,
+    // then the smooth edges.
+    std::vector<int32_t> items;
     items.reserve(n);
     for (size_t i = 0; i < n; ++i) {
         const Edge& e = all[size_t(edges[i])];
@@ -303,23 +320,31 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges)
             }
         }
     }
-    for (size_t i = 0; i < n; ++i)
-        if (in.always[i]) items.push_back(int32_t(i));
-    const int split = int(items.size());
-    for (size_t i = 0; i < n; ++i)
-        if (!in.always[i]) items.push_back(int32_t(i));
+    const bool everything = n > 0 && group >= n;
+    if (everything) group = 0;  // no subtree of their own: the root is theirs
+    int splits[2] = {0, 0};
+    for (int g = 0; g < 2; ++g) {
+        const size_t lo = g == 0 ? 0 : group, hi = g == 0 ? group : n;
+        for (size_t i = lo; i < hi; ++i)
+            if (in.always[i]) items.push_back(int32_t(i));
+        splits[g] = int(items.size());
+        for (size_t i = lo; i < hi; ++i)
+            if (!in.always[i]) items.push_back(int32_t(i));
+    }
+    group_root_ = group > 0 ? 1 : (everything ? 0 : -1);
     if (n > 0) {
         nodes_.resize(2 * n - 1);
-        if (split == 0 || split == int(n)) {
-            build_range(in, items, 0, int(n), 0, -1);
+        if (group == 0) {
+            build_kinds(in, items, 0, splits[1], int(n), 0, -1);
         } else {
-            // Two trees under one root.
+            // The group's subtree and the others' under one root.
+            const int g = int(group);
             Node& root = nodes_[0];
             root.left = 1;
-            root.right = 2 * split;
-            build_range(in, items, 0, split, root.left, 0);
-            build_range(in, items, split, int(n), root.right, 0);
-            finish_inner(0);  // holds discontinuities: never culled
+            root.right = 2 * g;
+            build_kinds(in, items, 0, splits[0], g, root.left, 0);
+            build_kinds(in, items, g, splits[1], int(n), root.right, 0);
+            finish_inner(0);
         }
     }
     build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
@@ -570,10 +595,10 @@ bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], con
     return lo >= kComparable * hi && il[k] + ir[k] >= kLarge * whole[k];
 }
 
-int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices]) const {
-    if (nodes_.empty() || (s == Lights && !q.cone)) return 0;
+int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices], int32_t start) const {
+    if (nodes_.empty() || start < 0 || size_t(start) >= nodes_.size() || (s == Lights && !q.cone)) return 0;
     float root[2];
-    importance(q, 0, root);
+    importance(q, start, root);
     if (!(root[s] > 0.f)) return 0;
     // Pending descents: the node, its u, the expected counts so far and the splits made so far
     // (under both strategies: the other strategy's count follows its own splitting rule).
@@ -585,7 +610,7 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
     };
     Item stack[kMaxChoices + 1];
     int top = 0, count = 0;
-    stack[top++] = Item{0, u, {root[0] > 0.f ? 1.f : 0.f, root[1] > 0.f ? 1.f : 0.f}, {0, 0}};
+    stack[top++] = Item{start, u, {root[0] > 0.f ? 1.f : 0.f, root[1] > 0.f ? 1.f : 0.f}, {0, 0}};
     while (top > 0) {
         Item it = stack[--top];
         bool alive = true;
@@ -639,18 +664,24 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
     return count;
 }
 
-EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge) const {
+EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge, int32_t start) const {
     Choice c;
     c.edge = edge;
-    if (size_t(edge) >= leaf_of_.size() || leaf_of_[size_t(edge)] < 0) return c;
-    float root[2];
-    importance(q, 0, root);
-    c.prob[0] = root[0] > 0.f ? 1.f : 0.f;
-    c.prob[1] = root[1] > 0.f ? 1.f : 0.f;
-    // The path from the root down (the splits depend on those made above).
+    if (size_t(edge) >= leaf_of_.size() || leaf_of_[size_t(edge)] < 0 || start < 0) return c;
+    // The path from `start` down (the splits depend on those made above); none if the edge is
+    // not under it.
     int32_t path[128];
     int depth = 0;
-    for (int32_t at = leaf_of_[size_t(edge)]; at >= 0 && depth < 128; at = nodes_[size_t(at)].parent) path[depth++] = at;
+    int32_t at = leaf_of_[size_t(edge)];
+    for (; at >= 0 && depth < 128; at = nodes_[size_t(at)].parent) {
+        path[depth++] = at;
+        if (at == start) break;
+    }
+    if (at != start) return c;
+    float root[2];
+    importance(q, start, root);
+    c.prob[0] = root[0] > 0.f ? 1.f : 0.f;
+    c.prob[1] = root[1] > 0.f ? 1.f : 0.f;
     int used[2] = {0, 0};
     for (int i = depth - 1; i > 0; --i) {
         const Node& n = nodes_[size_t(path[i])];

@@ -71,8 +71,12 @@ struct LobeBound {
 
 class EdgeHierarchy {
 public:
-    // Builds over the edges of `scene` listed in `edges` (indices into scene.edges()).
-    void build(const Scene& scene, const std::vector<int32_t>& edges);
+    // Builds over the edges of `scene` listed in `edges` (indices into scene.edges()). The first
+    // `group` of them (if neither none nor all) get a subtree of their own under the root,
+    // group_root(), which sample() and pdf() can start from to pick among those alone.
+    void build(const Scene& scene, const std::vector<int32_t>& edges, size_t group = 0);
+    // The node over the group's edges: 0 (the root) when they are all the edges, -1 when none.
+    int32_t group_root() const { return group_root_; }
     bool empty() const { return nodes_.empty(); }
     double build_ms() const { return build_ms_; }
 
@@ -100,13 +104,13 @@ public:
     // a large part of the whole, and (strategy Lights) where the light cone is narrow. So a query
     // gives up to kMaxChoices edges, each at most once.
     static constexpr int kMaxSplits = 2, kMaxChoices = 1 << kMaxSplits;
-    // Picks edges with strategy `s` (Lights needs q.cone), writing up to kMaxChoices of them to
-    // `out`, each with its expected count under both strategies. Returns how many (0: no edge can
-    // contribute).
-    int sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices]) const;
-    // The expected numbers of times sample() picks `edge` (an index into scene.edges()), under
-    // each strategy.
-    Choice pdf(const Query& q, int32_t edge) const;
+    // Picks edges with strategy `s` (Lights needs q.cone) among those under node `start` (the
+    // root, or group_root()), writing up to kMaxChoices of them to `out`, each with its expected
+    // count under both strategies. Returns how many (0: no edge can contribute).
+    int sample(const Query& q, Strategy s, float u, Choice out[kMaxChoices], int32_t start = 0) const;
+    // The expected numbers of times sample() from `start` picks `edge` (an index into
+    // scene.edges()), under each strategy (zero for an edge not under `start`).
+    Choice pdf(const Query& q, int32_t edge, int32_t start = 0) const;
 
 private:
     struct Node {
@@ -171,6 +175,10 @@ private:
     static constexpr int kExactLeaves = 8;
     struct Input;
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
+    // A subtree over items [begin, end): [begin, split) the discontinuities from everywhere,
+    // [split, end) the smooth edges, each under a child of its own when both are there.
+    void build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end, int32_t index,
+                     int32_t parent);
     void finish_inner(int32_t index);
     void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
     // Whether a descent with strategy k that has split `used` times splits at n, whose children
@@ -179,6 +187,7 @@ private:
                 int used) const;
     std::vector<Node> nodes_;
     std::vector<int32_t> leaf_of_;  // scene edge index -> leaf node (-1: not in the hierarchy)
+    int32_t group_root_ = -1;
     double build_ms_ = 0.0;
 };
 

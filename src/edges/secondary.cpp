@@ -23,7 +23,6 @@ void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&,
         set.cumulative.push_back(set.cumulative.back() + len);
     }
     set.total = set.cumulative.back();
-    if (!uniform_ && !set.edges.empty()) set.hierarchy.build(scene_, set.edges);
 }
 
 SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots)
@@ -44,6 +43,15 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     if (!every) {
         build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
         has_wanted_set_ = true;
+    }
+    if (!uniform_ && !all_.edges.empty()) {
+        // The wanted meshes' edges first, under a subtree of their own.
+        std::vector<int32_t> order = has_wanted_set_ ? wanted_.edges : all_.edges;
+        if (has_wanted_set_)
+            for (int32_t e : all_.edges)
+                if (!mesh_wanted(scene.edges()[size_t(e)].mesh)) order.push_back(e);
+        hierarchy_.build(scene, order, has_wanted_set_ ? wanted_.edges.size() : 0);
+        wanted_root_ = has_wanted_set_ ? hierarchy_.group_root() : 0;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.
     auto each_light_vertex = [&](auto&& f) {
@@ -121,7 +129,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     us = s == EdgeHierarchy::Lights ? us / c_lights : (us - c_lights) / c_all;
     const Edge* edges = scene_.edges().data();
     EdgeHierarchy::Choice choices[EdgeHierarchy::kMaxChoices];
-    const int count = set.hierarchy.sample(q, s, std::min(us, 0.99999994f), choices);
+    const int count = hierarchy_.sample(q, s, std::min(us, 0.99999994f), choices, &set == &wanted_ ? wanted_root_ : 0);
     for (int c = 0; c < count; ++c) {
         const EdgeHierarchy::Choice& choice = choices[c];
         const float ut = rng.next_float();

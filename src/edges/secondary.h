@@ -85,12 +85,11 @@ private:
     // the adjoint of the vertex position.
     Vec3f apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const;
 
-    // A set of edges with its samplers: by length (uniform) or the hierarchy.
+    // A set of edges with its sampler by length (uniform).
     struct EdgeSet {
         std::vector<int32_t> edges;  // indices into scene.edges()
         std::vector<double> cumulative;
         double total = 0.0;
-        EdgeHierarchy hierarchy;
     };
     void build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&));
 
@@ -99,6 +98,10 @@ private:
     const SceneGradients& slots_;
     bool uniform_ = false;
     EdgeSet all_, wanted_;  // every edge; the edges of meshes whose vertices are wanted
+    // The hierarchy over every edge, the wanted meshes' edges under a node of their own
+    // (wanted_root_) when not every mesh is wanted: one build serves both sets.
+    EdgeHierarchy hierarchy_;
+    int32_t wanted_root_ = 0;
     bool has_wanted_set_ = false;
     double total_ = 0.0;
     bool has_lights_ = false;

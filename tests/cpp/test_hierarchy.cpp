@@ -218,6 +218,66 @@ TEST(EdgeHierarchy, EveryEdgeThatCanContributeCanBePicked) {
     EXPECT_GT(checked, 2000);  // about 2400
 }
 
+// A group of edges under a subtree of their own (the wanted meshes' edges, in a render): from
+// the group's root, sample() picks only its edges, pdf() gives zero to the others and matches
+// the empirical frequencies; from the root, the other edges can still be picked.
+TEST(EdgeHierarchy, GroupSubtreeSamplesOnlyItsEdges) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    std::vector<int32_t> ids;  // the box's edges (mesh 1) first, then the others
+    for (int pass = 0; pass < 2; ++pass)
+        for (size_t i = 0; i < scene.edges().size(); ++i)
+            if ((scene.edges()[i].mesh == 1) == (pass == 0)) ids.push_back(int32_t(i));
+    size_t group = 0;
+    while (group < ids.size() && scene.edges()[size_t(ids[group])].mesh == 1) ++group;
+    ASSERT_GT(group, 0u);
+    EdgeHierarchy h;
+    h.build(scene, ids, group);
+    const int32_t start = h.group_root();
+    ASSERT_GT(start, 0);
+    EdgeHierarchy::Query q;
+    q.p = Vec3f(0.3f, 0.01f, 0.4f);
+    q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(-1, 1, 0)), 0.3f, 0.5f, 0.2f);
+    double sum = 0.0, sum_root = 0.0, others = 0.0;
+    for (size_t e = 0; e < scene.edges().size(); ++e) {
+        const float p = h.pdf(q, int32_t(e), start).prob[0];
+        const float from_root = h.pdf(q, int32_t(e)).prob[0];
+        if (scene.edges()[e].mesh != 1) {
+            EXPECT_EQ(p, 0.f) << "edge " << e;
+            others += from_root;
+        }
+        sum += p;
+        sum_root += from_root;
+    }
+    // (A descent may end where no leaf can contribute: the expected counts sum to less than 1.)
+    EXPECT_GT(sum, 0.5);
+    EXPECT_LE(sum, EdgeHierarchy::kMaxChoices + 1e-4);
+    EXPECT_GT(sum_root, 0.5);
+    EXPECT_GT(others, 0.05);
+    const int n = 40000;
+    std::map<int32_t, int> counts;
+    Rng rng(9, 3);
+    for (int i = 0; i < n; ++i) {
+        EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+        const int m = h.sample(q, EdgeHierarchy::All, rng.next_float(), c, start);
+        for (int j = 0; j < m; ++j) {
+            ASSERT_EQ(scene.edges()[size_t(c[j].edge)].mesh, 1);
+            EXPECT_NEAR(c[j].prob[0], h.pdf(q, c[j].edge, start).prob[0], 1e-5f);
+            counts[c[j].edge]++;
+        }
+    }
+    for (const auto& [e, c] : counts) {
+        const double pe = h.pdf(q, e, start).prob[0], sigma = std::sqrt(n * pe * (1 - pe)) + 1;
+        EXPECT_NEAR(c, n * pe, 5 * sigma) << "edge " << e;
+    }
+    // No group: none, or all of them (the root).
+    EdgeHierarchy none, all;
+    none.build(scene, ids, 0);
+    all.build(scene, ids, ids.size());
+    EXPECT_EQ(none.group_root(), -1);
+    EXPECT_EQ(all.group_root(), 0);
+}
+
 // The memo of node bounds changes nothing: with and without it (and with one memo kept across
 // both strategies and many descents, as a render keeps it per vertex), sample() picks the same
 // edges with the same expected counts, bit for bit.
