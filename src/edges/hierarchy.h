@@ -2,7 +2,8 @@
 //
 // EdgeHierarchy: a bounding volume hierarchy over edges, in two trees under one root: the edges
 // that are discontinuities from everywhere (boundaries, creases of flat-shaded meshes) and the
-// smooth edges (silhouettes only). Each node keeps its box and bounding sphere, the total length
+// smooth edges (silhouettes only). A group of edges (a render's: the meshes whose vertices are
+// wanted) can have a subtree of its own, holding those two trees for it, beside the others'. Each node keeps its box and bounding sphere, the total length
 // of its edges, and a cone bounding the normals of the faces adjacent to its smooth edges, so
 // that a node whose smooth edges cannot be silhouettes from the point is rejected at once; a
 // leaf tests its edge exactly (the point in front of exactly one of the two faces).

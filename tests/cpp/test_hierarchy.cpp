@@ -15,12 +15,10 @@
 namespace edgepath {
 namespace {
 
-struct HierarchyScene {
-    MeshData sphere = make_sphere(Vec3f(0, 1, 0), 0.5f, 8, 16), box = make_box(Vec3f(1.5f, 0.2f, 0), Vec3f(0.4f, 0.4f, 0.4f)),
-             quad = make_quad(Vec3f(-2, 0, -2), Vec3f(4, 0, 0), Vec3f(0, 0, 4));
+// A small camera and one matte material (its values kept alive by the owner).
+struct MatteScene {
     std::vector<float> kd = {0.5f, 0.5f, 0.5f}, ks = {0, 0, 0}, rough = {0.5f};
-    std::shared_ptr<const Scene> scene;
-    HierarchyScene() {
+    SceneDesc desc() {
         SceneDesc d;
         d.camera.width = d.camera.height = 8;
         d.camera.position[2] = -5;
@@ -29,6 +27,17 @@ struct HierarchyScene {
         m.specular = {ks.data(), 1, 1, 3};
         m.roughness = {rough.data(), 1, 1, 1};
         d.materials.push_back(m);
+        return d;
+    }
+};
+
+struct HierarchyScene {
+    MeshData sphere = make_sphere(Vec3f(0, 1, 0), 0.5f, 8, 16), box = make_box(Vec3f(1.5f, 0.2f, 0), Vec3f(0.4f, 0.4f, 0.4f)),
+             quad = make_quad(Vec3f(-2, 0, -2), Vec3f(4, 0, 0), Vec3f(0, 0, 4));
+    MatteScene matte;
+    std::shared_ptr<const Scene> scene;
+    HierarchyScene() {
+        SceneDesc d = matte.desc();
         d.meshes = {sphere.desc(0), box.desc(0), quad.desc(0)};
         scene = build_scene(d);
     }
@@ -119,15 +128,9 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
 TEST(EdgeHierarchy, LastBounceSkipsCreasesThatCannotChangeEmission) {
     MeshData dark = make_box(Vec3f(-1.f, 1.f, -0.5f), Vec3f(-0.2f, 1.8f, 0.5f)),
              bright = make_box(Vec3f(0.4f, 1.f, -0.5f), Vec3f(1.2f, 1.8f, 0.5f));
-    std::vector<float> kd = {0.5f, 0.5f, 0.5f}, ks = {0, 0, 0}, rough = {0.5f}, glow = {1.f, 1.f, 1.f};
-    SceneDesc d;
-    d.camera.width = d.camera.height = 8;
-    d.camera.position[2] = -5;
-    MaterialDesc m;
-    m.diffuse = {kd.data(), 1, 1, 3};
-    m.specular = {ks.data(), 1, 1, 3};
-    m.roughness = {rough.data(), 1, 1, 1};
-    d.materials.push_back(m);
+    std::vector<float> glow = {1.f, 1.f, 1.f};
+    MatteScene matte;
+    SceneDesc d = matte.desc();
     d.meshes = {dark.desc(0), bright.desc(0)};
     d.meshes[1].emission = {glow.data(), 1, 1, 3};
     const std::shared_ptr<const Scene> scene = build_scene(d);
