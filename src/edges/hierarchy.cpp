@@ -10,7 +10,6 @@ namespace edgepath {
 
 namespace {
 
-constexpr double kPiD = 3.14159265358979323846;
 float sine(float cosine) { return std::sqrt(std::max(0.f, 1.f - cosine * cosine)); }
 // cos(max(0, angle - beta)) from cos(angle) and beta's cosine and sine: the largest cosine
 // between a direction and the directions within beta of another.
@@ -409,30 +408,25 @@ EdgeHierarchy::Coarse EdgeHierarchy::coarse(const Query& q, const Node& n) const
         const float ct = n.cone_cos, st = n.cone_sin;
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
-        if (n.always) {  // creases: silhouettes where the range straddles 0, shading jumps elsewhere
-            if (n.dark_behind && !(hi > 0.f)) return out;  // p behind every face
-            const bool straddles = lo < 0.f && hi > 0.f;
-            if (q.direct_only && !n.emissive) {  // silhouettes only, as for smooth edges
-                if (!straddles) return out;
-                silhouettes_only = true;
-                fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
-            } else {
-                const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
-                fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
-            }
-        } else {
-            if (!(lo < 0.f && hi > 0.f)) return out;
-            silhouettes_only = true;
+        if (n.dark_behind && !(hi > 0.f)) return out;  // creases, p behind every face
+        // Creases count where the range straddles 0 (silhouettes) and elsewhere too (shading
+        // jumps), except at a last bounce of a mesh that does not emit: then, like smooth
+        // edges, only as silhouettes.
+        silhouettes_only = !n.always || (q.direct_only && !n.emissive);
+        const bool straddles = lo < 0.f && hi > 0.f;
+        if (silhouettes_only) {
+            if (!straddles) return out;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
+        } else {
+            const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
+            fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
         }
     }
-    // The lobe over the node's directions: over the cone around its sphere, or for a leaf, the
-    // largest cosines over the segment's own directions (exact).
+    // The lobe over the node's directions: for a leaf, along its edge's own arc (closed form);
+    // for a node, over the cone around its sphere.
     if (leaf) {
-        // The edge's term is at most the integral over the arc it subtends of the lobe over the
-        // distance h to its line (the rate at which the arc sweeps as the edge moves): about
-        // the lobe's largest value over the arc times the arc's angle, or for the glossy part
-        // the lobe's own width (pi alpha) where that is less.
+        // The edge's term is about the lobe's integral over the arc it subtends, over the
+        // distance h to its line (the rate at which the arc sweeps as the edge moves).
         double h = 0.0;
         const double integral = q.lobe.integral(q.p, n.a, n.b, &h);
         out.value[0] = weight * float(integral / std::max(h, 1e-3 * double(n.length)));
