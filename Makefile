@@ -28,7 +28,7 @@ PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest pillow mat
 
 # Everything the package build reads. The list itself is a prerequisite (through
 # build/sources.list, rewritten only when it changes) so adding or deleting a file rebuilds.
-SOURCES := $(sort $(shell find src bindings python apps bench tests/cpp -type f \
+SOURCES := $(sort $(shell find src support bindings python apps bench tests/cpp -type f \
 	\( -name '*.cpp' -o -name '*.h' -o -name '*.py' -o -name CMakeLists.txt \) 2>/dev/null)) \
 	CMakeLists.txt pyproject.toml
 

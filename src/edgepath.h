@@ -2,7 +2,7 @@
 // (scene/desc.h), build it once, render into your own buffer.
 #pragma once
 #include <memory>
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "render/channels.h"
 #include "scene/desc.h"
 

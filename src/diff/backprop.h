@@ -2,7 +2,7 @@
 // docs: every direction after the camera is held fixed in world space; pdfs and MIS weights are
 // constants). Boundary terms (edge sampling) are added by their own passes.
 #pragma once
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "render/path.h"
 #include "scene/geometry.h"
 

@@ -36,7 +36,7 @@
 #pragma once
 #include <cstdint>
 #include <vector>
-#include "edges/edges.h"
+#include "scene/edges.h"
 #include "math/vec.h"
 
 namespace edgepath {

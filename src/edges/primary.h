@@ -5,7 +5,7 @@
 // the pixel filter (and by the adjoint image in reverse mode), moves the edge's two vertices and
 // the camera through the derivative of the side function (edges/edges.h).
 #pragma once
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "render/channels.h"
 #include "scene/desc.h"
 #include "scene/scene.h"

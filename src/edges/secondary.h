@@ -19,7 +19,7 @@
 // instead (the baseline).
 #pragma once
 #include <vector>
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "edges/hierarchy.h"
 #include "sampling/rng.h"
 #include "scene/bsdf_diff.h"

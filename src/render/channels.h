@@ -7,7 +7,7 @@
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "math/ray.h"
 #include "scene/desc.h"
 

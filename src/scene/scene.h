@@ -8,8 +8,8 @@
 #include <embree3/rtcore.h>
 #include "math/frame.h"
 #include "math/ray.h"
-#include "edges/edges.h"
-#include "render/filter.h"
+#include "scene/edges.h"
+#include "scene/filter.h"
 #include "sampling/distribution.h"
 #include "scene/bsdf.h"
 #include "scene/camera.h"

@@ -6,7 +6,7 @@
 #include <random>
 #include <vector>
 
-#include "edges/edges.h"
+#include "scene/edges.h"
 #include "math/frame.h"
 #include "scene/bsdf.h"
 #include "scene/bsdf_diff.h"

@@ -8,13 +8,13 @@
 #include <stdexcept>
 #include <vector>
 
-#include "diff/gradients.h"
+#include "scene/gradients.h"
 #include "edgepath.h"
 #include "render/channels.h"
-#include "render/filter.h"
+#include "scene/filter.h"
 #include "render/path.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

@@ -5,7 +5,7 @@
 #include <cmath>
 #include <vector>
 
-#include "render/filter.h"
+#include "scene/filter.h"
 #include "sampling/distribution.h"
 #include "sampling/rng.h"
 #include "sampling/warp.h"

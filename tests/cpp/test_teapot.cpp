@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "edgepath.h"
-#include "scene/teapot.h"
+#include "support/teapot.h"
 
 namespace edgepath {
 namespace {
