@@ -150,7 +150,7 @@ public:
 
     RTCScene rtc_scene() const { return rtc_; }
 
-    // The edges of all meshes (see edges/edges.h), built on first use: only gradient passes
+    // The edges of all meshes (see scene/edges.h), built on first use: only gradient passes
     // that want geometry or camera derivatives pay for them.
     const std::vector<Edge>& edges() const;
 

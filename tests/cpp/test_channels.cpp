@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "diff/channels.h"
 #include "scene/gradients.h"
 #include "edgepath.h"
 #include "render/channels.h"

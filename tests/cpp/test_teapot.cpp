@@ -1,4 +1,4 @@
-// Tests for src/scene/teapot: the tessellated Newell teapot is a valid, well-formed mesh.
+// Tests for support/teapot: the tessellated Newell teapot is a valid, well-formed mesh.
 #include <gtest/gtest.h>
 
 #include <cmath>
