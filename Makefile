@@ -22,7 +22,7 @@ export CMAKE_BUILD_PARALLEL_LEVEL := $(JOBS)
 CMAKE_GENERATOR_FLAG := $(if $(shell command -v ninja 2>/dev/null),-G Ninja,)
 
 APT_PACKAGES := cmake ninja-build g++ make pkg-config python3-venv python3-dev \
-	libembree-dev libtbb-dev libgtest-dev libpugixml-dev libtinyobjloader-dev \
+	libembree-dev libtbb-dev libgtest-dev libtinyobjloader-dev \
 	libopenexr-dev libpng-dev libjpeg-dev
 PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest pillow matplotlib
 
