@@ -3,9 +3,9 @@
 // constants). The boundary term of the edges seen from the path's vertices is added during the
 // sweep (edges/secondary.h); that of the edges the camera sees, by its own pass (edges/primary.h).
 #pragma once
-#include "scene/gradients.h"
 #include "render/path.h"
 #include "scene/geometry.h"
+#include "scene/gradients.h"
 
 namespace edgepath {
 

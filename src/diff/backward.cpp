@@ -1,9 +1,9 @@
 // The gradient pass: every camera sample is re-traced with the random numbers of the forward
 // pass (same seed: same paths), recorded, and swept in reverse (the interior term, with the
 // boundary term of the edges seen from the path's vertices); then the boundary term of the edges
-// the camera sees is added by its own pass. The same pass serves the output
-// channels (render/channels.h): the radiance through the recorded path, the other continuous
-// channels through the camera ray's first hit.
+// the camera sees is added by its own pass. The same pass serves the output channels
+// (render/channels.h): the radiance through the recorded path, the other continuous channels
+// through the camera ray's first hit (diff/channels.h).
 #include "diff/backward.h"
 
 #include "diff/backprop.h"

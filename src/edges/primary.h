@@ -5,9 +5,9 @@
 // the pixel filter (and by the adjoint image in reverse mode), moves the edge's two vertices and
 // the camera through the derivative of the side function (scene/edges.h).
 #pragma once
-#include "scene/gradients.h"
 #include "render/channels.h"
 #include "scene/desc.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 
 namespace edgepath {

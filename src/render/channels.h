@@ -1,8 +1,8 @@
 // Output channels: besides radiance, what the camera ray of each sample meets first (coverage,
 // depth, position, normals, uv, albedo, ids). Continuous channels are filtered like radiance
 // (the mean over the pixel's camera samples, each drawn from the pixel filter) and are
-// differentiable (diff/channels.h); ids are those of the ray through the pixel centre. Units and conventions:
-// docs/conventions.md, "Output channels".
+// differentiable (diff/channels.h); ids are those of the ray through the pixel centre. Units
+// and conventions: docs/conventions.md, "Output channels".
 #pragma once
 #include <algorithm>
 #include <cstdint>

@@ -9,11 +9,11 @@
 #include <vector>
 
 #include "diff/channels.h"
-#include "scene/gradients.h"
 #include "edgepath.h"
 #include "render/channels.h"
-#include "scene/filter.h"
 #include "render/path.h"
+#include "scene/filter.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 

@@ -7,8 +7,8 @@
 #include <functional>
 #include <vector>
 
-#include "scene/gradients.h"
 #include "edgepath.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
