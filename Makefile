@@ -22,13 +22,13 @@ export CMAKE_BUILD_PARALLEL_LEVEL := $(JOBS)
 CMAKE_GENERATOR_FLAG := $(if $(shell command -v ninja 2>/dev/null),-G Ninja,)
 
 APT_PACKAGES := cmake ninja-build g++ make pkg-config python3-venv python3-dev \
-	libembree-dev libtbb-dev libgtest-dev libpugixml-dev libtinyobjloader-dev \
+	libembree-dev libtbb-dev libgtest-dev libtinyobjloader-dev \
 	libopenexr-dev libpng-dev libjpeg-dev
 PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest pillow matplotlib
 
 # Everything the package build reads. The list itself is a prerequisite (through
 # build/sources.list, rewritten only when it changes) so adding or deleting a file rebuilds.
-SOURCES := $(sort $(shell find src bindings python apps bench tests/cpp -type f \
+SOURCES := $(sort $(shell find src support bindings python apps bench tests/cpp -type f \
 	\( -name '*.cpp' -o -name '*.h' -o -name '*.py' -o -name CMakeLists.txt \) 2>/dev/null)) \
 	CMakeLists.txt pyproject.toml
 

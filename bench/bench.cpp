@@ -59,8 +59,8 @@
 #include "sampling/rng.h"
 #include "sampling/warp.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
-#include "scene/teapot.h"
+#include "support/shapes.h"
+#include "support/teapot.h"
 
 namespace {
 

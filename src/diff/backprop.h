@@ -1,10 +1,11 @@
 // The adjoint sweep of one recorded path (interior term of the gradient, see
 // docs: every direction after the camera is held fixed in world space; pdfs and MIS weights are
-// constants). Boundary terms (edge sampling) are added by their own passes.
+// constants). The boundary term of the edges seen from the path's vertices is added during the
+// sweep (edges/secondary.h); that of the edges the camera sees, by its own pass (edges/primary.h).
 #pragma once
-#include "diff/gradients.h"
 #include "render/path.h"
 #include "scene/geometry.h"
+#include "scene/gradients.h"
 
 namespace edgepath {
 
@@ -18,7 +19,7 @@ struct EdgeTermLog;
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& adjoint,
                    GradSink& sink, const SecondaryEdges* secondary = nullptr, EdgeTermLog* log = nullptr);
 
-// ---- pieces of the sweep, shared with the output channels (render/channels.h) ----------------
+// ---- pieces of the sweep, shared with the output channels (diff/channels.h) ------------------
 
 // The differentiable geometry of a hit: a fixed ray (origin, dir) meeting a triangle.
 struct VertexGeometry {

@@ -36,8 +36,8 @@
 #pragma once
 #include <cstdint>
 #include <vector>
-#include "edges/edges.h"
 #include "math/vec.h"
+#include "scene/edges.h"
 
 namespace edgepath {
 

@@ -3,11 +3,11 @@
 // pixel filter), and sampled in proportion to their clipped film length; at each sample a full
 // camera path is traced a tiny step to each side of the edge, and the difference, weighted by
 // the pixel filter (and by the adjoint image in reverse mode), moves the edge's two vertices and
-// the camera through the derivative of the side function (edges/edges.h).
+// the camera through the derivative of the side function (scene/edges.h).
 #pragma once
-#include "diff/gradients.h"
 #include "render/channels.h"
 #include "scene/desc.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 
 namespace edgepath {

@@ -19,11 +19,11 @@
 // instead (the baseline).
 #pragma once
 #include <vector>
-#include "diff/gradients.h"
 #include "edges/hierarchy.h"
 #include "sampling/rng.h"
 #include "scene/bsdf_diff.h"
 #include "scene/desc.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 
 namespace edgepath {

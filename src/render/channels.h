@@ -1,13 +1,13 @@
 // Output channels: besides radiance, what the camera ray of each sample meets first (coverage,
 // depth, position, normals, uv, albedo, ids). Continuous channels are filtered like radiance
 // (the mean over the pixel's camera samples, each drawn from the pixel filter) and are
-// differentiable; ids are those of the ray through the pixel centre. Units and conventions:
-// docs/conventions.md, "Output channels".
+// differentiable (diff/channels.h); ids are those of the ray through the pixel centre. Units
+// and conventions: docs/conventions.md, "Output channels".
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <string>
 #include <vector>
-#include "diff/gradients.h"
 #include "math/ray.h"
 #include "scene/desc.h"
 
@@ -15,7 +15,6 @@ namespace edgepath {
 
 class Scene;
 struct Hit;
-class GradSink;
 
 enum class Channel : int {
     Radiance = 0,    // 3: linear radiance (what render() writes)
@@ -63,12 +62,5 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
 
 // The ids of the ray's first intersection, at their offsets in `ids`.
 void eval_hit_ids(const ChannelLayout& layout, bool found, const Hit& hit, int32_t* ids);
-
-// Adjoint of eval_hit_channels: `adjoint` holds d loss / d value at the same offsets; the
-// derivatives go into the mesh and material slots, and (through the ray) into the camera's,
-// for the camera ray of film point `film`. Alpha and the ids have no interior derivative.
-void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots, const Vec2f& film,
-                    const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink);
-
 
 }  // namespace edgepath

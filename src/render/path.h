@@ -68,7 +68,7 @@ inline bool same_surface(const FirstHit& a, const FirstHit& b) {
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record = nullptr, const FirstHit* first = nullptr);
 
-// Film point of sample `s` of film pixel (x, y), and its random stream.
+// A film point in film pixel (x, y), drawn from the pixel filter with the next two numbers of `rng`.
 inline Vec2f sample_film_point(const Scene& scene, int x, int y, Rng& rng) {
     float fx = scene.filter.sample(rng.next_float());
     float fy = scene.filter.sample(rng.next_float());

@@ -1,6 +1,7 @@
+#include "render/render.h"
+
 #include <atomic>
 
-#include "edgepath.h"
 #include "render/path.h"
 #include "render/tiles.h"
 

@@ -7,8 +7,6 @@
 #include <stdexcept>
 #include <string>
 
-#include "edgepath.h"
-
 namespace edgepath {
 
 namespace {
@@ -365,9 +363,5 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
     if (!(cos_l > 0.f)) return 0.f;
     return light_distribution.pmf(int(li)) / lights[li].area * dist2 / cos_l;
 }
-
-std::shared_ptr<const Scene> build_scene(const SceneDesc& desc) { return Scene::build(desc); }
-int image_width(const Scene& s) { return s.out_width; }
-int image_height(const Scene& s) { return s.out_height; }
 
 }  // namespace edgepath

@@ -8,8 +8,8 @@
 #include <embree3/rtcore.h>
 #include "math/frame.h"
 #include "math/ray.h"
-#include "edges/edges.h"
-#include "render/filter.h"
+#include "scene/edges.h"
+#include "scene/filter.h"
 #include "sampling/distribution.h"
 #include "scene/bsdf.h"
 #include "scene/camera.h"
@@ -150,7 +150,7 @@ public:
 
     RTCScene rtc_scene() const { return rtc_; }
 
-    // The edges of all meshes (see edges/edges.h), built on first use: only gradient passes
+    // The edges of all meshes (see scene/edges.h), built on first use: only gradient passes
     // that want geometry or camera derivatives pay for them.
     const std::vector<Edge>& edges() const;
 

@@ -6,11 +6,11 @@
 #include <random>
 #include <vector>
 
-#include "edges/edges.h"
 #include "math/frame.h"
 #include "scene/bsdf.h"
 #include "scene/bsdf_diff.h"
 #include "scene/camera.h"
+#include "scene/edges.h"
 #include "scene/geometry.h"
 #include "scene/texture.h"
 

@@ -8,13 +8,14 @@
 #include <stdexcept>
 #include <vector>
 
-#include "diff/gradients.h"
+#include "diff/channels.h"
 #include "edgepath.h"
 #include "render/channels.h"
-#include "render/filter.h"
 #include "render/path.h"
+#include "scene/filter.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

@@ -4,8 +4,8 @@
 #include <map>
 #include <vector>
 
-#include "edges/edges.h"
-#include "scene/shapes.h"
+#include "scene/edges.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

@@ -7,10 +7,10 @@
 #include <functional>
 #include <vector>
 
-#include "diff/gradients.h"
 #include "edgepath.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

@@ -10,7 +10,7 @@
 #include "edges/hierarchy.h"
 #include "sampling/rng.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

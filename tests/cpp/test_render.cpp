@@ -7,7 +7,7 @@
 #include "edgepath.h"
 #include "render/path.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {

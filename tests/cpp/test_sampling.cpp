@@ -5,12 +5,12 @@
 #include <cmath>
 #include <vector>
 
-#include "render/filter.h"
 #include "sampling/distribution.h"
 #include "sampling/rng.h"
 #include "sampling/warp.h"
 #include "scene/bsdf.h"
 #include "scene/envmap.h"
+#include "scene/filter.h"
 
 namespace edgepath {
 namespace {

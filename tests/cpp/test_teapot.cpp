@@ -1,4 +1,4 @@
-// Tests for src/scene/teapot: the tessellated Newell teapot is a valid, well-formed mesh.
+// Tests for support/teapot: the tessellated Newell teapot is a valid, well-formed mesh.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -7,7 +7,7 @@
 #include <vector>
 
 #include "edgepath.h"
-#include "scene/teapot.h"
+#include "support/teapot.h"
 
 namespace edgepath {
 namespace {

@@ -1,4 +1,4 @@
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 #include <cmath>
 

@@ -1,4 +1,4 @@
-#include "edges/edges.h"
+#include "scene/edges.h"
 
 #include <algorithm>
 #include <cstring>

@@ -1,7 +1,7 @@
 // Martin Newell's teapot (1975) as a triangle mesh, for tests, benchmarks and examples.
 #pragma once
 #include <cstdint>
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 

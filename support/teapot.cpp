@@ -1,4 +1,4 @@
-#include "scene/teapot.h"
+#include "support/teapot.h"
 
 #include <cmath>
 #include <stdexcept>

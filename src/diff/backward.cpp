@@ -1,10 +1,13 @@
 // The gradient pass: every camera sample is re-traced with the random numbers of the forward
-// pass (same seed: same paths), recorded, and swept in reverse (the interior term); then the
-// boundary terms of the edges are added by their own passes. The same pass serves the output
-// channels (render/channels.h): the radiance through the recorded path, the other continuous
-// channels through the camera ray's first hit.
+// pass (same seed: same paths), recorded, and swept in reverse (the interior term, with the
+// boundary term of the edges seen from the path's vertices); then the boundary term of the edges
+// the camera sees is added by its own pass. The same pass serves the output channels
+// (render/channels.h): the radiance through the recorded path, the other continuous channels
+// through the camera ray's first hit (diff/channels.h).
+#include "diff/backward.h"
+
 #include "diff/backprop.h"
-#include "edgepath.h"
+#include "diff/channels.h"
 #include "edges/primary.h"
 #include "edges/secondary.h"
 #include "render/channels.h"

@@ -1,0 +1,11 @@
+#include "edgepath.h"
+
+#include "scene/scene.h"
+
+namespace edgepath {
+
+std::shared_ptr<const Scene> build_scene(const SceneDesc& desc) { return Scene::build(desc); }
+int image_width(const Scene& s) { return s.out_width; }
+int image_height(const Scene& s) { return s.out_height; }
+
+}  // namespace edgepath
