@@ -24,8 +24,10 @@ int image_height(const Scene& scene);
 // Deterministic for a given seed whatever the thread count.
 RenderStats render(const Scene& scene, const RenderOptions& options, float* image);
 
-// The gradient pass (interior term). `adjoint` is d loss / d image, shaped like the image; the
-// gradients are ADDED into the buffers of `grads` (slots left null are skipped). Uses the same
+// The gradient pass: the interior term plus, as `options` asks (primary_edges,
+// secondary_edges, both on by default), the boundary terms of primary and secondary visibility
+// by edge sampling. `adjoint` is d loss / d image, shaped like the image; the gradients are
+// ADDED into the buffers of `grads` (slots left null are skipped). Uses the same
 // random numbers as render() with the same options, so with the same seed it differentiates
 // exactly the paths of that image.
 void render_gradients(const Scene& scene, const RenderOptions& options, const float* adjoint,
