@@ -46,7 +46,7 @@ def imread(path: PathLike) -> torch.Tensor:
         cv2 = _cv2(path)
         bgr = cv2.imread(path, cv2.IMREAD_UNCHANGED)
         if bgr is None or bgr.ndim != 3 or bgr.shape[2] != 3:
-            raise ValueError(f"{path}: not a readable Radiance HDR (RGBE) image")
+            raise OSError(f"{path}: not a readable Radiance HDR (RGBE) image")
         return torch.from_numpy(np.ascontiguousarray(bgr[:, :, ::-1], dtype=np.float32))
     return torch.from_numpy(_core.imread(path))
 

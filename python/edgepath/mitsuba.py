@@ -20,7 +20,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import torch
 
-from .io import _texture_rgb, imread, load_obj, load_ply
+from .io import _texture_rgb, imread, load_obj, load_ply, to_srgb
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 PathLike = Union[str, os.PathLike]
@@ -362,10 +362,9 @@ class _Loader:
             image = _texture_rgb(filename)
         else:
             image = imread(filename)[:, :, :1].contiguous()
-        if raw and not filename.lower().endswith(".exr"):
+        if raw and not filename.lower().endswith((".exr", ".hdr")):
             # imread linearised the 8-bit sRGB values: encode them back (exact up to rounding).
-            image = torch.where(image <= 0.0031308, image * 12.92,
-                                1.055 * image.clamp_min(0) ** (1 / 2.4) - 0.055).contiguous()
+            image = to_srgb(image).contiguous()
         self.texture_cache[key] = image
         if "id" in node.attrs:
             self.result.textures.setdefault(node.attrs["id"], image)
