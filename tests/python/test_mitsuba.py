@@ -353,8 +353,14 @@ def test_bsdfs(tmp_path):
     assert torch.allclose(pl.specular, torch.full((3,), r)) and pl.roughness == pytest.approx(0.3)
     assert torch.allclose(pl.diffuse, torch.tensor([0.1, 0.2, 0.3])) and not pl.two_sided
     names = s.parameters()
-    assert names["shared.diffuse"] is shared.diffuse and names["ek.specular"] is s.bsdfs["ek"].specular
+    assert names["shared.brdf_0.reflectance.data"] is shared.diffuse
+    assert names["ek.specular"] is s.bsdfs["ek"].specular
     assert names["gold.bsdf.specular"] is gold.specular
+    assert names["pl.diffuse_reflectance.value"] is pl.diffuse
+    assert "gold.bsdf.diffuse" in names  # a conductor's (black) diffuse: no Mitsuba name
+    # Shapes a and b share one BSDF: its tensors are listed once, under its id.
+    assert not any(name.startswith(("a.bsdf", "b.bsdf")) for name in names)
+    assert len({id(t) for t in names.values()}) == len(names)
 
 
 def test_beckmann_is_rendered_as_ggx_with_a_warning(tmp_path):
@@ -407,20 +413,24 @@ def test_parameters_and_directions(tmp_path):
     <emitter type="constant"/>"""
     s = ep.load_mitsuba(_write(tmp_path, body))
     names = s.parameters()
-    assert set(names) == {"sensor.to_world", "sensor.position", "sensor.fov", "plane.vertices",
-                          "plane.bsdf.diffuse", "lamp.vertices", "lamp.emission",
-                          "lamp.bsdf.diffuse", "envmap.values"}
-    param, d = s.direction("plane.vertices", [1, 2, 3])
+    # Mitsuba 3's names (mi.traverse), each tensor once (sensor.position is a direction only).
+    assert set(names) == {"sensor.to_world", "sensor.x_fov", "plane.vertex_positions",
+                          "plane.bsdf.reflectance.value", "lamp.vertex_positions",
+                          "lamp.emitter.radiance.value", "lamp.bsdf.reflectance.value",
+                          "envmap.data"}
+    assert len({id(t) for t in names.values()}) == len(names)
+    torch.optim.Adam(names.values(), lr=0.1)  # no duplicate-parameter warning or error
+    param, d = s.direction("plane.vertex_positions", [1, 2, 3])
     assert param is s.shapes["plane"].vertices and torch.equal(d, torch.tensor([1.0, 2, 3]).expand(4, 3))
     param, d = s.direction("sensor.position", [0, 0, 1])
     assert param is s.scene.camera.to_world and d[2, 3] == 1 and int((d != 0).sum()) == 1
-    param, d = s.direction("envmap.values", [0.5])
+    param, d = s.direction("envmap.data", [0.5])
     assert d.shape == (1, 1, 3) and bool((d == 0.5).all())
-    param, d = s.direction("sensor.fov", [2])
+    param, d = s.direction("sensor.x_fov", [2])
     assert d.shape == () and float(d) == 2
     with pytest.raises(ValueError, match="expected 3 numbers, got 1"):
-        s.direction("plane.vertices", [1])
-    with pytest.raises(ValueError, match="'nothing': not in this scene"):
+        s.direction("plane.vertex_positions", [1])
+    with pytest.raises(ValueError, match="'nothing': not in this scene .*sensor.position"):
         s.direction("nothing", [1])
     image = s.render(spp=1)  # the file's settings: 12 x 8 film
     assert image.shape == (8, 12, 3) and float(image.min()) >= 0
@@ -442,4 +452,5 @@ def test_the_documented_example_loads(tmp_path):
     bunny = s.shapes["bunny"]
     assert torch.allclose(bunny.vertices[bunny.indices.long()],
                           (2 * v + torch.tensor([0.0, -0.5, 0.0]))[f])
-    assert {"bunny.vertices", "paint.diffuse", "lamp.emission", "envmap.values"} <= set(s.parameters())
+    assert {"bunny.vertex_positions", "paint.brdf_0.reflectance.value",
+            "lamp.emitter.radiance.value", "envmap.data"} <= set(s.parameters())
