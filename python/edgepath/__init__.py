@@ -20,5 +20,5 @@ __version__ = "0.1.0"
 __all__ = ["CHANNELS", "ID_CHANNELS", "Camera", "EnvironmentMap", "Material", "Mesh", "Scene",
            "render", "render_channels", "derivative_image", "derivative_channels",
            "finite_difference_image", "finite_difference_channels", "imread", "imwrite", "load_obj",
-           "load_ply", "save_obj", "to_srgb", "show", "Picture", "shapes", "load_mitsuba", "MitsubaScene",
-           "MitsubaError", "__version__"]
+           "load_ply", "save_obj", "to_srgb", "show", "Picture", "shapes", "load_mitsuba",
+           "MitsubaScene", "MitsubaError", "__version__"]

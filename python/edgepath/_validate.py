@@ -100,8 +100,9 @@ def scalar_tensor(value, field: str) -> torch.Tensor:
 
 
 def index_tensor(value, field: str, shape: Shape = ("M", 3)) -> torch.Tensor:
-    """An int32 or int64 index tensor (or a list / numpy array of ints), as int32 C-contiguous. int64 values must fit in int32
-    (narrowing must not change an index); range checks against vertex counts are the core's."""
+    """An int32 or int64 index tensor (or a list / numpy array of ints), as int32
+    C-contiguous. int64 values must fit in int32 (narrowing must not change an index); range
+    checks against vertex counts are the core's."""
     t = tensor(value, field)
     if t.dtype not in (torch.int32, torch.int64):
         fail(field, f"expected an int32 or int64 tensor, got {t.dtype}")

@@ -249,8 +249,8 @@ def _cmd_info(args) -> None:
     print("parameters (NAME, shape, what --direction takes):")
     for name, t in loaded.parameters().items():
         print(f"  {name}  {tuple(t.shape)}  {_direction_help(name, t)}")
-        if name == "sensor.to_world":
-            print(f"  sensor.position  (a direction of sensor.to_world)  {_direction_help('sensor.position', t)}")
+        if name == "sensor.to_world":  # a direction of it, not a parameter of its own
+            print("  sensor.position  (--direction only)  3 numbers: a translation of the camera")
 
 
 def _direction_help(name: str, t: torch.Tensor) -> str:
@@ -335,8 +335,8 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_options(g)
     g.add_argument("--param", required=True, metavar="NAME", help="the parameter (see edgepath info)")
     g.add_argument("--direction", required=True, type=float, nargs="+", metavar="X",
-                   help="SHAPE.vertex_positions, sensor.position: 3 numbers, a translation; colours: "
-                        "1 number (all channels) or 3, added to every texel; scalars "
+                   help="SHAPE.vertex_positions, sensor.position: 3 numbers, a translation; "
+                        "colours: 1 number (all channels) or 3, added to every texel; scalars "
                         "(sensor.x_fov, alpha): 1 number; sensor.to_world: 16 numbers")
     g.add_argument("-o", "--output", default="derivative.exr", metavar="FILE.exr",
                    help="the derivative image (default derivative.exr); the PNG goes beside it")

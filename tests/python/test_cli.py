@@ -161,6 +161,8 @@ def test_info(scene_file, capsys):
     for name in ("card.vertex_positions", "paint.reflectance.value", "lamp.emitter.radiance.value",
                  "sensor.position", "sensor.x_fov"):
         assert f"  {name}  " in text
+    # The camera's matrix is one parameter; sensor.position is only a --direction of it.
+    assert text.count("(4, 4)") == 1 and "sensor.position  (--direction only)" in text
 
 
 def test_errors_name_the_line(tmp_path, capsys):
