@@ -2,7 +2,8 @@
 # each step leaves a stamp file and reruns only when what it depends on changed.
 #
 #   make setup     Debian packages (if missing), .venv with pinned Python packages, build and
-#                  install the package (one CMake build in build/py: module + C++ tests)
+#                  install the package, editable (one CMake build in build/py: module, C++
+#                  tests and programs; Python edits need no reinstall, C++ edits a `make`)
 #   make build     same as setup
 #   make test      C++ tests (ctest) and Python tests (pytest)
 #   make demo      the inverse-rendering demo: images, GIF and convergence plot in demo_out/
@@ -24,13 +25,15 @@ CMAKE_GENERATOR_FLAG := $(if $(shell command -v ninja 2>/dev/null),-G Ninja,)
 APT_PACKAGES := cmake ninja-build g++ make pkg-config python3-venv python3-dev \
 	libembree-dev libtbb-dev libgtest-dev libtinyobjloader-dev \
 	libopenexr-dev libpng-dev libjpeg-dev
-PIP_PACKAGES := torch==2.13.0 numpy nanobind scikit-build-core pytest pillow matplotlib
+# torch is pinned to the version the tests run; the package itself accepts torch>=2,<3.
+PIP_PACKAGES := torch==2.13.0 numpy opencv-python-headless nanobind scikit-build-core pytest \
+	pillow matplotlib
 
 # Everything the package build reads. The list itself is a prerequisite (through
 # build/sources.list, rewritten only when it changes) so adding or deleting a file rebuilds.
-SOURCES := $(sort $(shell find src support bindings python apps bench tests/cpp -type f \
-	\( -name '*.cpp' -o -name '*.h' -o -name '*.py' -o -name CMakeLists.txt \) 2>/dev/null)) \
-	CMakeLists.txt pyproject.toml
+SOURCES := $(sort $(shell find src support bindings python apps bench tests/cpp tests/cmake_package cmake \
+	-type f \( -name '*.cpp' -o -name '*.h' -o -name '*.py' -o -name '*.cmake' -o -name '*.in' \
+	-o -name CMakeLists.txt \) 2>/dev/null)) CMakeLists.txt pyproject.toml
 
 APT_STAMP := build/apt.stamp
 DEPS_STAMP := $(VENV)/edgepath-deps.stamp
@@ -69,7 +72,8 @@ build/sources.list: FORCE
 
 $(INSTALL_STAMP): $(DEPS_STAMP) build/sources.list $(SOURCES)
 	@echo "building edgepath in build/py (the first build takes a few minutes)"
-	$(VPY) -m pip install --no-build-isolation .
+	$(VPY) -m pip install --no-build-isolation -e . \
+	  -C cmake.define.EDGEPATH_TESTS=ON -C cmake.define.EDGEPATH_APPS=ON
 	@touch $@
 
 test: setup

@@ -4,7 +4,9 @@ plots, welding a mesh's duplicated vertices."""
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import sys
 from typing import Dict, List, Optional, Sequence
 
 import torch
@@ -23,7 +25,21 @@ def parser(description: str, iterations: int, size: int, spp: int) -> argparse.A
                    help="where the pictures go (default: out/<example name>)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--quiet", action="store_true", help="print only the summary")
+    p.add_argument("--metrics", metavar="FILE.json", default=None,
+                   help="also write the run's figures (losses, errors per step) as JSON")
     return p
+
+
+def run(main) -> None:
+    """A script's entry point: ``main(command line)``; with ``--metrics FILE`` the figures it
+    returns are written to FILE as JSON (tensors as nested lists)."""
+    figures = main(sys.argv[1:])
+    option = argparse.ArgumentParser(add_help=False)
+    option.add_argument("--metrics", default=None)
+    path = option.parse_known_args()[0].metrics
+    if path:
+        with open(path, "w") as f:
+            json.dump(figures, f, default=lambda t: t.tolist())
 
 
 def output_dir(args, name: str) -> str:

@@ -12,13 +12,12 @@ iteration.
 """
 
 import math
-import sys
 
 import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import output_dir, parser, plot, rotation, row, save_images, weld
+from _common import output_dir, parser, plot, rotation, row, run, save_images, weld
 
 CLASSES = ("sphere", "box", "cylinder")
 BASE_V, BASE_I = weld(*shapes.sphere(radius=1.0, rings=12, segments=24)[:2])
@@ -209,4 +208,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

@@ -10,13 +10,12 @@ brightness (without it, a darker material under a brighter sky would look the sa
 """
 
 import math
-import sys
 
 import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import orbit_cameras, output_dir, parser, plot, report, row, save_images
+from _common import orbit_cameras, output_dir, parser, plot, report, row, run, save_images
 
 TRUE_MATERIAL = {"diffuse": torch.tensor([0.7, 0.25, 0.1]), "specular": torch.tensor([0.4, 0.4, 0.4]),
                  "roughness": torch.tensor([0.15])}
@@ -99,4 +98,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

@@ -7,12 +7,11 @@ vertices, both from the shading inside and from the silhouette (edge sampling).
     python examples/pose_estimation.py [--iterations 150] [--size 96] [--output-dir DIR]
 """
 
-import sys
 
 import torch
 
 import edgepath as ep
-from _common import output_dir, parser, plot, report, rotation, row, save_images
+from _common import output_dir, parser, plot, report, rotation, row, run, save_images
 
 TRUE_ROTATION = torch.tensor([0.4, -0.6, 0.2])
 TRUE_TRANSLATION = torch.tensor([0.2, -0.1, 0.0])
@@ -81,4 +80,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

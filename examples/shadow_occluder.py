@@ -8,13 +8,12 @@ gradient with respect to the plate's position and rotation comes from the shadow
     python examples/shadow_occluder.py [--iterations 120] [--size 64] [--output-dir DIR]
 """
 
-import sys
 
 import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import lamp, output_dir, parser, plot, report, row, save_images
+from _common import lamp, output_dir, parser, plot, report, row, run, save_images
 
 # The plate: centre (x, z) at height PLATE_HEIGHT, rotation about the vertical axis (radians).
 TRUE_PLATE = torch.tensor([-1.2, 0.1, 0.5])
@@ -76,4 +75,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

@@ -9,13 +9,12 @@ outline (primary edges); the flat shading under a lamp pulls the face orientatio
 """
 
 import math
-import sys
 
 import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import lamp, orbit_cameras, output_dir, parser, plot, report, row, save_images, weld
+from _common import lamp, orbit_cameras, output_dir, parser, plot, report, row, run, save_images, weld
 
 SPHERE_V, SPHERE_I = weld(*shapes.sphere(radius=1.0, rings=12, segments=24)[:2])
 
@@ -108,4 +107,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

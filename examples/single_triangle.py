@@ -8,12 +8,11 @@ strip of the progress and the loss against iteration.
     python examples/single_triangle.py [--iterations 100] [--size 64] [--output-dir DIR]
 """
 
-import sys
 
 import torch
 
 import edgepath as ep
-from _common import output_dir, parser, plot, report, row, save_images
+from _common import output_dir, parser, plot, report, row, run, save_images
 
 TRUE_XY = torch.tensor([[-1.0, -0.8], [1.1, -0.6], [0.1, 1.0]])
 START_XY = torch.tensor([[-0.6, -0.3], [0.5, -0.9], [-0.3, 0.5]])
@@ -59,4 +58,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

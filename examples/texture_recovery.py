@@ -8,13 +8,12 @@ texels recovers the pattern wherever the cameras see it (not near the poles).
 """
 
 import math
-import sys
 
 import torch
 
 import edgepath as ep
 from edgepath import shapes
-from _common import lamp, orbit_cameras, output_dir, parser, plot, report, row, save_images
+from _common import lamp, orbit_cameras, output_dir, parser, plot, report, row, run, save_images
 
 TEXTURE_SIZE = (32, 64)
 SPHERE = shapes.sphere(radius=1.0, rings=24, segments=48)
@@ -85,4 +84,4 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:])
+    run(main)

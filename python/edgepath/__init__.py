@@ -7,15 +7,18 @@
     ep.imwrite(image, "out.png")
 """
 
-from .io import imread, imwrite, load_obj, load_ply, save_obj
+from . import shapes
+from .io import Picture, imread, imwrite, load_obj, load_ply, save_obj, show, to_srgb
 from .mitsuba import MitsubaError, MitsubaScene, load_mitsuba
 from .render import (CHANNELS, ID_CHANNELS, derivative_channels, derivative_image,
                      finite_difference_channels, finite_difference_image, render, render_channels)
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
+# The one place the version is written: pyproject.toml and CMakeLists.txt read it from here.
 __version__ = "0.1.0"
 
 __all__ = ["CHANNELS", "ID_CHANNELS", "Camera", "EnvironmentMap", "Material", "Mesh", "Scene",
            "render", "render_channels", "derivative_image", "derivative_channels",
            "finite_difference_image", "finite_difference_channels", "imread", "imwrite", "load_obj",
-           "load_ply", "save_obj", "load_mitsuba", "MitsubaScene", "MitsubaError", "__version__"]
+           "load_ply", "save_obj", "to_srgb", "show", "Picture", "shapes", "load_mitsuba",
+           "MitsubaScene", "MitsubaError", "__version__"]

@@ -12,6 +12,7 @@ from __future__ import annotations
 import numbers
 from typing import Optional, Sequence, Union
 
+import numpy as np
 import torch
 
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
@@ -31,10 +32,28 @@ def _shape_str(shape: Sequence) -> str:
     return "(" + ", ".join(str(s) for s in shape) + ")"
 
 
-def tensor(value, field: str) -> torch.Tensor:
-    """`value` must be a torch.Tensor on the CPU."""
+def _holds_tensor(value) -> bool:
+    if isinstance(value, torch.Tensor):
+        return True
+    return isinstance(value, (list, tuple)) and any(_holds_tensor(x) for x in value)
+
+
+def tensor(value, field: str, dtype: Optional[torch.dtype] = None) -> torch.Tensor:
+    """`value` as a torch.Tensor on the CPU. A tensor is taken as it is; a list, tuple or numpy
+    array is copied into a new tensor (of ``dtype`` where given), which never requires grad."""
+    if isinstance(value, (list, tuple, np.ndarray)):
+        if _holds_tensor(value):
+            fail(field, "a list holding tensors: build the tensor with torch.stack or torch.cat "
+                        "so that gradients reach them")
+        try:
+            array = np.array(value, dtype=None if dtype is None else np.float32)
+        except (TypeError, ValueError) as e:
+            fail(field, f"cannot convert the {type(value).__name__} to a tensor ({e})")
+        if array.dtype.kind not in "biuf":
+            fail(field, f"expected numbers, got a {type(value).__name__} of {array.dtype}")
+        return torch.from_numpy(array)
     if not isinstance(value, torch.Tensor):
-        fail(field, f"expected a torch.Tensor, got {type(value).__name__}")
+        fail(field, f"expected a torch.Tensor, a list or a numpy array, got {type(value).__name__}")
     if value.device.type != "cpu":
         fail(field, f"tensor is on device '{value.device}', but edgepath renders on the CPU "
                     "(move it with .cpu())")
@@ -58,10 +77,11 @@ def check_shape(t: torch.Tensor, field: str, shape: Shape, min_rows: int = 1) ->
 
 
 def float_tensor(value, field: str, shape: Shape, min_rows: int = 1) -> torch.Tensor:
-    """A floating-point tensor of the given shape, as float32 C-contiguous (copied only if
-    needed). The conversion is a differentiable torch op: the result stays attached to the
-    caller's tensor, so gradients flow back to it (and to its dtype)."""
-    t = tensor(value, field)
+    """A floating-point tensor (or a list / numpy array of numbers) of the given shape, as
+    float32 C-contiguous (copied only if needed). The conversion is a differentiable torch op:
+    the result stays attached to the caller's tensor, so gradients flow back to it (and to its
+    dtype)."""
+    t = tensor(value, field, torch.float32)
     if not t.dtype.is_floating_point:
         fail(field, f"expected a floating-point tensor, got {t.dtype}")
     check_shape(t, field, shape, min_rows)
@@ -80,8 +100,9 @@ def scalar_tensor(value, field: str) -> torch.Tensor:
 
 
 def index_tensor(value, field: str, shape: Shape = ("M", 3)) -> torch.Tensor:
-    """An int32 or int64 index tensor, as int32 C-contiguous. int64 values must fit in int32
-    (narrowing must not change an index); range checks against vertex counts are the core's."""
+    """An int32 or int64 index tensor (or a list / numpy array of ints), as int32
+    C-contiguous. int64 values must fit in int32 (narrowing must not change an index); range
+    checks against vertex counts are the core's."""
     t = tensor(value, field)
     if t.dtype not in (torch.int32, torch.int64):
         fail(field, f"expected an int32 or int64 tensor, got {t.dtype}")
@@ -96,11 +117,14 @@ def index_tensor(value, field: str, shape: Shape = ("M", 3)) -> torch.Tensor:
 
 
 def number(value, field: str) -> float:
-    """A Python real number or a 0-d (or one-element) floating tensor, as a float."""
+    """A Python real number or a 0-d (or one-element) floating tensor or numpy array, as a
+    float."""
     if isinstance(value, bool):
         fail(field, "expected a number, got bool")
     if isinstance(value, numbers.Real):
         return float(value)
+    if isinstance(value, np.ndarray):
+        value = tensor(value, field)
     if isinstance(value, torch.Tensor):
         t = tensor(value, field)
         if not t.dtype.is_floating_point and t.dtype not in (torch.int32, torch.int64):
@@ -137,11 +161,11 @@ def texture(value, field: str, channels: int) -> torch.Tensor:
     """A constant or a texture, as a float32 (H, W, channels) tensor; a constant is 1x1.
     Attached to the caller's tensor like ``float_tensor``.
 
-    Constants: a Python number, a 0-d tensor, or a tensor of shape (channels,) or (1,).
-    Textures: (H, W, channels); with channels == 1 also (H, W)."""
+    Constants: a Python number, a 0-d tensor, or a tensor, list or numpy array of shape
+    (channels,) or (1,). Textures: (H, W, channels); with channels == 1 also (H, W)."""
     if isinstance(value, numbers.Real) and not isinstance(value, bool):
         return torch.full((1, 1, channels), float(value), dtype=torch.float32)
-    t = tensor(value, field)
+    t = tensor(value, field, torch.float32)
     if not t.dtype.is_floating_point:
         fail(field, f"expected a floating-point tensor, got {t.dtype}")
     if t.dim() <= 1:

@@ -249,10 +249,12 @@ def _cmd_info(args) -> None:
     print("parameters (NAME, shape, what --direction takes):")
     for name, t in loaded.parameters().items():
         print(f"  {name}  {tuple(t.shape)}  {_direction_help(name, t)}")
+        if name == "sensor.to_world":  # a direction of it, not a parameter of its own
+            print("  sensor.position  (--direction only)  3 numbers: a translation of the camera")
 
 
 def _direction_help(name: str, t: torch.Tensor) -> str:
-    if name.endswith(".vertices") or name == "sensor.position":
+    if name.endswith(".vertex_positions") or name == "sensor.position":
         return "3 numbers: a translation"
     if name == "sensor.to_world":
         return "16 numbers: a 4x4 matrix, row-major"
@@ -327,14 +329,15 @@ def build_parser() -> argparse.ArgumentParser:
                     "parameter's space (forward mode, with edge sampling), as EXR, and a "
                     "colour-mapped PNG beside it (blue negative, white zero, red positive; the "
                     "mean over RGB, scaled by a percentile of its magnitude). NAME: a name that "
-                    "`edgepath info` lists, e.g. SHAPE.vertices, SHAPE.emission, BSDF.diffuse, "
-                    "sensor.position, sensor.fov, envmap.values.")
+                    "`edgepath info` lists (Mitsuba 3's names), e.g. SHAPE.vertex_positions, "
+                    "SHAPE.emitter.radiance.value, BSDF.reflectance.value, sensor.x_fov, "
+                    "envmap.data, or sensor.position (a translation of sensor.to_world).")
     _add_scene_options(g)
     g.add_argument("--param", required=True, metavar="NAME", help="the parameter (see edgepath info)")
     g.add_argument("--direction", required=True, type=float, nargs="+", metavar="X",
-                   help="SHAPE.vertices, sensor.position: 3 numbers, a translation; colours: 1 "
-                        "number (all channels) or 3, added to every texel; scalars (sensor.fov, "
-                        "roughness): 1 number; sensor.to_world: 16 numbers")
+                   help="SHAPE.vertex_positions, sensor.position: 3 numbers, a translation; "
+                        "colours: 1 number (all channels) or 3, added to every texel; scalars "
+                        "(sensor.x_fov, alpha): 1 number; sensor.to_world: 16 numbers")
     g.add_argument("-o", "--output", default="derivative.exr", metavar="FILE.exr",
                    help="the derivative image (default derivative.exr); the PNG goes beside it")
     g.add_argument("--percentile", type=float, default=99.0,

@@ -27,7 +27,7 @@ import numpy as np
 import torch
 
 from . import shapes
-from .io import imwrite
+from .io import imwrite, to_srgb
 from .render import render
 from .scene import Camera, Material, Mesh, Scene
 
@@ -162,8 +162,7 @@ class ProgressBar:
 
 def to_srgb8(image: torch.Tensor) -> np.ndarray:
     """Linear radiance (H, W, 3) to 8-bit sRGB, clamped to [0, 1], as a numpy array."""
-    x = image.detach().to(torch.float64).clamp(0.0, 1.0)
-    srgb = torch.where(x <= 0.0031308, 12.92 * x, 1.055 * x.pow(1 / 2.4) - 0.055)
+    srgb = to_srgb(image.detach().to(torch.float64))
     return (srgb * 255.0 + 0.5).to(torch.uint8).numpy()
 
 

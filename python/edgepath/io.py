@@ -1,5 +1,6 @@
-"""Files: images (PNG, JPEG, EXR) and OBJ meshes, read and written by the C++ core; PLY meshes
-(read) and OBJ meshes (written) here in Python."""
+"""Files: images (PNG, JPEG, EXR) and OBJ meshes, read and written by the C++ core; Radiance
+HDR images (.hdr, RGBE) through OpenCV; PLY meshes (read) and OBJ meshes (written) here in
+Python. Also the sRGB curve and a picture a notebook shows."""
 
 from __future__ import annotations
 
@@ -23,29 +24,117 @@ def _existing(path: PathLike, what: str) -> str:
     return path
 
 
+def _is_hdr(path: str) -> bool:
+    return os.path.splitext(path)[1].lower() == ".hdr"
+
+
+def _cv2(path: str):
+    try:
+        import cv2
+    except ImportError as e:  # a dependency of the package; missing only in a broken install
+        raise ImportError(f"{path}: .hdr images are read and written with OpenCV "
+                          "(pip install opencv-python-headless)") from e
+    return cv2
+
+
 def imread(path: PathLike) -> torch.Tensor:
     """Reads an image as a float32 (H, W, C) tensor of linear values, row 0 at the top.
-    PNG/JPEG (sRGB) are linearised; EXR is returned as stored. C is 1 (grey), 2 (grey and
-    alpha), 3 (RGB) or 4 (RGBA)."""
-    return torch.from_numpy(_core.imread(_existing(path, "image")))
+    PNG/JPEG (sRGB) are linearised; EXR and HDR (Radiance RGBE) are returned as stored. C is
+    1 (grey), 2 (grey and alpha), 3 (RGB) or 4 (RGBA); HDR images are RGB."""
+    path = _existing(path, "image")
+    if _is_hdr(path):
+        cv2 = _cv2(path)
+        bgr = cv2.imread(path, cv2.IMREAD_UNCHANGED)
+        if bgr is None or bgr.ndim != 3 or bgr.shape[2] != 3:
+            raise OSError(f"{path}: not a readable Radiance HDR (RGBE) image")
+        return torch.from_numpy(np.ascontiguousarray(bgr[:, :, ::-1], dtype=np.float32))
+    return torch.from_numpy(_core.imread(path))
 
 
-def imwrite(img: Union[torch.Tensor, np.ndarray], path: PathLike) -> None:
-    """Writes a (H, W) or (H, W, C) image (C = 1..4) of linear values: .png (sRGB-encoded,
-    clamped to [0, 1], 8-bit) or .exr (float32). Accepts torch tensors (any device, any
-    float dtype) and numpy arrays; the input is never modified."""
+def _image_array(img, field: str = "image") -> np.ndarray:
+    """A (H, W) or (H, W, C) float32 C-contiguous numpy copy or view of an image (C = 1..4)."""
     if isinstance(img, torch.Tensor):
         array = img.detach().to(device="cpu", dtype=torch.float32).contiguous().numpy()
     elif isinstance(img, np.ndarray):
         array = np.ascontiguousarray(img, dtype=np.float32)
     else:
-        raise ValueError(f"image: expected a torch.Tensor or numpy.ndarray, got {type(img).__name__}")
+        raise ValueError(f"{field}: expected a torch.Tensor or numpy.ndarray, got {type(img).__name__}")
     if array.ndim not in (2, 3) or (array.ndim == 3 and not 1 <= array.shape[2] <= 4):
-        raise ValueError(f"image: expected shape (H, W) or (H, W, C) with C in 1..4, "
+        raise ValueError(f"{field}: expected shape (H, W) or (H, W, C) with C in 1..4, "
                          f"got {tuple(array.shape)}")
     if array.shape[0] == 0 or array.shape[1] == 0:
-        raise ValueError(f"image: is empty, shape {tuple(array.shape)}")
-    _core.imwrite(os.fspath(path), array)
+        raise ValueError(f"{field}: is empty, shape {tuple(array.shape)}")
+    return array
+
+
+def imwrite(img: Union[torch.Tensor, np.ndarray], path: PathLike) -> None:
+    """Writes a (H, W) or (H, W, C) image (C = 1..4) of linear values: .png (sRGB-encoded,
+    clamped to [0, 1], 8-bit), .exr (float32) or .hdr (Radiance RGBE: grey or RGB,
+    non-negative, about 1% precision). Accepts torch tensors (any device, any float dtype)
+    and numpy arrays; the input is never modified."""
+    array = _image_array(img)
+    path = os.fspath(path)
+    if not _is_hdr(path):
+        _core.imwrite(path, array)
+        return
+    if array.ndim == 2:
+        array = array[:, :, None]
+    if array.shape[2] not in (1, 3):
+        raise ValueError(f"image: a .hdr file holds grey or RGB, got {array.shape[2]} channels")
+    if not np.isfinite(array).all() or (array < 0).any():
+        raise ValueError(f"image: a .hdr file holds finite non-negative values, got values in "
+                         f"[{np.nanmin(array):g}, {np.nanmax(array):g}]")
+    rgb = np.broadcast_to(array, array.shape[:2] + (3,))
+    cv2 = _cv2(path)
+    if not cv2.imwrite(path, np.ascontiguousarray(rgb[:, :, ::-1])):
+        raise OSError(f"{path}: cannot write the image")
+
+
+def to_srgb(img: Union[torch.Tensor, np.ndarray]) -> torch.Tensor:
+    """Linear radiance clamped to [0, 1] and encoded with the sRGB curve (what ``imwrite``
+    stores in a PNG), as a float tensor of the same shape (differentiable)."""
+    x = torch.as_tensor(img).clamp(0.0, 1.0)
+    return torch.where(x <= 0.0031308, 12.92 * x, 1.055 * x.clamp_min(0.0031308) ** (1 / 2.4) - 0.055)
+
+
+class Picture:
+    """An image as an 8-bit sRGB PNG, which Jupyter and IPython show (``_repr_png_``).
+    ``png``: the file's bytes; ``save(path)`` writes them."""
+
+    def __init__(self, png: bytes, shape):
+        self.png = png
+        self.shape = tuple(shape)
+
+    def _repr_png_(self) -> bytes:
+        return self.png
+
+    def save(self, path: PathLike) -> None:
+        with open(path, "wb") as f:
+            f.write(self.png)
+
+    def __repr__(self):
+        return f"Picture({self.shape[1]}x{self.shape[0]} PNG, {len(self.png)} bytes)"
+
+
+def show(img: Union[torch.Tensor, np.ndarray]) -> Picture:
+    """A (H, W) or (H, W, C) linear image (C = 1..4) as a ``Picture``: the last expression of a
+    notebook cell, or ``IPython.display.display(ep.show(image))``, shows it. Channels as
+    ``imwrite`` writes a PNG: sRGB-encoded, clamped, alpha kept linear."""
+    array = _image_array(img)
+    if array.ndim == 2:
+        array = array[:, :, None]
+    pixels = to_srgb(torch.from_numpy(array)).numpy()
+    if array.shape[2] in (2, 4):  # alpha is not a colour
+        pixels[:, :, -1] = np.clip(array[:, :, -1], 0.0, 1.0)
+    pixels = np.round(pixels * 255.0).astype(np.uint8)
+    order = {1: [0], 2: [0, 1], 3: [2, 1, 0], 4: [2, 1, 0, 3]}[pixels.shape[2]]  # OpenCV: BGR(A)
+    if pixels.shape[2] == 2:  # PNG grey + alpha: OpenCV writes it as BGRA
+        pixels = pixels[:, :, [0, 0, 0, 1]]
+        order = [0, 1, 2, 3]
+    ok, data = _cv2("picture").imencode(".png", np.ascontiguousarray(pixels[:, :, order]))
+    if not ok:
+        raise RuntimeError("image: PNG encoding failed")
+    return Picture(data.tobytes(), array.shape[:2])
 
 
 def _texture_rgb(path: str) -> torch.Tensor:

@@ -20,7 +20,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import torch
 
-from .io import _texture_rgb, imread, load_obj, load_ply
+from .io import _texture_rgb, imread, load_obj, load_ply, to_srgb
 from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 PathLike = Union[str, os.PathLike]
@@ -60,6 +60,13 @@ class MitsubaError(ValueError):
     """A scene file outside the supported subset, or malformed."""
 
 
+# Mitsuba's names of the Material fields a BSDF type sets (parameters() adds .value / .data).
+# A material made without a <bsdf> (a shape's default) is a diffuse one.
+_DIFFUSE_KEYS = {"diffuse": "reflectance"}
+_BSDF_KEYS = {"diffuse": _DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
+                                                         "roughness": "alpha"},
+              "roughconductor": {"roughness": "alpha"}}
+
 # What an unbounded integrator depth (max_depth -1, Mitsuba's default) renders with: the
 # direct light and one indirect bounce. ``MitsubaScene.render`` and the command line agree.
 UNBOUNDED_MAX_BOUNCES = 2
@@ -85,46 +92,63 @@ class MitsubaScene:
     bsdfs: Dict[str, Material] = field(default_factory=dict)
     textures: Dict[str, torch.Tensor] = field(default_factory=dict)
     path: str = ""
+    # Mitsuba's names of a material's fields (see parameters), by id() of the Material.
+    bsdf_keys: Dict[int, Dict[str, str]] = field(default_factory=dict, repr=False)
 
     def parameters(self) -> Dict[str, torch.Tensor]:
-        """The scene's differentiable tensors by name: ``sensor.to_world``, ``sensor.fov``,
-        ``SHAPE.vertices``, ``SHAPE.emission`` (area lights), ``BSDF.diffuse`` /
-        ``.specular`` / ``.roughness`` (``BSDF``: the BSDF's id, or ``SHAPE.bsdf`` for one
-        without an id) where they are tensors, ``envmap.values``. ``sensor.position`` names
-        ``sensor.to_world`` too (see ``direction``)."""
+        """The scene's differentiable tensors by name, each tensor once, named as Mitsuba 3's
+        ``mi.traverse`` names them where Mitsuba has the same quantity: ``sensor.to_world``,
+        ``sensor.x_fov``, ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
+        (area lights), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
+        ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
+        in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
+        ``BSDF.specular`` (the GGX lobe's F0, which Mitsuba derives from eta/k or the IOR),
+        ``BSDF.diffuse`` of a conductor. ``BSDF``: the BSDF's id, or ``SHAPE.bsdf`` for one
+        without an id. A tensor shared by several shapes or BSDFs is listed under the first."""
         out: Dict[str, torch.Tensor] = {}
+        listed = set()
+
+        def put(name: str, value, texture_suffix: bool = False) -> None:
+            if not isinstance(value, torch.Tensor) or id(value) in listed:
+                return
+            if texture_suffix:
+                name += ".data" if value.dim() >= 2 else ".value"
+            listed.add(id(value))
+            out[name] = value
+
         camera = self.scene.camera
-        if isinstance(camera.to_world, torch.Tensor):
-            out["sensor.to_world"] = camera.to_world
-            out["sensor.position"] = camera.to_world
-        if isinstance(camera.fov, torch.Tensor):
-            out["sensor.fov"] = camera.fov
+        put("sensor.to_world", camera.to_world)
+        put("sensor.x_fov", camera.fov)
         bsdf_names = {id(m): name for name, m in self.bsdfs.items()}
         for sid, mesh in zip(self.shape_ids, self.scene.meshes):
-            out[f"{sid}.vertices"] = mesh.vertices
-            if isinstance(mesh.emission, torch.Tensor):
-                out[f"{sid}.emission"] = mesh.emission
+            put(f"{sid}.vertex_positions", mesh.vertices)
+            put(f"{sid}.emitter.radiance", mesh.emission, texture_suffix=True)
             material = mesh.material
             prefix = bsdf_names.get(id(material), f"{sid}.bsdf")
+            keys = self.bsdf_keys.get(id(material), _DIFFUSE_KEYS)
             for name in ("diffuse", "specular", "roughness"):
-                value = getattr(material, name, None)
-                if isinstance(value, torch.Tensor) and f"{prefix}.{name}" not in out:
-                    out[f"{prefix}.{name}"] = value
+                mitsuba = keys.get(name)
+                put(f"{prefix}.{mitsuba or name}", getattr(material, name, None),
+                    texture_suffix=mitsuba is not None)
         if self.scene.envmap is not None:
-            out["envmap.values"] = self.scene.envmap.values
+            put("envmap.data", self.scene.envmap.values)
         return out
 
     def direction(self, name: str, values: Sequence[float]) -> Tuple[torch.Tensor, torch.Tensor]:
         """(tensor, direction) for ``ep.derivative_image`` from a parameter name and a few
-        numbers: ``SHAPE.vertices`` and ``sensor.position``: 3 numbers, a translation (of
-        every vertex, of the camera); ``sensor.to_world``: 16 numbers (row-major);
-        colours (``diffuse``, ``specular``, ``emission``, ``envmap.values``): 1 number (every
-        channel) or 3 (per channel), added to every texel; scalars (``sensor.fov``,
-        ``roughness``): 1 number (every texel)."""
+        numbers: ``SHAPE.vertex_positions``: 3 numbers, a translation of every vertex;
+        ``sensor.to_world``: 16 numbers (row-major), or ``sensor.position`` (a direction of
+        ``sensor.to_world``): 3 numbers, a translation of the camera; colours (radiance,
+        reflectance, ``specular``, ``envmap.data``): 1 number (every channel) or 3 (per
+        channel), added to every texel; scalars (``sensor.x_fov``, ``alpha``): 1 number
+        (every texel)."""
         params = self.parameters()
-        if name not in params:
-            raise ValueError(f"parameter {name!r}: not in this scene (have: {', '.join(params)})")
-        param = params[name]
+        key = "sensor.to_world" if name == "sensor.position" else name
+        if key not in params:
+            shorthand = ", sensor.position" if "sensor.to_world" in params else ""
+            raise ValueError(f"parameter {name!r}: not in this scene (have: "
+                             f"{', '.join(params)}{shorthand})")
+        param = params[key]
         values = [float(x) for x in values]
         d = torch.tensor(values, dtype=param.dtype)
 
@@ -140,7 +164,7 @@ class MitsubaScene:
         if name == "sensor.to_world":
             need((16,))
             return param, d.reshape(4, 4)
-        if name.endswith(".vertices"):
+        if name.endswith(".vertex_positions"):
             need((3,))
             return param, d.expand_as(param).clone()
         channels = param.shape[-1] if param.dim() > 0 else 1
@@ -362,10 +386,9 @@ class _Loader:
             image = _texture_rgb(filename)
         else:
             image = imread(filename)[:, :, :1].contiguous()
-        if raw and not filename.lower().endswith(".exr"):
+        if raw and not filename.lower().endswith((".exr", ".hdr")):
             # imread linearised the 8-bit sRGB values: encode them back (exact up to rounding).
-            image = torch.where(image <= 0.0031308, image * 12.92,
-                                1.055 * image.clamp_min(0) ** (1 / 2.4) - 0.055).contiguous()
+            image = to_srgb(image).contiguous()
         self.texture_cache[key] = image
         if "id" in node.attrs:
             self.result.textures.setdefault(node.attrs["id"], image)
@@ -812,6 +835,8 @@ class _Loader:
             self.leftovers(node, props, "bsdf")
             material = Material(diffuse=base.diffuse, specular=base.specular,
                                 roughness=base.roughness, two_sided=True)
+            self.result.bsdf_keys[id(material)] = {
+                k: "brdf_0." + v for k, v in self.result.bsdf_keys[id(base)].items()}
         else:
             for child in nested:
                 if child.tag != "texture" and child.tag != "ref":
@@ -822,6 +847,7 @@ class _Loader:
             for r in refs:
                 props[self.attr(r, "name")] = r
             material = self.simple_material(node, kind, props)
+            self.result.bsdf_keys[id(material)] = _BSDF_KEYS[kind]
         self.bsdf_cache[id(node)] = material
         if "id" in node.attrs:
             self.result.bsdfs[node.attrs["id"]] = material

@@ -114,6 +114,41 @@ def test_orthographic_envmap_and_options_render():
         assert img.mean() > 0
 
 
+# ---- lists and numpy arrays --------------------------------------------------------------
+
+def test_lists_and_numpy_arrays_are_taken_where_tensors_are():
+    """The README scene written with lists, tuples and numpy arrays (ints too, where a
+    float is meant) renders the same image as with tensors, and leaves the inputs as given."""
+    reference = ep.render(make_scene(resolution=(24, 24)), spp=2, seed=3)
+    vertices = np.array([[-1.7, 1., 0.], [1., 1., 0.], [-0.5, -1., 0.]])
+    indices = [[0, 1, 2]]
+    cam = ep.Camera(position=[0, 0, -5], look_at=(0, 0, 0), up=np.array([0., 1., 0.]),
+                    fov=np.float32(45.0), resolution=(24, 24))
+    tri = ep.Mesh(vertices=vertices, indices=indices,
+                  material=ep.Material(diffuse=[0.8, 0.2, 0.2], roughness=np.array(0.5)))
+    lamp = ep.Mesh(vertices=[[-2, -2, -7], [2, -2, -7], [2, 2, -7], [-2, 2, -7]],
+                   indices=np.array([[0, 1, 2], [0, 2, 3]], dtype=np.int32),
+                   material=ep.Material(diffuse=[0, 0, 0]), emission=[20, 20, 20])
+    scene = ep.Scene(cam, [tri, lamp])
+    image = ep.render(scene, spp=2, seed=3)
+    assert torch.equal(image, reference)
+    assert isinstance(tri.vertices, np.ndarray) and vertices.dtype == np.float64
+    assert tri.material.diffuse == [0.8, 0.2, 0.2] and cam.position == [0, 0, -5]
+    # A list never requires grad: the loss reaches the tensors only.
+    colour = torch.tensor([0.5, 0.5, 0.5], requires_grad=True)
+    tri.material.diffuse = colour
+    ep.render(scene, spp=1).sum().backward()
+    assert colour.grad is not None and (colour.grad > 0).all()
+
+
+def test_a_list_holding_tensors_is_refused_rather_than_detached():
+    scene = make_scene(resolution=(8, 8))
+    x = torch.tensor(0.0, requires_grad=True)
+    scene.camera.position = [x, 0.0, -5.0]
+    with pytest.raises(ValueError, match=r"camera\.position: a list holding tensors.*torch\.stack"):
+        ep.render(scene, spp=1)
+
+
 # ---- validation -----------------------------------------------------------------------------
 
 def render_small(scene):
@@ -124,7 +159,9 @@ def render_small(scene):
     (lambda s: setattr(s.meshes[0], "vertices", torch.zeros(3, 2)), r"meshes\[0\]\.vertices"),
     (lambda s: setattr(s.meshes[0], "vertices", torch.zeros(3, 3, dtype=torch.int32)),
      r"meshes\[0\]\.vertices"),
-    (lambda s: setattr(s.meshes[0], "vertices", [[0., 0., 0.]] * 3), r"meshes\[0\]\.vertices"),
+    (lambda s: setattr(s.meshes[0], "vertices", [[0., 0.], [0., 0., 0.]]), r"meshes\[0\]\.vertices"),
+    (lambda s: setattr(s.meshes[0], "vertices", [[0., 0., "x"]] * 3), r"meshes\[0\]\.vertices"),
+    (lambda s: setattr(s.meshes[0], "vertices", {"x": 0}), r"meshes\[0\]\.vertices"),
     (lambda s: setattr(s.meshes[0], "vertices", torch.zeros(3, 3, device="meta")),
      r"meshes\[0\]\.vertices: .*device"),
     (lambda s: setattr(s.meshes[0], "indices", torch.tensor([[0., 1., 2.]])), r"meshes\[0\]\.indices"),

@@ -100,12 +100,12 @@ def test_render_obj_still_works(tmp_path, capsys):
     code, text, err = _run(["info", tmp_path / "quad.obj"], capsys)
     assert code == 0, err
     assert "meshes: 1, triangles: 2, vertices: 4" in text and "environment: constant" in text
-    assert "  mesh_0.vertices  (4, 3)" in text
+    assert "  mesh_0.vertex_positions  (4, 3)" in text
 
 
 def test_derivative_writes_exr_and_png(scene_file, tmp_path, capsys):
     out = tmp_path / "d.exr"
-    code, text, err = _run(["derivative", scene_file, "--param", "card.vertices",
+    code, text, err = _run(["derivative", scene_file, "--param", "card.vertex_positions",
                             "--direction", "0.5", "0", "0", "-o", out, "--spp", "2"], capsys)
     assert code == 0, err
     loaded = ep.load_mitsuba(scene_file)
@@ -124,13 +124,13 @@ def test_derivative_writes_exr_and_png(scene_file, tmp_path, capsys):
 
 
 def test_derivative_of_scalars_and_colours(scene_file, tmp_path, capsys):
-    for param, direction in (("sensor.fov", ["1"]), ("paint.diffuse", ["1", "0", "0"]),
-                             ("lamp.emission", ["1"]), ("sensor.position", ["0.1", "0", "0"])):
+    for param, direction in (("sensor.x_fov", ["1"]), ("paint.reflectance.value", ["1", "0", "0"]),
+                             ("lamp.emitter.radiance.value", ["1"]), ("sensor.position", ["0.1", "0", "0"])):
         code, _, err = _run(["derivative", scene_file, "--param", param, "--direction", *direction,
                              "-o", tmp_path / f"{param}.exr", "--spp", "1"], capsys)
         assert code == 0, (param, err)
         assert float(ep.imread(tmp_path / f"{param}.exr").abs().sum()) > 0, param
-    code, _, err = _run(["derivative", scene_file, "--param", "paint.diffuse", "--direction", "1", "2",
+    code, _, err = _run(["derivative", scene_file, "--param", "paint.reflectance.value", "--direction", "1", "2",
                          "-o", tmp_path / "x.exr"], capsys)
     assert code == 1 and "expected 1 or 3 numbers, got 2" in err
     code, _, err = _run(["derivative", scene_file, "--param", "nope", "--direction", "1",
@@ -158,8 +158,11 @@ def test_info(scene_file, capsys):
     assert "bounds: min (-1, -1, 0), max (1, 3, 2)" in text
     assert "camera: perspective, position (0, 0, 4)" in text and "fov 45 deg, 16x12" in text
     assert "render: spp 4, max_bounces 2, seed 0" in text
-    for name in ("card.vertices", "paint.diffuse", "lamp.emission", "sensor.position", "sensor.fov"):
+    for name in ("card.vertex_positions", "paint.reflectance.value", "lamp.emitter.radiance.value",
+                 "sensor.position", "sensor.x_fov"):
         assert f"  {name}  " in text
+    # The camera's matrix is one parameter; sensor.position is only a --direction of it.
+    assert text.count("(4, 4)") == 1 and "sensor.position  (--direction only)" in text
 
 
 def test_errors_name_the_line(tmp_path, capsys):
@@ -184,7 +187,7 @@ def test_derivative_matches_finite_differences_of_a_linear_parameter(scene_file,
     # The image is linear in the floor's albedo (the floor is flat: no path meets it twice), so
     # a finite difference with the same random numbers is exact up to rounding.
     out = tmp_path / "albedo.exr"
-    code, _, err = _run(["derivative", scene_file, "--param", "paint.diffuse", "--direction",
+    code, _, err = _run(["derivative", scene_file, "--param", "paint.reflectance.value", "--direction",
                          "1", "0", "0", "-o", out, "--spp", "4"], capsys)
     assert code == 0, err
     d = ep.imread(out)
