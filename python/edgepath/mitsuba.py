@@ -740,7 +740,10 @@ class _Loader:
 
         vertices = vertices @ to_world[:3, :3].T + to_world[:3, 3]
         if normals is not None:
-            normals = normals @ torch.linalg.inv(to_world[:3, :3])
+            inverse, singular = torch.linalg.inv_ex(to_world[:3, :3])
+            if singular:
+                self.fail(node, "to_world is singular (a zero scale?): the normals have no transform")
+            normals = normals @ inverse
             normals = normals / normals.norm(dim=1, keepdim=True)
         elif smooth:
             normals = _vertex_normals(vertices, indices)
