@@ -293,7 +293,7 @@ def load_ply(path: PathLike) -> Mesh:
         for i, p in enumerate(polygons):
             p = _ply_indices(path, np.asarray(p), i)
             if len(p) < 3:
-                raise ValueError(f"{path}: element 'face' row {i}: {len(p)} vertices (at least 3)")
+                raise ValueError(f"{path}: face {i} has {len(p)} vertices (at least 3)")
             triangles.append(np.stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]], 1))
     indices = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
     if indices.size and (indices.min() < 0 or indices.max() >= len(vertices)):
