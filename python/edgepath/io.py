@@ -255,6 +255,14 @@ def load_ply(path: PathLike) -> Mesh:
     with open(path, "rb") as f:
         data = f.read()
     fmt, elements, pos = _ply_header(path, data)
+    per_vertex = {"x", "y", "z", "nx", "ny", "nz"}.union(*_PLY_UV_NAMES)
+    for element, _, props in elements:
+        for prop, _, item in props:
+            if element == "vertex" and prop in per_vertex and item is not None:
+                raise ValueError(f"{path}: element 'vertex': property '{prop}' is a list "
+                                 "(expected one number per vertex)")
+            if element == "face" and prop in ("vertex_indices", "vertex_index") and item is None:
+                raise ValueError(f"{path}: element 'face': property '{prop}' is not a list")
     values = {}
     tokens = data[pos:].split() if fmt == "ascii" else None
     tpos = 0

@@ -4,7 +4,9 @@ them. Everything here is deterministic: a case is a function of (seed, case numb
 from __future__ import annotations
 
 import io
+import os
 import random
+import re
 import struct
 import zlib
 from typing import Callable, Dict, List, Tuple
@@ -123,7 +125,7 @@ def ply_binary(big_endian: bool = False) -> bytes:
     return out
 
 
-def _png_chunk(kind: bytes, data: bytes) -> bytes:
+def png_chunk(kind: bytes, data: bytes) -> bytes:
     return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
 
 
@@ -133,8 +135,8 @@ def png(width: int = 6, height: int = 4, colour_type: int = 2) -> bytes:
     rows = b"".join(b"\0" + bytes((x * 40 + y * 60 + c * 20) % 256 for x in range(width)
                                   for c in range(channels)) for y in range(height))
     ihdr = struct.pack(">IIBBBBB", width, height, 8, colour_type, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + _png_chunk(b"IHDR", ihdr) +
-            _png_chunk(b"IDAT", zlib.compress(rows)) + _png_chunk(b"IEND", b""))
+    return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
+            png_chunk(b"IDAT", zlib.compress(rows)) + png_chunk(b"IEND", b""))
 
 
 def jpeg(progressive: bool = False, width: int = 16, height: int = 12) -> bytes:
@@ -158,7 +160,6 @@ def exr(path: str) -> None:
 def write_seeds(directory: str) -> Dict[str, List[str]]:
     """Writes the seed files into ``directory``; returns {kind: [file names]}. The XML seed
     refers to seed.obj, seed.ply, seed.png and seed.exr beside it."""
-    import os
     files = {
         "seed.obj": _OBJ.encode(), "seed.mtl": _MTL.encode(), "seed.xml": _XML.encode(),
         "seed.ply": ply_ascii(), "seed_le.ply": ply_binary(False), "seed_be.ply": ply_binary(True),
@@ -180,7 +181,7 @@ def write_seeds(directory: str) -> Dict[str, List[str]]:
 _HUGE = [b"1e19", b"-1e19", b"1e39", b"-1e308", b"1e308", b"nan", b"inf", b"-inf", b"NaN",
          b"4294967296", b"2147483648", b"-2147483649", b"99999999999999999999", b"-1", b"0",
          b"1e-45", b"0x10", b"1.5", b"", b"-0", b"+", b"."]
-_NUMBER = None  # compiled lazily (re)
+_NUMBER = re.compile(rb"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?")
 
 
 def _lines(data: bytes) -> List[bytes]:
@@ -221,10 +222,6 @@ def delete_line(rng: random.Random, data: bytes) -> bytes:
 
 def replace_number(rng: random.Random, data: bytes) -> bytes:
     """A number in the text replaced by a huge, non-finite or malformed one."""
-    import re
-    global _NUMBER
-    if _NUMBER is None:
-        _NUMBER = re.compile(rb"[-+]?\d+(\.\d*)?([eE][-+]?\d+)?")
     matches = list(_NUMBER.finditer(data))
     if not matches:
         return flip_bytes(rng, data)
@@ -267,7 +264,7 @@ def png_size(rng: random.Random, data: bytes) -> bytes:
     w, h = rng.choice([(60000, 60000), (2**31 - 1, 1), (1, 2**31 - 1), (16384, 16384), (0, 5),
                        (65536, 4097)])
     ihdr = struct.pack(">II", w, h) + data[24:29]
-    return data[:8] + _png_chunk(b"IHDR", ihdr) + data[33:]
+    return data[:8] + png_chunk(b"IHDR", ihdr) + data[33:]
 
 
 def jpeg_size(rng: random.Random, data: bytes) -> bytes:

@@ -114,6 +114,13 @@ VERTS_BINARY = struct.pack("<9f", 0, 0, 0, 1, 0, 0, 0, 1, 0)
     ("ply\nformat ascii 1.0\nelement vertex 1\nproperty\nend_header\n0\n", "header line 4"),
     ("ply\nformat ascii 1.0\nelement vertex 1\nproperty list\nend_header\n0\n", "header line 4"),
     ("ply\nformat ascii 1.0\nelement vertex x\nend_header\n", "header line 3"),
+    # lists where numbers belong, and numbers where lists belong (a TypeError before)
+    ("ply\nformat ascii 1.0\nelement vertex 1\nproperty list uchar float x\nproperty float y\n"
+     "property float z\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n"
+     "2 0 1 0 0\n", "property 'x' is a list"),
+    ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+     "property float z\nelement face 1\nproperty int vertex_indices\nend_header\n"
+     + VERTS_ASCII + "0\n", "property 'vertex_indices' is not a list"),
     # non-finite positions
     (ply_header() + "nan 0 0\n1 0 0\n0 1 0\n3 0 1 2\n", "element 'vertex' row 0"),
     (ply_header() + "0 0 0\n1e39 0 0\n0 1 0\n3 0 1 2\n", "element 'vertex' row 1"),
@@ -127,15 +134,11 @@ def test_ply_bad_files_name_the_file_and_element(tmp_path, data, words):
 
 # ---- images ---------------------------------------------------------------------------------
 
-def png_chunk(kind, data):
-    return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data))
-
-
 def png_declaring(width, height):
     """A 68-byte PNG whose (valid) header declares width x height RGB pixels."""
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + png_chunk(b"IHDR", ihdr) +
-            png_chunk(b"IDAT", zlib.compress(b"\0" * 16)) + png_chunk(b"IEND", b""))
+    return (b"\x89PNG\r\n\x1a\n" + corpus.png_chunk(b"IHDR", ihdr) +
+            corpus.png_chunk(b"IDAT", zlib.compress(b"\0" * 16)) + corpus.png_chunk(b"IEND", b""))
 
 
 def jpeg_declaring(height, width):
