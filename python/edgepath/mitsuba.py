@@ -171,6 +171,8 @@ class _Node:
         return "<" + " ".join([self.tag] + shown) + ">"
 
 
+_FLOAT32_MAX = 3.4028234663852886e38
+
 # Deeper nesting than any scene needs is refused (the loader recurses over the tree).
 _MAX_DEPTH = 64
 
@@ -257,8 +259,8 @@ class _Loader:
             values = [float(p) for p in parts]
         except ValueError:
             self.fail(node, f"expected numbers, got {text!r}")
-        if not all(math.isfinite(x) for x in values):
-            self.fail(node, f"expected finite numbers, got {text!r}")
+        if not all(abs(x) <= _FLOAT32_MAX for x in values):  # NaN fails too
+            self.fail(node, f"expected finite numbers (as float32), got {text!r}")
         if len(values) not in counts:
             self.fail(node, f"expected {' or '.join(map(str, counts))} numbers, got {len(values)}")
         return values

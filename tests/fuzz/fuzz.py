@@ -265,7 +265,7 @@ def fuzz(cases: int, seed: int, kinds: List[str], save: Optional[str], log=None,
             counts[kind][outcome] += 1
             if log is not None:
                 log.write(json.dumps({"case": i, "seed": seed, "kind": kind, "mutations": names,
-                                      "outcome": outcome, "detail": detail[:500]}) + "\n")
+                                      "outcome": outcome, "detail": detail[-800:]}) + "\n")
             if outcome in BAD or outcome == "unnamed":
                 if not quiet:
                     print(f"case {i} ({kind}, {'+'.join(names)}): {outcome}: {detail[-300:]}",

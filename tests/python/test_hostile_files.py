@@ -208,10 +208,12 @@ SCENE_HEAD = """<scene version="3.0.0">
     ('<bsdf type="twosided" id="a"><ref id="b"/></bsdf><bsdf type="twosided" id="b"><ref id="a"/>'
      '</bsdf>\n<shape type="rectangle"><ref id="a"/></shape>', r"scene.xml:5: <ref id=\"[ab]\">"),
     ('<shape type="rectangle"><transform name="to_world"><rotate x="1" angle="inf"/></transform>'
-     '</shape>', r"scene.xml:5: <rotate>: expected finite numbers, got 'inf'"),
+     '</shape>', r"scene.xml:5: <rotate>: expected finite numbers \(as float32\), got 'inf'"),
     ('<shape type="rectangle"><transform name="to_world"><rotate x="nan" angle="30"/></transform>'
      '</shape>', r"scene.xml:5: <rotate>: expected finite numbers"),
     ('<shape type="sphere"><float name="radius" value="1e400"/></shape>', r"scene.xml:5: <float"),
+    ('<shape type="rectangle"><bsdf type="roughconductor"><float name="alpha" value="-1e308"/>'
+     '</bsdf></shape>', r"scene.xml:5: <float name=\"alpha\">: expected finite numbers \(as float32\)"),
 ])
 def test_mitsuba_hostile_structure_names_file_and_line(tmp_path, body, words):
     path = write(tmp_path / "scene.xml", SCENE_HEAD + body + "\n</scene>\n")
