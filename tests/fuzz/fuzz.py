@@ -14,9 +14,11 @@ and memory cap, and every outcome is classified:
               ray checks abort on until the core refuses such scenes when it builds them
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
-imports edgepath once and forks a child per case (it never renders itself, so no TBB or
-OpenMP threads exist when it forks); the child sets its limits and one thread each for torch
-and the core, runs the case and reports through a pipe.
+imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
+threads exist when it forks); a child sets its limits and one thread each for torch and the
+core, and runs a batch of cases one after the other, reporting each through a pipe, until one
+kills it or runs past the time cap: a new child goes on after that case. Replayed files
+(``--replay``) run one per child.
 
     python tests/fuzz/fuzz.py --cases 2000 --seed 1 --save build/fuzz/found
     python tests/fuzz/fuzz.py --replay tests/python/fuzz_regressions
@@ -128,7 +130,7 @@ def _extent(scene) -> float:
 
 
 def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
-    """Runs one case in this process: (outcome, detail). Only ``run_isolated`` calls it;
+    """Runs one case in this process: (outcome, detail). Only ``run_batch``'s children call it;
     ``report`` gets a note before the render (the detail if the render kills the process)."""
     import edgepath as ep
     import edgepath.shapes  # noqa: F401  (ep.shapes)
@@ -154,7 +156,7 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
             traceback.format_exception(type(error), error, error.__traceback__))[-2000:]
 
 
-def _child(kind: str, path: str, write_fd: int, memory_limit: int) -> None:
+def _child(cases: List[Tuple[str, str]], write_fd: int, memory_limit: int) -> None:
     code = 0
     try:
         resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
@@ -164,10 +166,13 @@ def _child(kind: str, path: str, write_fd: int, memory_limit: int) -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, 1)
         os.dup2(devnull, 2)  # warnings (e.g. wrap modes) are fine; tracebacks are caught
-        def report(note):
-            os.write(write_fd, (json.dumps({"note": note}) + "\n").encode())
-        outcome, detail = run_case(kind, path, report)
-        os.write(write_fd, (json.dumps({"outcome": outcome, "detail": detail}) + "\n").encode())
+
+        def send(answer):
+            os.write(write_fd, (json.dumps(answer) + "\n").encode())
+
+        for kind, path in cases:
+            outcome, detail = run_case(kind, path, lambda note: send({"note": note}))
+            send({"outcome": outcome, "detail": detail})
     except BaseException:  # noqa: BLE001  (nothing may escape a forked child)
         code = 3
     finally:
@@ -182,42 +187,55 @@ def _mapped_bytes() -> int:
     return 0
 
 
-def run_isolated(kind: str, path: str, time_limit: float = TIME_LIMIT,
-                 memory_limit: int = MEMORY_LIMIT) -> Tuple[str, str]:
-    """Forks a child that runs the case; waits at most ``time_limit`` seconds."""
-    read_fd, write_fd = os.pipe()
-    pid = os.fork()
-    if pid == 0:
-        os.close(read_fd)
-        _child(kind, path, write_fd, memory_limit)
-    os.close(write_fd)
-    chunks, deadline, timed_out = [], time.monotonic() + time_limit, False
-    try:
-        while True:
-            left = deadline - time.monotonic()
-            if left <= 0:
-                timed_out = True
-                os.kill(pid, signal.SIGKILL)
-                break
-            ready, _, _ = select.select([read_fd], [], [], left)
-            if ready:
+def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
+              memory_limit: int = MEMORY_LIMIT) -> List[Tuple[str, str]]:
+    """Runs cases (kind, path) in forked children, one after the other in the same child
+    (a fork costs more than most cases) until one kills it or runs past ``time_limit``
+    seconds; a new child goes on with the next. Returns (outcome, detail) per case."""
+    results: List[Tuple[str, str]] = []
+    while len(results) < len(cases):
+        read_fd, write_fd = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(read_fd)
+            _child(cases[len(results):], write_fd, memory_limit)
+        os.close(write_fd)
+        buffer, note, timed_out = b"", "", False
+        deadline = time.monotonic() + time_limit
+        try:
+            while True:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    timed_out = True
+                    os.kill(pid, signal.SIGKILL)
+                    break
+                ready, _, _ = select.select([read_fd], [], [], left)
+                if not ready:
+                    continue
                 chunk = os.read(read_fd, 1 << 16)
                 if not chunk:
                     break
-                chunks.append(chunk)
-    finally:
-        os.close(read_fd)
-        _, status = os.waitpid(pid, 0)
-    answers = [json.loads(line) for line in b"".join(chunks).splitlines() if line.strip()]
-    note = "".join(f" while {a['note']}" for a in answers if "note" in a)
-    if timed_out:
-        return "hang", f"no answer in {time_limit:g} s{note}"
-    died = "far_abort" if KNOWN_CORE_ABORT in note else "signal"
-    if os.WIFSIGNALED(status):
-        return died, f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"
-    if os.WEXITSTATUS(status) != 0 or not answers or "outcome" not in answers[-1]:
-        return died, f"exit status {os.WEXITSTATUS(status)} without an answer{note}"
-    return answers[-1]["outcome"], answers[-1]["detail"]
+                buffer += chunk
+                *lines, buffer = buffer.split(b"\n")
+                for line in lines:
+                    answer = json.loads(line)
+                    if "note" in answer:
+                        note += f" while {answer['note']}"
+                    else:
+                        results.append((answer["outcome"], answer["detail"]))
+                        note, deadline = "", time.monotonic() + time_limit
+        finally:
+            os.close(read_fd)
+            _, status = os.waitpid(pid, 0)
+        if len(results) < len(cases):  # the child died in (or hung on) the next case
+            died = "far_abort" if KNOWN_CORE_ABORT in note else "signal"
+            if timed_out:
+                results.append(("hang", f"no answer in {time_limit:g} s{note}"))
+            elif os.WIFSIGNALED(status):
+                results.append((died, f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"))
+            else:
+                results.append((died, f"exit status {os.WEXITSTATUS(status)} without an answer{note}"))
+    return results
 
 
 def _prepare_driver() -> None:
@@ -242,6 +260,9 @@ def make_case(seeds: Dict[str, List[str]], seed_dir: str, seed: int, i: int,
     return kind, data, names
 
 
+BATCH = 25  # cases per batch of files (and at most per child)
+
+
 def fuzz(cases: int, seed: int, kinds: List[str], save: Optional[str], log=None,
          time_limit: float = TIME_LIMIT, start: int = 0, quiet: bool = False) -> Dict:
     _prepare_driver()
@@ -252,29 +273,39 @@ def fuzz(cases: int, seed: int, kinds: List[str], save: Optional[str], log=None,
         os.mkdir(seed_dir)
         seeds = corpus.write_seeds(seed_dir)
         began = time.monotonic()
-        for i in range(start, start + cases):
-            kind, data, names = make_case(seeds, seed_dir, seed, i, kinds)
-            # The XML seed refers to the other seeds: each case runs beside fresh copies.
+        done = 0
+        for first in range(start, start + cases, BATCH):
+            numbers = range(first, min(first + BATCH, start + cases))
+            # The XML seed refers to the other seeds: each batch runs beside fresh copies.
             case_dir = os.path.join(work, "case")
             shutil.rmtree(case_dir, ignore_errors=True)
             shutil.copytree(seed_dir, case_dir)
-            path = os.path.join(case_dir, f"{kind}-{seed}-{i}{corpus.KINDS[kind]}")
-            with open(path, "wb") as f:
-                f.write(data)
-            outcome, detail = run_isolated(kind, path, time_limit)
-            counts[kind][outcome] += 1
+            batch = []
+            for i in numbers:
+                kind, data, names = make_case(seeds, seed_dir, seed, i, kinds)
+                path = os.path.join(case_dir, f"{kind}-{seed}-{i}{corpus.KINDS[kind]}")
+                with open(path, "wb") as f:
+                    f.write(data)
+                batch.append((i, kind, path, names))
+            results = run_batch([(kind, path) for _, kind, path, _ in batch], time_limit)
+            for (i, kind, path, names), (outcome, detail) in zip(batch, results):
+                counts[kind][outcome] += 1
+                if log is not None:
+                    log.write(json.dumps({"case": i, "seed": seed, "kind": kind,
+                                          "mutations": names, "outcome": outcome,
+                                          "detail": detail[-800:]}) + "\n")
+                if outcome in BAD or outcome == "unnamed":
+                    if not quiet:
+                        print(f"case {i} ({kind}, {'+'.join(names)}): {outcome}: {detail[-300:]}",
+                              file=sys.stderr)
+                    if save and outcome in BAD:
+                        os.makedirs(save, exist_ok=True)
+                        shutil.copy(path, os.path.join(save, os.path.basename(path)))
             if log is not None:
-                log.write(json.dumps({"case": i, "seed": seed, "kind": kind, "mutations": names,
-                                      "outcome": outcome, "detail": detail[-800:]}) + "\n")
-            if outcome in BAD or outcome == "unnamed":
-                if not quiet:
-                    print(f"case {i} ({kind}, {'+'.join(names)}): {outcome}: {detail[-300:]}",
-                          file=sys.stderr)
-                if save and outcome in BAD:
-                    os.makedirs(save, exist_ok=True)
-                    shutil.copy(path, os.path.join(save, os.path.basename(path)))
-            if not quiet and (i - start + 1) % 500 == 0:
-                print(f"{i - start + 1}/{cases} cases, {time.monotonic() - began:.0f} s",
+                log.flush()
+            done += len(batch)
+            if not quiet and done % 500 < BATCH:
+                print(f"{done}/{cases} cases, {time.monotonic() - began:.0f} s",
                       file=sys.stderr, flush=True)
     finally:
         shutil.rmtree(work, ignore_errors=True)
@@ -294,7 +325,7 @@ def replay(directory: str, time_limit: float = TIME_LIMIT) -> Dict[str, Tuple[st
                 continue
             path = os.path.join(work, name)
             shutil.copy(os.path.join(directory, name), path)
-            results[name] = run_isolated(kind_of(name), path, time_limit)
+            results[name] = run_batch([(kind_of(name), path)], time_limit)[0]
     finally:
         shutil.rmtree(work, ignore_errors=True)
     return results
