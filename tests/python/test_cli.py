@@ -5,6 +5,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -270,28 +271,40 @@ def test_bad_arguments_of_derivative_and_demo(scene_file, capsys):
 
 def test_ctrl_c_exits_130_with_one_line(quad_obj, tmp_path):
     """SIGINT during a long render (many short chunks, so that it lands in Python code between
-    core calls, or in a core call that returns within a chunk): exit status 130, one line on
-    stderr after the progress lines, no traceback."""
+    core calls, or in a core call that returns within a chunk): 'edgepath: interrupted' on
+    stderr soon after (the exit itself waits for the interpreter's teardown), exit status 130,
+    no traceback, no image written."""
     env = dict(os.environ, PYTHONPATH=str(Path(ep.__file__).resolve().parents[1]))
     process = subprocess.Popen(
         [sys.executable, "-m", "edgepath", "render", str(quad_obj), "-o", str(tmp_path / "out.png"),
          "--resolution", "16", "16", "--spp", "10000000", "--chunk-spp", "1", "--threads", "1"],
         stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    lines, said = [], {}
+
+    def read_stderr():  # keeps the pipe drained; notes when the message comes
+        for line in process.stderr:
+            lines.append(line)
+            if "interrupted" in line:
+                said["at"] = time.monotonic()
+
     try:
         for _ in range(20):  # up to the first progress line: rendering has begun
             line = process.stderr.readline()
             if " spp, " in line or not line:
                 break
         assert " spp, " in line, line
-        process.send_signal(signal.SIGINT)
+        reader = threading.Thread(target=read_stderr)
+        reader.start()
         sent = time.monotonic()
-        _, err = process.communicate(timeout=30)
-        latency = time.monotonic() - sent
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=60)
+        reader.join(timeout=60)
     finally:
         process.kill()
         process.wait()
+    err = "".join(lines)
     assert process.returncode == 130, err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err
     assert err.strip().splitlines()[-1] == "edgepath: interrupted"
-    assert latency < 5.0
+    assert said["at"] - sent < 3.0
     assert not (tmp_path / "out.png").exists()
