@@ -146,7 +146,7 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
             mesh.vertices.requires_grad_(True)
         image = ep.render(scene, spp=1, max_bounces=bounces, num_threads=1)
         image.sum().backward()
-        return "ok", f"rendered, sum {float(image.sum()):.6g}"
+        return "ok", f"rendered, sum {float(image.detach().sum()):.6g}"
     except (ValueError, OSError) as error:
         message = f"{stage}: {type(error).__name__}: {error}"
         named = _names_source(str(error), path) if stage == "load" else ":" in str(error)
