@@ -8,6 +8,9 @@
 #   make test      C++ tests (ctest) and Python tests (pytest)
 #   make demo      the inverse-rendering demo: images, GIF and convergence plot in demo_out/
 #   make bench     run bench/run.sh, if there is one (options: BENCH_ARGS="--runs 3")
+#   make fuzz      N mutated scene, mesh and image files through the loaders and a small render,
+#                  each in a child process with time and memory caps (N=1000 SEED=0; inputs
+#                  that crash are copied to build/fuzz/found, a line per case in build/fuzz/log.jsonl)
 #   make sanitize  C++ tests built with AddressSanitizer + UBSan (build/asan)
 #   make lint      byte-compile the Python sources; ruff if the venv has it
 #   make clean     remove build outputs (distclean: also the venv)
@@ -39,7 +42,7 @@ APT_STAMP := build/apt.stamp
 DEPS_STAMP := $(VENV)/edgepath-deps.stamp
 INSTALL_STAMP := build/py/edgepath-install.stamp
 
-.PHONY: setup build test demo bench sanitize lint clean distclean FORCE
+.PHONY: setup build test demo bench fuzz sanitize lint clean distclean FORCE
 
 setup: $(INSTALL_STAMP)
 build: setup
@@ -86,6 +89,13 @@ demo: setup
 bench: setup
 	@if [ -f bench/run.sh ]; then PATH="$(CURDIR)/$(VENV)/bin:$$PATH" bash bench/run.sh $(BENCH_ARGS); \
 	else echo "no benchmarks yet (bench/run.sh)"; fi
+
+N ?= 1000
+SEED ?= 0
+fuzz: setup
+	@mkdir -p build/fuzz
+	$(VPY) tests/fuzz/fuzz.py --cases $(N) --seed $(SEED) --save build/fuzz/found \
+	  --log build/fuzz/log.jsonl
 
 sanitize: | $(APT_STAMP)
 	cmake -S . -B build/asan $(CMAKE_GENERATOR_FLAG) -DCMAKE_BUILD_TYPE=RelWithDebInfo \

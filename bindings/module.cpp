@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <stdexcept>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "edgepath.h"
@@ -519,7 +520,15 @@ NB_MODULE(_core, m) {
         try {
             std::rethrow_exception(p);
         } catch (const edgepath::IoError& e) {
-            PyErr_SetString(PyExc_OSError, e.what());
+            // Messages quote bytes from files: bytes that are not UTF-8 are escaped, not a
+            // UnicodeDecodeError in place of the error.
+            const std::string_view text = e.what();
+            PyObject* message = PyUnicode_DecodeUTF8(text.data(), static_cast<Py_ssize_t>(text.size()),
+                                                     "backslashreplace");
+            if (message) {
+                PyErr_SetObject(PyExc_OSError, message);
+                Py_DECREF(message);
+            }
         }
     });
 

@@ -122,14 +122,14 @@ def render_in_chunks(loaded: MitsubaScene, chunk_spp: int, num_threads=None, sam
     return image / total
 
 
-def _parse_channels(text: Optional[str]) -> List[str]:
-    if not text:
-        return []
+def _channels(text: str) -> List[str]:
+    """--channels: comma-separated output channel names (at least one)."""
     names = [n.strip() for n in text.split(",") if n.strip()]
     unknown = [n for n in names if n not in CHANNELS or n == "radiance"]
     if unknown or not names:
-        raise ValueError(f"--channels: unknown channel(s) {unknown or [text]}; choose from "
-                         f"{', '.join(n for n in CHANNELS if n != 'radiance')}")
+        raise argparse.ArgumentTypeError(
+            f"unknown channel(s) {unknown or [text]}; choose from "
+            f"{', '.join(n for n in CHANNELS if n != 'radiance')}")
     return names
 
 
@@ -140,7 +140,7 @@ def channel_path(output: str, name: str) -> str:
 
 
 def _cmd_render(args) -> None:
-    channels = _parse_channels(args.channels)
+    channels = args.channels or []
     loaded = _load_scene(args)
     start = time.perf_counter()
     image = render_in_chunks(loaded, args.chunk_spp, args.threads, args.sampling)
@@ -195,8 +195,6 @@ def _cmd_derivative(args) -> None:
     loaded = _load_scene(args)
     if not args.output.lower().endswith(".exr"):
         raise ValueError(f"-o: the derivative image is written as EXR, got {args.output!r}")
-    if not 0 < args.percentile <= 100:
-        raise ValueError(f"--percentile: must be in (0, 100], got {args.percentile}")
     param, direction = loaded.direction(args.param, args.direction)
     start = time.perf_counter()
     image = derivative_image(loaded.scene, param, direction, spp=loaded.spp,
@@ -263,6 +261,52 @@ def _direction_help(name: str, t: torch.Tensor) -> str:
     return "1 number"
 
 
+# The largest image the command line renders: a (H, W, 3) float32 image of this many pixels
+# (16384 x 16384) takes 3 GiB.
+MAX_PIXELS = 2**28
+
+
+def _integer(minimum: int, maximum: int = 2**31 - 1):
+    """An argparse type: an integer in [minimum, maximum]."""
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if not minimum <= value <= maximum:
+            raise argparse.ArgumentTypeError(f"must be in [{minimum}, {maximum}], got {value}")
+        return value
+    return parse
+
+
+def _finite(low: float = -math.inf, high: float = math.inf, open_low: bool = False,
+            open_high: bool = False):
+    """An argparse type: a finite number in the interval from low to high (open where asked)."""
+    def parse(text: str) -> float:
+        try:
+            value = float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+        if not math.isfinite(value):
+            raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+        if value < low or value > high or (open_low and value == low) or \
+                (open_high and value == high):
+            interval = ("(" if open_low else "[") + f"{low:g}, {high:g}" + (")" if open_high else "]")
+            raise argparse.ArgumentTypeError(f"must be in {interval}, got {text}")
+        return value
+    return parse
+
+
+class _Resolution(argparse.Action):
+    """--resolution HEIGHT WIDTH: at most MAX_PIXELS pixels in all."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        if values[0] * values[1] > MAX_PIXELS:
+            raise argparse.ArgumentError(self, f"{values[0]}x{values[1]} is more than the "
+                                               f"{MAX_PIXELS} pixels the command line renders")
+        setattr(namespace, self.dest, values)
+
+
 def _define(text: str):
     if "=" not in text:
         raise argparse.ArgumentTypeError(f"expected NAME=VALUE, got {text!r}")
@@ -274,22 +318,23 @@ def _add_scene_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("scene", help="a Mitsuba 3 XML scene file, or an OBJ file")
     parser.add_argument("-D", dest="define", action="append", type=_define, metavar="NAME=VALUE",
                         help="set the XML file's parameter $NAME (overrides its <default>); repeat")
-    parser.add_argument("--spp", type=int, default=None,
+    parser.add_argument("--spp", type=_integer(1), default=None,
                         help="samples per pixel (default: the file's sampler, 16 for OBJ)")
-    parser.add_argument("--max-bounces", type=int, default=None,
+    parser.add_argument("--max-bounces", type=_integer(0), default=None,
                         help="scattering events per path: 0 = emitters only, 1 = direct light, ... "
                              "(default: the file's max_depth - 1, or "
                              f"{DEFAULT_MAX_BOUNCES} where it has none)")
-    parser.add_argument("--seed", type=int, default=None,
+    parser.add_argument("--seed", type=_integer(0, 2**64 - 1), default=None,
                         help="random seed (default: the file's sampler seed, or 0)")
-    parser.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    parser.add_argument("--threads", type=_integer(1, 4096), default=None,
+                        help="worker threads (default: all cores)")
     parser.add_argument("--sampling", choices=list(SAMPLING), default="mis",
                         help="direct-light sampling strategy (default mis)")
-    parser.add_argument("--resolution", type=int, nargs=2, metavar=("HEIGHT", "WIDTH"), default=None,
+    parser.add_argument("--resolution", type=_integer(1, 65536), nargs=2, action=_Resolution, metavar=("HEIGHT", "WIDTH"), default=None,
                         help="image size (default: the file's film, 256 256 for OBJ)")
-    parser.add_argument("--fov", type=float, default=None,
+    parser.add_argument("--fov", type=_finite(0, 180, open_low=True, open_high=True), default=None,
                         help="OBJ only: horizontal field of view, degrees (default 45)")
-    parser.add_argument("--env", type=float, default=0.0,
+    parser.add_argument("--env", type=_finite(), default=0.0,
                         help="OBJ only: constant environment radiance: 0 = only if the file has no "
                              "emitters (radiance 1), < 0 = never (default 0)")
 
@@ -315,9 +360,9 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scene_options(r)
     r.add_argument("-o", "--output", action="append", metavar="FILE",
                    help="output image, .png or .exr; repeat for several (default out.png)")
-    r.add_argument("--chunk-spp", type=int, default=16,
+    r.add_argument("--chunk-spp", type=_integer(1), default=16,
                    help="samples per pixel per chunk (default 16; chunk k uses seed + k)")
-    r.add_argument("--channels", metavar="NAMES", default=None,
+    r.add_argument("--channels", metavar="NAMES", type=_channels, default=None,
                    help="also write these output channels, comma-separated (alpha, depth, "
                         "position, geometry_normal, shading_normal, uv, albedo, mesh_id, "
                         "triangle_id), each as OUTPUT_STEM.NAME.exr; ids as floats, -1 = no hit")
@@ -334,13 +379,13 @@ def build_parser() -> argparse.ArgumentParser:
                     "envmap.data, or sensor.position (a translation of sensor.to_world).")
     _add_scene_options(g)
     g.add_argument("--param", required=True, metavar="NAME", help="the parameter (see edgepath info)")
-    g.add_argument("--direction", required=True, type=float, nargs="+", metavar="X",
+    g.add_argument("--direction", required=True, type=_finite(), nargs="+", metavar="X",
                    help="SHAPE.vertex_positions, sensor.position: 3 numbers, a translation; "
                         "colours: 1 number (all channels) or 3, added to every texel; scalars "
                         "(sensor.x_fov, alpha): 1 number; sensor.to_world: 16 numbers")
     g.add_argument("-o", "--output", default="derivative.exr", metavar="FILE.exr",
                    help="the derivative image (default derivative.exr); the PNG goes beside it")
-    g.add_argument("--percentile", type=float, default=99.0,
+    g.add_argument("--percentile", type=_finite(0, 100, open_low=True), default=99.0,
                    help="the PNG's colour scale: this percentile of |dI| (default 99)")
     g.set_defaults(run=_cmd_derivative)
 
@@ -360,11 +405,14 @@ def build_parser() -> argparse.ArgumentParser:
                                         "optimisation.gif and convergence.png.")
     d.add_argument("-o", "--output-dir", default="demo_out", metavar="DIR",
                    help="output directory (default demo_out)")
-    d.add_argument("--iterations", type=int, default=150, help="optimisation steps (default 150)")
-    d.add_argument("--size", type=int, default=128, help="image height and width (default 128)")
-    d.add_argument("--spp", type=int, default=4, help="samples per pixel per step (default 4)")
-    d.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    d.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
+    d.add_argument("--iterations", type=_integer(1), default=150,
+                   help="optimisation steps (default 150)")
+    d.add_argument("--size", type=_integer(1, 16384), default=128,
+                   help="image height and width (default 128)")
+    d.add_argument("--spp", type=_integer(1), default=4, help="samples per pixel per step (default 4)")
+    d.add_argument("--seed", type=_integer(0, 2**64 - 1), default=0, help="random seed (default 0)")
+    d.add_argument("--threads", type=_integer(1, 4096), default=None,
+                   help="worker threads (default: all cores)")
     d.add_argument("--no-secondary-edges", action="store_true",
                    help="leave the shadow and lamp outlines out of the gradient (for comparison: "
                         "the lamp then gets no gradient)")
@@ -374,12 +422,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    args = build_parser().parse_args(argv)
+    """Runs one command. Exit status: 0 done, 1 an error in the input (one line on stderr),
+    2 bad arguments (argparse's usage and one line), 130 interrupted (Ctrl-C)."""
     try:
-        args.run(args)
-    except (ValueError, OSError) as error:
-        print(f"edgepath {args.command}: error: {error}", file=sys.stderr)
-        return 1
+        args = build_parser().parse_args(argv)
+        try:
+            args.run(args)
+        except (ValueError, OSError, MemoryError) as error:
+            print(f"edgepath {args.command}: error: {error}", file=sys.stderr)
+            return 1
+    except KeyboardInterrupt:
+        print("edgepath: interrupted", file=sys.stderr)
+        return 130
     return 0
 
 

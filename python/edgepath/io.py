@@ -183,56 +183,85 @@ _PLY_UV_NAMES = (("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s
 
 
 def _ply_header(path: str, data: bytes):
-    end = re.search(rb"end_header[ \t]*\r?\n", data)
+    end = re.search(rb"(^|\n)end_header[ \t]*\r?\n", data)
     if not data.startswith(b"ply") or end is None:
         raise ValueError(f"{path}: not a PLY file (no 'ply' ... 'end_header' header)")
     fmt, elements = None, []
     for number, line in enumerate(data[:end.start()].decode("ascii", "replace").splitlines(), 1):
         words = line.split()
+        where = f"{path}: header line {number}"
         if not words or words[0] in ("ply", "comment", "obj_info"):
             continue
         if words[0] == "format" and len(words) >= 2:
             fmt = words[1]
             if fmt not in ("ascii", "binary_little_endian", "binary_big_endian"):
-                raise ValueError(f"{path}: header line {number}: unknown format '{fmt}'")
+                raise ValueError(f"{where}: unknown format '{fmt}'")
         elif words[0] == "element" and len(words) == 3:
-            if not words[2].isdigit():
-                raise ValueError(f"{path}: header line {number}: bad element count in {line!r}")
+            if not words[2].isdigit() or not words[2].isascii():
+                raise ValueError(f"{where}: bad element count in {line!r}")
+            if any(e[0] == words[1] for e in elements):
+                raise ValueError(f"{where}: element '{words[1]}' is declared twice")
             elements.append((words[1], int(words[2]), []))
-        elif words[0] == "property" and elements:
+        elif words[0] == "property" and elements and len(words) >= 3:
+            props = elements[-1][2]
             if words[1] == "list" and len(words) == 5:
                 count_type, item_type, name = words[2:]
                 if count_type not in _PLY_TYPES or item_type not in _PLY_TYPES:
-                    raise ValueError(f"{path}: header line {number}: unknown type in {line!r}")
-                elements[-1][2].append((name, _PLY_TYPES[count_type], _PLY_TYPES[item_type]))
+                    raise ValueError(f"{where}: unknown type in {line!r}")
+                if _PLY_TYPES[count_type][0] not in "iu":
+                    raise ValueError(f"{where}: a list count must have an integer type, got "
+                                     f"'{count_type}'")
+                prop = (name, _PLY_TYPES[count_type], _PLY_TYPES[item_type])
             elif len(words) == 3 and words[1] in _PLY_TYPES:
-                elements[-1][2].append((words[2], _PLY_TYPES[words[1]], None))
+                prop = (words[2], _PLY_TYPES[words[1]], None)
             else:
-                raise ValueError(f"{path}: header line {number}: cannot read {line!r}")
+                raise ValueError(f"{where}: cannot read {line!r}")
+            if any(p[0] == prop[0] for p in props):
+                raise ValueError(f"{where}: property '{prop[0]}' of element '{elements[-1][0]}' "
+                                 "is declared twice")
+            if prop[0] in ("vertex_indices", "vertex_index") and prop[2] is not None and \
+                    prop[2][0] not in "iu":
+                raise ValueError(f"{where}: face indices must have an integer type, got "
+                                 f"'{words[3]}'")
+            props.append(prop)
         else:
-            raise ValueError(f"{path}: header line {number}: cannot read {line!r}")
+            raise ValueError(f"{where}: cannot read {line!r}")
     if fmt is None:
         raise ValueError(f"{path}: no 'format' line in the header")
     return fmt, elements, end.end()
 
 
+def _ply_check_count(count: int, row_size: int, left: int, unit: str) -> None:
+    """Refuses an element count the rest of the file cannot hold (before allocating for it)."""
+    if count * row_size > left:
+        raise ValueError(f"declares {count} rows of at least {row_size} {unit} each, but only "
+                        f"{left} {unit} are left (the file ends early)")
+
+
+def _ply_list_count(value, row: int, left: int, unit: str, size: int) -> int:
+    k = int(value)
+    if k < 0 or k * size > left:
+        raise ValueError(f"row {row}: a list of {k} items, but only {left} {unit} are left")
+    return k
+
+
 def _ply_read_ascii(tokens, pos, count, props):
     """Rows of one element from whitespace-separated tokens: {name: array or list of arrays}."""
+    n = len(props)
+    _ply_check_count(count, n, len(tokens) - pos, "numbers")
     if all(p[2] is None for p in props):
-        n = len(props)
-        block = np.array(tokens[pos:pos + count * n], dtype=np.float64)
-        if block.size != count * n:
-            raise ValueError("file ends early")
-        block = block.reshape(count, n)
+        block = np.array(tokens[pos:pos + count * n], dtype=np.float64).reshape(count, n)
         return {p[0]: block[:, i] for i, p in enumerate(props)}, pos + count * n
     out = {p[0]: [] for p in props}
-    for _ in range(count):
+    for row in range(count):
         for name, _, item in props:
+            if pos >= len(tokens):
+                raise ValueError(f"row {row}: the file ends early")
             if item is None:
                 out[name].append(float(tokens[pos]))
                 pos += 1
             else:
-                k = int(tokens[pos])
+                k = _ply_list_count(tokens[pos], row, len(tokens) - pos - 1, "numbers", 1)
                 out[name].append(np.array(tokens[pos + 1:pos + 1 + k], dtype=np.float64))
                 pos += 1 + k
     return {k: (np.array(v) if props[i][2] is None else v)
@@ -250,6 +279,7 @@ def _ply_read_binary(data, pos, count, props, endian):
                 fields.append((name, endian + item, (k,)))
         return np.dtype(fields)
 
+    _ply_check_count(count, dtype_of([0] * len(props)).itemsize, len(data) - pos, "bytes")
     list_props = [p for p in props if p[2] is not None]
     if not list_props:
         dt = dtype_of([None] * len(props))
@@ -264,7 +294,8 @@ def _ply_read_binary(data, pos, count, props, endian):
                 first.append(None)
                 offset += size
             else:
-                k = int(np.frombuffer(data, endian + t, 1, offset)[0])
+                k = _ply_list_count(np.frombuffer(data, endian + t, 1, offset)[0], 0,
+                                    len(data) - offset - size, "bytes", np.dtype(item).itemsize)
                 first.append(k)
                 offset += size + k * np.dtype(item).itemsize
         dt = dtype_of(first)
@@ -274,18 +305,33 @@ def _ply_read_binary(data, pos, count, props, endian):
                 return ({p[0]: (rows[p[0]] if p[2] is None else list(rows[p[0]])) for p in props},
                         pos + count * dt.itemsize)
     out = {p[0]: [] for p in props}
-    for _ in range(count):
+    for row in range(count):
         for name, t, item in props:
+            if pos + np.dtype(t).itemsize > len(data):
+                raise ValueError(f"row {row}: the file ends early")
             value = np.frombuffer(data, endian + t, 1, pos)[0]
             pos += np.dtype(t).itemsize
             if item is None:
                 out[name].append(value)
             else:
-                k = int(value)
+                size = np.dtype(item).itemsize
+                k = _ply_list_count(value, row, len(data) - pos, "bytes", size)
                 out[name].append(np.frombuffer(data, endian + item, k, pos))
-                pos += k * np.dtype(item).itemsize
+                pos += k * size
     return {k: (np.array(v) if props[i][2] is None else v)
             for i, (k, v) in enumerate(out.items())}, pos
+
+
+def _ply_indices(path: str, values: np.ndarray, first_row: int) -> np.ndarray:
+    """Face indices as int64; values that are not integers (an ASCII file) raise."""
+    if values.dtype.kind == "f":
+        bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) >= 2**31)
+        if bad.any():
+            row = first_row + (int(np.flatnonzero(bad.reshape(len(values), -1).any(1))[0])
+                               if values.ndim == 2 else 0)
+            raise ValueError(f"{path}: element 'face' row {row}: vertex index "
+                             f"{float(values[bad].flat[0])!r} is not an integer")
+    return values.astype(np.int64)
 
 
 def load_ply(path: PathLike) -> Mesh:
@@ -298,6 +344,14 @@ def load_ply(path: PathLike) -> Mesh:
     with open(path, "rb") as f:
         data = f.read()
     fmt, elements, pos = _ply_header(path, data)
+    per_vertex = {"x", "y", "z", "nx", "ny", "nz"}.union(*_PLY_UV_NAMES)
+    for element, _, props in elements:
+        for prop, _, item in props:
+            if element == "vertex" and prop in per_vertex and item is not None:
+                raise ValueError(f"{path}: element 'vertex': property '{prop}' is a list "
+                                 "(expected one number per vertex)")
+            if element == "face" and prop in ("vertex_indices", "vertex_index") and item is None:
+                raise ValueError(f"{path}: element 'face': property '{prop}' is not a list")
     values = {}
     tokens = data[pos:].split() if fmt == "ascii" else None
     tpos = 0
@@ -308,8 +362,8 @@ def load_ply(path: PathLike) -> Mesh:
             else:
                 endian = "<" if fmt == "binary_little_endian" else ">"
                 values[name], pos = _ply_read_binary(data, pos, count, props, endian)
-    except (ValueError, IndexError) as error:
-        raise ValueError(f"{path}: cannot read the data of element '{name}' ({error})") from None
+    except (ValueError, IndexError, OverflowError) as error:
+        raise ValueError(f"{path}: element '{name}': cannot read its data ({error})") from None
     vertex = values.get("vertex")
     if vertex is None or not all(k in vertex for k in "xyz"):
         raise ValueError(f"{path}: no vertex element with x, y, z")
@@ -317,21 +371,26 @@ def load_ply(path: PathLike) -> Mesh:
     key = "vertex_indices" if "vertex_indices" in face else "vertex_index"
     if key not in face:
         raise ValueError(f"{path}: no face element with vertex_indices")
-    vertices = np.stack([vertex[k] for k in "xyz"], 1).astype(np.float32)
+    with np.errstate(over="ignore", invalid="ignore"):
+        vertices = np.stack([vertex[k] for k in "xyz"], 1).astype(np.float32)
+    if not np.isfinite(vertices).all():
+        bad = int(np.flatnonzero(~np.isfinite(vertices).all(1))[0])
+        raise ValueError(f"{path}: element 'vertex' row {bad}: position {vertices[bad].tolist()} "
+                         "is not finite (as float32)")
     triangles = []
     polygons = face[key]
     block = None
     if polygons and len({len(p) for p in polygons}) == 1:  # all faces of one size: vectorised
-        block = np.array(polygons, dtype=np.int64).reshape(len(polygons), -1)
+        block = _ply_indices(path, np.array(polygons).reshape(len(polygons), -1), 0)
     if block is not None and block.shape[1] >= 3:
         k = block.shape[1]
         fans = [np.stack([block[:, 0], block[:, j], block[:, j + 1]], 1) for j in range(1, k - 1)]
         triangles = [np.stack(fans, 1).reshape(-1, 3)]  # each face's triangles together
     else:
         for i, p in enumerate(polygons):
-            p = np.asarray(p, dtype=np.int64)
+            p = _ply_indices(path, np.asarray(p), i)
             if len(p) < 3:
-                raise ValueError(f"{path}: face {i} has {len(p)} vertices")
+                raise ValueError(f"{path}: face {i} has {len(p)} vertices (at least 3)")
             triangles.append(np.stack([np.full(len(p) - 2, p[0]), p[1:-1], p[2:]], 1))
     indices = np.concatenate(triangles) if triangles else np.zeros((0, 3), np.int64)
     if indices.size and (indices.min() < 0 or indices.max() >= len(vertices)):

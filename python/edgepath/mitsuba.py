@@ -195,12 +195,21 @@ class _Node:
         return "<" + " ".join([self.tag] + shown) + ">"
 
 
+_FLOAT32_MAX = 3.4028234663852886e38
+
+# Deeper nesting than any scene needs is refused (the loader recurses over the tree).
+_MAX_DEPTH = 64
+
+
 def _parse_xml(path: str) -> _Node:
     stack: List[_Node] = []
     root: List[_Node] = []
     parser = xml.parsers.expat.ParserCreate()
 
     def start(tag, attrs):
+        if len(stack) >= _MAX_DEPTH:
+            raise MitsubaError(f"{path}:{parser.CurrentLineNumber}: <{tag}>: elements nested "
+                               f"deeper than {_MAX_DEPTH} levels")
         node = _Node(tag, dict(attrs), parser.CurrentLineNumber)
         (stack[-1].children if stack else root).append(node)
         stack.append(node)
@@ -217,6 +226,8 @@ def _parse_xml(path: str) -> _Node:
     except xml.parsers.expat.ExpatError as error:
         raise MitsubaError(f"{path}:{error.lineno}: malformed XML: "
                            f"{xml.parsers.expat.ErrorString(error.code)}") from None
+    except LookupError as error:  # the XML declaration names an encoding Python lacks
+        raise MitsubaError(f"{path}:{parser.CurrentLineNumber}: {error}") from None
     return root[0]
 
 
@@ -239,6 +250,7 @@ class _Loader:
         self.bsdf_cache: Dict[int, Material] = {}
         self.texture_cache: Dict[int, torch.Tensor] = {}
         self.result = MitsubaScene(scene=None, max_bounces=None, spp=4, path=path)
+        self.last_ref: Optional[_Node] = None  # names the culprit of a cycle of references
 
     # errors and values
 
@@ -271,6 +283,8 @@ class _Loader:
             values = [float(p) for p in parts]
         except ValueError:
             self.fail(node, f"expected numbers, got {text!r}")
+        if not all(abs(x) <= _FLOAT32_MAX for x in values):  # NaN fails too
+            self.fail(node, f"expected finite numbers (as float32), got {text!r}")
         if len(values) not in counts:
             self.fail(node, f"expected {' or '.join(map(str, counts))} numbers, got {len(values)}")
         return values
@@ -344,6 +358,7 @@ class _Loader:
     def deref(self, node: _Node, tags: Tuple[str, ...]) -> _Node:
         if node.tag != "ref":
             return node
+        self.last_ref = node
         ref = self.attr(node, "id")
         if ref not in self.ids:
             self.fail(node, f"unknown id '{ref}'")
@@ -750,7 +765,10 @@ class _Loader:
 
         vertices = vertices @ to_world[:3, :3].T + to_world[:3, 3]
         if normals is not None:
-            normals = normals @ torch.linalg.inv(to_world[:3, :3])
+            inverse, singular = torch.linalg.inv_ex(to_world[:3, :3])
+            if singular:
+                self.fail(node, "to_world is singular (a zero scale?): the normals have no transform")
+            normals = normals @ inverse
             normals = normals / normals.norm(dim=1, keepdim=True)
         elif smooth:
             normals = _vertex_normals(vertices, indices)
@@ -956,7 +974,15 @@ def load_mitsuba(path: PathLike, **params) -> MitsubaScene:
     path = os.fspath(path)
     if not os.path.isfile(path):
         raise FileNotFoundError(f"{path}: scene file not found")
-    return _Loader(path, {}).load(params)
+    loader = _Loader(path, {})
+    try:
+        return loader.load(params)
+    except RecursionError:
+        # Nesting is bounded when parsing: only <ref>s that lead back into themselves recurse.
+        node = loader.last_ref
+        where = path if node is None else f"{path}:{node.line}: {node.describe()}"
+        raise MitsubaError(f"{where}: refers to an element that contains it (a cycle of "
+                           "references)") from None
 
 
 # ---- geometry ------------------------------------------------------------------------------

@@ -14,6 +14,7 @@ turning a direction on the user's tensor into directions on the core's slots.
 from __future__ import annotations
 
 import re
+import threading
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
@@ -51,6 +52,18 @@ class FlatScene:
 
     def core_args(self):
         return self.camera, self.materials, self.meshes, self.envmap
+
+    def named_tensors(self) -> List[Tuple[str, torch.Tensor]]:
+        """Every tensor the core reads, with the field it came from (views of the caller's
+        tensors where no conversion was needed, so they share their version counters)."""
+        out = []
+        for i, (mesh, material) in enumerate(zip(self.meshes, self.materials)):
+            out += [(f"meshes[{i}].{k}", t) for k, t in mesh.items() if isinstance(t, torch.Tensor)]
+            out += [(f"meshes[{i}].material.{k}", t) for k, t in material.items()
+                    if isinstance(t, torch.Tensor)]
+        if self.envmap is not None:
+            out.append(("envmap.values", self.envmap["values"]))
+        return out
 
     def slot_buffers(self, buffers: Dict[Slot, torch.Tensor]) -> dict:
         """The core's nested description of gradient slots, from {slot: float32 tensor}."""
@@ -134,12 +147,14 @@ class _RenderFunction(torch.autograd.Function):
     @staticmethod
     def forward(ctx, flat, options, grad_options, slots, *tensors):
         image, _ = render_flat(flat, options)
+        _save_inputs(ctx, flat, tensors)
         ctx.flat, ctx.grad_options, ctx.slots = flat, grad_options, slots
         return image
 
     @staticmethod
     def backward(ctx, grad_image):
         flat = ctx.flat
+        _check_saved_inputs(ctx)
         needed = ctx.needs_input_grad[4:]
         buffers = {slot: torch.zeros(flat.params[slot].shape, dtype=torch.float32)
                    for slot, need in zip(ctx.slots, needed) if need}
@@ -147,7 +162,49 @@ class _RenderFunction(torch.autograd.Function):
             adjoint = grad_image.detach().to(torch.float32).contiguous()
             _call_core(_core.render_gradients, *flat.core_args(), adjoint,
                        flat.slot_buffers(buffers), ctx.grad_options.core())
-        return (None, None, None, None, *[buffers.get(slot) for slot in ctx.slots])
+        return (None, None, None, None, *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
+
+
+def _save_inputs(ctx, flat: FlatScene, tensors) -> None:
+    """Keeps what the gradient pass will read, as torch's own ops do: the tracked inputs
+    through ``save_for_backward``, and the versions of every tensor of the flat scene (indices
+    and constant tensors too), so that editing one in place before ``backward()`` raises
+    instead of differentiating a scene that was never rendered."""
+    ctx.save_for_backward(*tensors)
+    ctx.versions = [(name, t, t._version) for name, t in flat.named_tensors()]
+
+
+def _check_saved_inputs(ctx) -> None:
+    for name, t, version in ctx.versions:
+        if t._version != version:
+            raise RuntimeError(
+                f"{name}: one of the variables needed for gradient computation has been modified "
+                f"by an inplace operation: it is at version {t._version}, expected version "
+                f"{version} (edit scene tensors after backward(), or render again)")
+    _ = ctx.saved_tensors  # torch's own check of the tracked inputs
+
+
+class _FirstOrderOnly(torch.autograd.Function):
+    """The identity on a gradient, attached to the input it is the gradient of, whose own
+    derivative raises: under ``create_graph=True`` the render's gradient then carries a node
+    that refuses a second differentiation, instead of silently having none."""
+
+    @staticmethod
+    def forward(ctx, gradient, anchor):
+        return gradient.clone()
+
+    @staticmethod
+    def backward(ctx, *_):
+        raise RuntimeError("edgepath: cannot differentiate twice through a render: its gradient "
+                           "is first-order only (double backward, create_graph=True, is not "
+                           "supported)")
+
+
+def _first_order_only(ctx, gradients: List[Optional[torch.Tensor]]) -> List[Optional[torch.Tensor]]:
+    if not torch.is_grad_enabled():  # grad mode is on in backward only with create_graph=True
+        return gradients
+    return [g if g is None else _FirstOrderOnly.apply(g, t)
+            for g, t in zip(gradients, ctx.saved_tensors)]
 
 
 def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
@@ -251,12 +308,14 @@ class _ChannelsFunction(torch.autograd.Function):
     def forward(ctx, flat, names, options, grad_options, slots, *tensors):
         values, ids, _ = render_channels_flat(flat, names, options)
         ctx.mark_non_differentiable(ids)
+        _save_inputs(ctx, flat, tensors)
         ctx.flat, ctx.names, ctx.grad_options, ctx.slots = flat, names, grad_options, slots
         return values, ids
 
     @staticmethod
     def backward(ctx, grad_values, grad_ids):
         flat = ctx.flat
+        _check_saved_inputs(ctx)
         needed = ctx.needs_input_grad[5:]
         buffers = {slot: torch.zeros(flat.params[slot].shape, dtype=torch.float32)
                    for slot, need in zip(ctx.slots, needed) if need}
@@ -264,7 +323,8 @@ class _ChannelsFunction(torch.autograd.Function):
             adjoint = grad_values.detach().to(torch.float32).contiguous()
             _call_core(_core.channel_gradients, *flat.core_args(), ctx.names, adjoint,
                        flat.slot_buffers(buffers), ctx.grad_options.core())
-        return (None, None, None, None, None, *[buffers.get(slot) for slot in ctx.slots])
+        return (None, None, None, None, None,
+                *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
 
 def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tensor, channels=None,
@@ -559,6 +619,9 @@ def _check_direction(param, direction) -> Tuple[torch.Tensor, torch.Tensor]:
     return param.detach().to(torch.float64), direction.detach().to(torch.float64)
 
 
+_DUAL_LEVEL_LOCK = threading.Lock()
+
+
 def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]:
     """The directions on the core's slots that ``direction`` on ``param`` induces: by
     forward-mode AD through the flattening if the scene holds ``param`` itself, else (for a
@@ -566,7 +629,9 @@ def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]
     autograd graph that connects them."""
     _check_direction(param, direction)
     direction = direction.detach().to(param.dtype)
-    with fwad.dual_level():
+    # torch has one forward-mode AD level for the whole process: threads take turns here
+    # (only the flattening; the core calls that follow run in parallel).
+    with _DUAL_LEVEL_LOCK, fwad.dual_level():
         moved = _substitute(scene, param, fwad.make_dual(param.detach(), direction), required=False)
         tangents = None if moved is None else {
             slot: fwad.unpack_dual(t).tangent for slot, t in flatten_scene(moved).params.items()}

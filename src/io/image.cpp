@@ -17,6 +17,7 @@
 #include <png.h>
 // jpeglib.h needs FILE and size_t declared first.
 #include <jpeglib.h>
+#include <jerror.h>  // the message codes
 
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfFrameBuffer.h>
@@ -64,6 +65,23 @@ std::string lowercase_extension(const std::string& path) {
     std::transform(ext.begin(), ext.end(), ext.begin(),
                    [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
     return ext;
+}
+
+// Refuses sizes that are empty or larger than kMaxImagePixels, before anything is allocated.
+void check_image_size(const std::string& path, long long width, long long height) {
+    if (width <= 0 || height <= 0 || width > kMaxImagePixels || height > kMaxImagePixels ||
+        width * height > kMaxImagePixels)
+        throw IoError(path + ": the file declares " + std::to_string(width) + "x" +
+                      std::to_string(height) + " pixels (at most " +
+                      std::to_string(kMaxImagePixels) + " pixels are read)");
+}
+
+long long file_size(std::FILE* file) {
+    const long position = std::ftell(file);
+    std::fseek(file, 0, SEEK_END);
+    const long size = std::ftell(file);
+    std::fseek(file, position, SEEK_SET);
+    return size;
 }
 
 // True for the channels of a `channels`-channel image that hold colour (not alpha).
@@ -137,6 +155,19 @@ Image read_png(const std::string& path) {
     png_read_info(state.png, state.info);
     const png_byte color_type = png_get_color_type(state.png, state.info);
     const png_byte depth = png_get_bit_depth(state.png, state.info);
+    {
+        const long long width = png_get_image_width(state.png, state.info);
+        const long long height = png_get_image_height(state.png, state.info);
+        check_image_size(path, width, height);
+        // Deflate packs at most 1032 bytes into one: a file too small for the rows it declares
+        // is truncated or lying, and is refused before the rows are allocated.
+        const long long raw = (width * png_get_channels(state.png, state.info) * depth + 7) / 8 *
+                              height + height;
+        if (raw / 1032 > file_size(file.get()))
+            throw IoError(path + ": the file declares " + std::to_string(width) + "x" +
+                          std::to_string(height) + " pixels, more than its " +
+                          std::to_string(file_size(file.get())) + " bytes can hold");
+    }
     if (color_type == PNG_COLOR_TYPE_PALETTE) png_set_palette_to_rgb(state.png);
     if (color_type == PNG_COLOR_TYPE_GRAY && depth < 8) png_set_expand_gray_1_2_4_to_8(state.png);
     if (png_get_valid(state.png, state.info, PNG_INFO_tRNS)) png_set_tRNS_to_alpha(state.png);
@@ -218,6 +249,14 @@ void jpeg_error_handler(j_common_ptr info) {
 
 void jpeg_message_handler(j_common_ptr) {}  // warnings are not fatal; stay quiet
 
+// Warnings of lost data (the file ends early, a marker where data should be) are errors:
+// libjpeg would fill the missing rows with grey.
+void jpeg_emit_handler(j_common_ptr info, int level) {
+    const int code = info->err->msg_code;
+    if (level < 0 && (code == JWRN_JPEG_EOF || code == JWRN_HIT_MARKER || code == JWRN_MUST_RESYNC))
+        jpeg_error_handler(info);
+}
+
 Image read_jpeg(const std::string& path) {
     FilePtr file = open_file(path, "rb");
     Image image;
@@ -228,6 +267,7 @@ Image read_jpeg(const std::string& path) {
     info.err = jpeg_std_error(&errors.base);
     errors.base.error_exit = jpeg_error_handler;
     errors.base.output_message = jpeg_message_handler;
+    errors.base.emit_message = jpeg_emit_handler;
     if (setjmp(errors.jump)) {
         jpeg_destroy_decompress(&info);
         throw IoError(path + ": " + errors.message);
@@ -235,6 +275,9 @@ Image read_jpeg(const std::string& path) {
     jpeg_create_decompress(&info);
     jpeg_stdio_src(&info, file.get());
     jpeg_read_header(&info, TRUE);
+    check_image_size(path, info.image_width, info.image_height);
+    // Progressive files keep all coefficients in memory: bound it (beyond, libjpeg errors).
+    info.mem->max_memory_to_use = 8 * kMaxImagePixels;
     info.out_color_space = info.num_components == 1 ? JCS_GRAYSCALE : JCS_RGB;
     jpeg_start_decompress(&info);
 
@@ -242,12 +285,14 @@ Image read_jpeg(const std::string& path) {
     image.height = static_cast<int>(info.output_height);
     image.channels = info.output_components;
     const size_t row_size = static_cast<size_t>(image.width) * image.channels;
-    image.pixels.resize(row_size * image.height);
     row.resize(row_size);
     while (info.output_scanline < info.output_height) {
         const size_t y = info.output_scanline;
         JSAMPROW rows[1] = {row.data()};
         jpeg_read_scanlines(&info, rows, 1);
+        // Grown row by row: a file that declares more rows than it holds fails before
+        // its declared size is allocated.
+        image.pixels.resize((y + 1) * row_size);
         decode_samples(row.data(), image.channels, row_size, image.pixels.data() + y * row_size);
     }
     jpeg_finish_decompress(&info);
@@ -256,6 +301,23 @@ Image read_jpeg(const std::string& path) {
 }
 
 // ---- OpenEXR ------------------------------------------------------------------------------
+
+// A name from a file, with bytes outside printable ASCII written as \xNN (messages are UTF-8).
+std::string printable(const char* name) {
+    static const char digits[] = "0123456789abcdef";
+    std::string out;
+    for (const char* p = name; *p; ++p) {
+        const unsigned char c = static_cast<unsigned char>(*p);
+        if (c >= 0x20 && c < 0x7f) {
+            out += static_cast<char>(c);
+        } else {
+            out += "\\x";
+            out += digits[c >> 4];
+            out += digits[c & 15];
+        }
+    }
+    return out;
+}
 
 Image read_exr(const std::string& path) {
     try {
@@ -271,12 +333,14 @@ Image read_exr(const std::string& path) {
         if (names.empty()) {
             std::string found;
             for (auto it = available.begin(); it != available.end(); ++it)
-                found += std::string(found.empty() ? "" : ",") + it.name();
+                found += std::string(found.empty() ? "" : ",") + printable(it.name());
             throw IoError(path + ": no R,G,B or Y channels (found: " + found + ")");
         }
         if (available.findChannel("A")) names.push_back("A");
 
         Image image;
+        check_image_size(path, static_cast<long long>(window.max.x) - window.min.x + 1,
+                         static_cast<long long>(window.max.y) - window.min.y + 1);
         image.width = window.max.x - window.min.x + 1;
         image.height = window.max.y - window.min.y + 1;
         image.channels = static_cast<int>(names.size());

@@ -22,6 +22,10 @@ struct Image {
     }
 };
 
+// The most pixels an image file may declare (16384 x 16384): larger sizes are refused, before
+// any pixel memory is allocated, with an IoError naming the file and the size.
+constexpr long long kMaxImagePixels = 1ll << 28;
+
 // The sRGB transfer curve (IEC 61966-2-1) and its inverse, on [0, 1].
 float srgb_to_linear(float encoded);
 float linear_to_srgb(float linear);

@@ -1,7 +1,15 @@
 #include "io/obj.h"
 
 #include <algorithm>
+#include <cctype>
+#include <cerrno>
+#include <cfloat>
 #include <cmath>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string_view>
 #include <unordered_map>
 
 #include <tiny_obj_loader.h>
@@ -78,9 +86,107 @@ struct FaceRef {
     size_t shape, face;
 };
 
+// ---- checking the text before tinyobjloader reads it ---------------------------------------
+// tinyobjloader reads an unparsable number as 0, drops faces of fewer than three vertices and
+// reads a binary file as an empty mesh, all without a word: these checks name the line instead.
+
+bool is_space(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\f' || c == '\v'; }
+
+std::vector<std::string_view> split_words(std::string_view line) {
+    std::vector<std::string_view> words;
+    size_t i = 0;
+    while (i < line.size()) {
+        while (i < line.size() && is_space(line[i])) ++i;
+        const size_t start = i;
+        while (i < line.size() && !is_space(line[i])) ++i;
+        if (i > start) words.push_back(line.substr(start, i - start));
+    }
+    return words;
+}
+
+// A decimal number (digits, sign, point, exponent; no hex, inf or nan) finite as a float.
+bool parse_float(std::string_view word) {
+    if (word.empty() || word.size() > 64) return false;
+    for (char c : word)
+        if (!std::isdigit(static_cast<unsigned char>(c)) && !std::strchr("+-.eE", c)) return false;
+    const std::string text(word);
+    char* end = nullptr;
+    const double value = std::strtod(text.c_str(), &end);
+    return end == text.c_str() + text.size() && std::fabs(value) <= FLT_MAX;
+}
+
+// A nonzero integer that fits in int32 (OBJ indices count from 1; negative: from the end).
+bool parse_index(std::string_view word) {
+    if (word.empty() || word.size() > 11) return false;
+    size_t i = word[0] == '-' || word[0] == '+' ? 1 : 0;
+    if (i == word.size()) return false;
+    for (size_t k = i; k < word.size(); ++k)
+        if (!std::isdigit(static_cast<unsigned char>(word[k]))) return false;
+    const long long value = std::strtoll(std::string(word).c_str(), nullptr, 10);
+    return value != 0 && value >= INT32_MIN && value <= INT32_MAX;
+}
+
+// v, v/vt, v//vn or v/vt/vn.
+bool parse_face_corner(std::string_view word) {
+    const size_t a = word.find('/');
+    if (a == std::string_view::npos) return parse_index(word);
+    const size_t b = word.find('/', a + 1);
+    const std::string_view v = word.substr(0, a);
+    const std::string_view t = word.substr(a + 1, b == std::string_view::npos ? b : b - a - 1);
+    if (b == std::string_view::npos) return parse_index(v) && parse_index(t);
+    const std::string_view n = word.substr(b + 1);
+    return parse_index(v) && (t.empty() || parse_index(t)) && parse_index(n);
+}
+
+void check_obj_text(const std::string& path) {
+    std::ifstream file(path, std::ios::binary);
+    if (!file) throw IoError(path + ": cannot open (" + std::strerror(errno) + ")");
+    std::ostringstream buffer;
+    buffer << file.rdbuf();
+    const std::string text = buffer.str();
+    size_t line_start = text.compare(0, 3, "\xEF\xBB\xBF") == 0 ? 3 : 0;  // a UTF-8 byte order mark
+    for (size_t number = 1; line_start < text.size(); ++number) {
+        size_t line_end = text.find('\n', line_start);
+        if (line_end == std::string::npos) line_end = text.size();
+        const std::string_view line(text.data() + line_start, line_end - line_start);
+        line_start = line_end + 1;
+        const auto where = [&] { return path + ":" + std::to_string(number) + ": "; };
+        for (char c : line)
+            if (static_cast<unsigned char>(c) < 0x20 && !is_space(c))
+                throw IoError(where() + "control character " + std::to_string(int(c)) +
+                              " in the text (a binary or UTF-16 file, not an OBJ file)");
+        const std::vector<std::string_view> words = split_words(line);
+        if (words.empty() || words[0][0] == '#') continue;
+        const std::string_view key = words[0];
+        size_t minimum = 0;
+        if (key == "v" || key == "vn") minimum = 3;
+        else if (key == "vt") minimum = 1;
+        else if (key != "f") continue;
+        const size_t count = words.size() - 1;
+        if (key == "f") {
+            if (count < 3)
+                throw IoError(where() + "a face needs at least 3 vertices, this one has " +
+                              std::to_string(count));
+            for (size_t i = 1; i < words.size(); ++i)
+                if (!parse_face_corner(words[i]))
+                    throw IoError(where() + "cannot read face vertex '" + std::string(words[i]) +
+                                  "' (expected v, v/vt, v//vn or v/vt/vn with nonzero indices)");
+            continue;
+        }
+        if (count < minimum)
+            throw IoError(where() + "'" + std::string(key) + "' needs at least " +
+                          std::to_string(minimum) + " numbers, got " + std::to_string(count));
+        for (size_t i = 1; i < words.size(); ++i)
+            if (!parse_float(words[i]))
+                throw IoError(where() + "cannot read '" + std::string(words[i]) +
+                              "' as a finite number");
+    }
+}
+
 }  // namespace
 
 std::vector<ObjMesh> load_obj(const std::string& path) {
+    check_obj_text(path);
     tinyobj::ObjReaderConfig config;
     config.triangulate = true;
     config.vertex_color = false;

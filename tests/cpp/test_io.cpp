@@ -5,7 +5,10 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <iterator>
 #include <string>
+#include <tuple>
+#include <utility>
 
 #include "io/image.h"
 #include "io/obj.h"
@@ -125,6 +128,75 @@ TEST_F(IoTest, ErrorsNameThePath) {
     EXPECT_THROW(write_image(path("image.exr"), image.pixels.data(), 2, 2, 5),
                  std::invalid_argument);
     EXPECT_THROW(write_image(path("no_such_dir/image.png"), image), IoError);
+}
+
+namespace {
+
+// CRC-32 as PNG chunks carry it (ISO 3309), bit by bit.
+uint32_t png_crc(const std::string& bytes) {
+    uint32_t crc = 0xFFFFFFFFu;
+    for (unsigned char byte : bytes) {
+        crc ^= byte;
+        for (int k = 0; k < 8; ++k) crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+    }
+    return crc ^ 0xFFFFFFFFu;
+}
+
+std::string big_endian(uint32_t v) {
+    return {char(v >> 24), char(v >> 16), char(v >> 8), char(v)};
+}
+
+std::string read_bytes(const std::string& file) {
+    std::ifstream in(file, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+}
+
+}  // namespace
+
+// A PNG whose header (with a valid CRC) declares a huge size is refused before its rows are
+// allocated: beyond kMaxImagePixels, or more rows than its bytes can hold.
+TEST_F(IoTest, PngDeclaringHugeSizesIsRefusedBeforeAllocating) {
+    write_image(path("small.png"), gradient_image(4, 4, 3));
+    const std::string png = read_bytes(path("small.png"));
+    ASSERT_EQ(png.substr(12, 4), "IHDR");
+    for (auto [width, height, words] : {std::tuple{60000u, 60000u, "at most"},
+                                        std::tuple{16384u, 16384u, "bytes can hold"}}) {
+        const std::string body = "IHDR" + big_endian(width) + big_endian(height) + png.substr(24, 5);
+        const std::string patched = png.substr(0, 12) + body + big_endian(png_crc(body)) +
+                                    png.substr(33);
+        const std::string file = path("huge.png");
+        std::ofstream(file, std::ios::binary) << patched;
+        try {
+            read_image(file);
+            FAIL() << "no exception for " << width << "x" << height;
+        } catch (const IoError& e) {
+            const std::string message = e.what();
+            EXPECT_NE(message.find(file + ": the file declares " + std::to_string(width) + "x" +
+                                   std::to_string(height)), std::string::npos) << message;
+            EXPECT_NE(message.find(words), std::string::npos) << message;
+        }
+    }
+}
+
+TEST_F(IoTest, ObjTextErrorsNameTheLine) {
+    const std::string triangle = "v 0 0 0\nv 1 0 0\nv 0 1 0\n";
+    const std::pair<std::string, int> cases[] = {
+        {triangle + "f 1 2\n", 4},           {"v 0 0 0\nv 1 y 0\n", 2},
+        {"v 0 0\n", 1},                      {triangle + "vn 0 0 1e40\n", 4},
+        {triangle + "f 1 2 0x3\n", 4},       {triangle + "f 1 2 3\n" + std::string(1, '\0') + "\n", 5},
+        {"# c\nv inf 0 0\n", 2},            {triangle + "f 1/1/1/1 2 3\n", 4},
+    };
+    for (const auto& [text, line] : cases) {
+        const std::string file = path("bad.obj");
+        std::ofstream(file, std::ios::binary) << text;
+        try {
+            load_obj(file);
+            FAIL() << "no exception for " << text;
+        } catch (const IoError& e) {
+            EXPECT_EQ(std::string(e.what()).rfind(file + ":" + std::to_string(line) + ": ", 0), 0u)
+                << e.what();
+        }
+    }
 }
 
 TEST(ConformanceImages, ReadsPizCompressedExr) {

@@ -2,8 +2,11 @@
 main(argv) (and once as a process)."""
 
 import os
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -46,7 +49,10 @@ def scene_file(tmp_path):
 
 
 def _run(argv, capsys):
-    code = cli.main([str(a) for a in argv])
+    try:
+        code = cli.main([str(a) for a in argv])
+    except SystemExit as exit:  # argparse refused an argument (status 2)
+        code = exit.code
     out, err = capsys.readouterr()
     return code, out, err
 
@@ -214,3 +220,94 @@ def test_render_writes_output_channels(scene_file, tmp_path, capsys):
     assert float(expected["alpha"].sum()) > 0 and int((expected["triangle_id"] >= 0).sum()) > 0
     code, text, err = _run(["render", scene_file, "-o", out, "--channels", "alpha,colour"], capsys)
     assert code != 0 and "--channels" in err and "colour" in err
+
+
+# ---- bad arguments and Ctrl-C ------------------------------------------------------------------
+
+@pytest.fixture
+def quad_obj(tmp_path):
+    v, f = ep.shapes.quad([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    ep.save_obj(ep.Mesh(vertices=v, indices=f), tmp_path / "quad.obj")
+    return tmp_path / "quad.obj"
+
+
+@pytest.mark.parametrize("args,option", [
+    (["--spp", "0"], "--spp"),
+    (["--spp", "-3"], "--spp"),
+    (["--spp", "lots"], "--spp"),
+    (["--fov", "0"], "--fov"),
+    (["--fov", "180"], "--fov"),
+    (["--fov", "inf"], "--fov"),
+    (["--resolution", "100000", "100000"], "--resolution"),
+    (["--resolution", "60000", "60000"], "--resolution"),
+    (["--resolution", "0", "8"], "--resolution"),
+    (["--env", "nan"], "--env"),
+    (["--env", "inf"], "--env"),
+    (["--channels", ""], "--channels"),
+    (["--channels", ","], "--channels"),
+    (["--max-bounces", "-1"], "--max-bounces"),
+    (["--threads", "0"], "--threads"),
+    (["--chunk-spp", "0"], "--chunk-spp"),
+    (["--seed", "-1"], "--seed"),
+])
+def test_bad_arguments_are_one_line_and_exit_2(quad_obj, tmp_path, capsys, args, option):
+    with pytest.raises(SystemExit) as info:
+        cli.main(["render", str(quad_obj), "-o", str(tmp_path / "out.png"), *args])
+    _, err = capsys.readouterr()
+    assert info.value.code == 2
+    assert "Traceback" not in err
+    lines = err.strip().splitlines()
+    assert lines[-1].startswith("edgepath render: error: argument") and option in lines[-1]
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_bad_arguments_of_derivative_and_demo(scene_file, capsys):
+    for argv in (["derivative", str(scene_file), "--param", "paint.reflectance", "--direction", "nan"],
+                 ["derivative", str(scene_file), "--param", "paint.reflectance", "--direction", "1",
+                  "--percentile", "0"],
+                 ["demo", "--size", "0"], ["demo", "--iterations", "0"], ["demo", "--size", "100000"]):
+        with pytest.raises(SystemExit) as info:
+            cli.main(argv)
+        _, err = capsys.readouterr()
+        assert info.value.code == 2 and "Traceback" not in err and "error: argument" in err, argv
+
+
+def test_ctrl_c_exits_130_with_one_line(quad_obj, tmp_path):
+    """SIGINT during a long render (many short chunks, so that it lands in Python code between
+    core calls, or in a core call that returns within a chunk): 'edgepath: interrupted' on
+    stderr soon after (the exit itself waits for the interpreter's teardown), exit status 130,
+    no traceback, no image written."""
+    env = dict(os.environ, PYTHONPATH=str(Path(ep.__file__).resolve().parents[1]))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "edgepath", "render", str(quad_obj), "-o", str(tmp_path / "out.png"),
+         "--resolution", "16", "16", "--spp", "10000000", "--chunk-spp", "1", "--threads", "1"],
+        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    lines, said = [], {}
+
+    def read_stderr():  # keeps the pipe drained; notes when the message comes
+        for line in process.stderr:
+            lines.append(line)
+            if "interrupted" in line:
+                said["at"] = time.monotonic()
+
+    try:
+        for _ in range(20):  # up to the first progress line: rendering has begun
+            line = process.stderr.readline()
+            if " spp, " in line or not line:
+                break
+        assert " spp, " in line, line
+        reader = threading.Thread(target=read_stderr)
+        reader.start()
+        sent = time.monotonic()
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=60)
+        reader.join(timeout=60)
+    finally:
+        process.kill()
+        process.wait()
+    err = "".join(lines)
+    assert process.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err
+    assert err.strip().splitlines()[-1] == "edgepath: interrupted"
+    assert said["at"] - sent < 3.0
+    assert not (tmp_path / "out.png").exists()

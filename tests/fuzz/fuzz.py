@@ -1,0 +1,384 @@
+"""Fuzzing the loaders: mutated OBJ, PLY (ASCII and binary), Mitsuba XML, PNG, JPEG and EXR
+files go through ``edgepath``'s loader and a small render, each in a child process with a time
+and memory cap, and every outcome is classified:
+
+  ok          loaded (and rendered, where the input makes a scene)
+  error       a clean error: ValueError or OSError whose message names the file (loading)
+              or a field (rendering)
+  unnamed     a ValueError / OSError whose message names neither
+  unexpected  any other Python exception (a traceback of an unexpected type, MemoryError, a
+              C++ exception that reached Python as RuntimeError, ...)
+  signal      the child died by a signal (abort, segfault, the memory cap)
+  hang        the child ran past the time cap
+  far_abort   ``signal`` while rendering a scene with coordinates beyond 1e18, which Embree's
+              ray checks abort on until the core refuses such scenes when it builds them
+
+Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
+imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
+threads exist when it forks); a child sets its limits and one thread each for torch and the
+core, and runs a batch of cases one after the other, reporting each through a pipe, until one
+kills it or runs past the time cap: a new child goes on after that case. Replayed files
+(``--replay``) run one per child.
+
+    python tests/fuzz/fuzz.py --cases 2000 --seed 1 --save build/fuzz/found
+    python tests/fuzz/fuzz.py --replay tests/python/fuzz_regressions
+
+Exit status 1 if any case was ``unexpected``, ``signal`` or ``hang``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import random
+import resource
+import select
+import shutil
+import signal
+import sys
+import tempfile
+import time
+import traceback
+from collections import Counter, defaultdict
+from typing import Dict, List, Optional, Tuple
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import corpus  # noqa: E402
+
+BAD = ("unexpected", "signal", "hang", "far_abort")
+OUTCOMES = ("ok", "error", "unnamed") + BAD
+
+# Per case: seconds of wall time, bytes of address space beyond what the driver had mapped.
+TIME_LIMIT = 10.0
+MEMORY_LIMIT = 2 << 30
+
+
+def kind_of(path: str) -> str:
+    """The loader a file goes to, from its name (regression files: KIND-...ext)."""
+    name = os.path.basename(path)
+    for kind in sorted(corpus.KINDS, key=len, reverse=True):
+        if name.startswith(kind + "-") or name.startswith(kind + "."):
+            return kind
+    ext = os.path.splitext(name)[1].lower()
+    return {".obj": "obj", ".ply": "ply_ascii", ".xml": "xml", ".png": "png", ".jpg": "jpeg",
+            ".jpeg": "jpeg", ".exr": "exr"}[ext]
+
+
+# ---- one case, in the child ------------------------------------------------------------------
+
+def _framing_camera(ep, meshes):
+    import torch
+    points = torch.cat([m.vertices.detach().reshape(-1, 3).double() for m in meshes])
+    lo, hi = points.min(0).values, points.max(0).values
+    centre = (lo + hi) / 2
+    radius = max(float((hi - lo).norm()) / 2, 1e-3)
+    return ep.Camera(position=(centre + torch.tensor([0.0, 0.0, 3 * radius])).float(),
+                     look_at=centre.float(), up=torch.tensor([0.0, 1.0, 0.0]), fov=45.0,
+                     resolution=(6, 8))
+
+
+def _scene_of(ep, kind: str, path: str):
+    """Loads ``path`` with the loader of ``kind``; returns a small scene that uses what was
+    loaded (or None when there is nothing to render)."""
+    import torch
+    if kind == "xml":
+        loaded = ep.load_mitsuba(path)
+        scene = loaded.scene
+        scene.camera.resolution, scene.camera.crop_window = (6, 8), None
+        return scene, min(loaded.max_bounces if loaded.max_bounces is not None else 2, 2)
+    if kind == "obj":
+        meshes = ep.load_obj(path)
+        if not meshes:
+            return None, 0
+    elif kind.startswith("ply"):
+        meshes = [ep.load_ply(path)]
+    else:
+        image = ep.imread(path)
+        rgb = image[:, :, :1].expand(-1, -1, 3) if image.shape[2] <= 2 else image[:, :, :3]
+        rgb = rgb.contiguous()
+        vertices, indices, uvs, normals = ep.shapes.sphere(rings=4, segments=6)
+        mesh = ep.Mesh(vertices=vertices, indices=indices, uvs=uvs, normals=normals,
+                       material=ep.Material(diffuse=rgb.clamp(0, 1)))
+        camera = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3),
+                           fov=40.0, resolution=(6, 8))
+        return ep.Scene(camera=camera, meshes=[mesh], envmap=ep.EnvironmentMap(values=rgb)), 1
+    envmap = ep.EnvironmentMap(values=torch.ones(1, 1, 3))
+    return ep.Scene(camera=_framing_camera(ep, meshes), meshes=meshes, envmap=envmap), 1
+
+
+def _names_source(message: str, path: str) -> bool:
+    """A loading error names the file (or, from an XML scene, the seed file it refers to)."""
+    return os.path.basename(path) in message or "seed" in message
+
+
+# Coordinates this far from the origin are beyond what Embree's ray checks accept: until the
+# core refuses them when it builds a scene, rendering them aborts. A case that dies rendering
+# such a scene is reported as that known cause (``KNOWN_CORE_ABORT`` in its detail).
+FAR = 1e18
+KNOWN_CORE_ABORT = "coordinates beyond Embree's range"
+
+
+def _extent(scene) -> float:
+    """The largest coordinate of the scene's meshes and camera."""
+    import torch
+    values = [m.vertices.detach().abs().max() for m in scene.meshes if m.vertices.numel()]
+    camera = scene.camera
+    values += [t.detach().abs().max() for t in (camera.position, camera.look_at, camera.to_world)
+               if isinstance(t, torch.Tensor)]
+    return max((float(v) for v in values), default=0.0)
+
+
+def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
+    """Runs one case in this process: (outcome, detail). Only ``run_batch``'s children call it;
+    ``report`` gets a note before the render (the detail if the render kills the process)."""
+    import edgepath as ep
+    import edgepath.shapes  # noqa: F401  (ep.shapes)
+    stage = "load"
+    try:
+        scene, bounces = _scene_of(ep, kind, path)
+        if scene is None:
+            return "ok", "nothing to render"
+        stage = "render"
+        extent = _extent(scene)
+        report(f"rendering{' ' + KNOWN_CORE_ABORT if extent > FAR else ''} (up to {extent:.3g})")
+        for mesh in scene.meshes:
+            mesh.vertices.requires_grad_(True)
+        image = ep.render(scene, spp=1, max_bounces=bounces, num_threads=1)
+        image.sum().backward()
+        return "ok", f"rendered, sum {float(image.detach().sum()):.6g}"
+    except (ValueError, OSError) as error:
+        message = f"{stage}: {type(error).__name__}: {error}"
+        named = _names_source(str(error), path) if stage == "load" else ":" in str(error)
+        return ("error" if named else "unnamed"), message
+    except Exception as error:  # noqa: BLE001  (classifying is the point)
+        return "unexpected", f"{stage}: " + "".join(
+            traceback.format_exception(type(error), error, error.__traceback__))[-2000:]
+
+
+def _child(cases: List[Tuple[str, str]], write_fd: int, memory_limit: int) -> None:
+    code = 0
+    try:
+        resource.setrlimit(resource.RLIMIT_CORE, (0, 0))
+        mapped = _mapped_bytes()
+        resource.setrlimit(resource.RLIMIT_AS, (mapped + memory_limit, mapped + memory_limit))
+        os.environ["OMP_NUM_THREADS"] = "1"
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, 1)
+        os.dup2(devnull, 2)  # warnings (e.g. wrap modes) are fine; tracebacks are caught
+
+        def send(answer):
+            os.write(write_fd, (json.dumps(answer) + "\n").encode())
+
+        for kind, path in cases:
+            outcome, detail = run_case(kind, path, lambda note: send({"note": note}))
+            send({"outcome": outcome, "detail": detail})
+    except BaseException:  # noqa: BLE001  (nothing may escape a forked child)
+        code = 3
+    finally:
+        os._exit(code)
+
+
+def _mapped_bytes() -> int:
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmSize:"):
+                return int(line.split()[1]) * 1024
+    return 0
+
+
+def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
+              memory_limit: int = MEMORY_LIMIT) -> List[Tuple[str, str]]:
+    """Runs cases (kind, path) in forked children, one after the other in the same child
+    (a fork costs more than most cases) until one kills it or runs past ``time_limit``
+    seconds; a new child goes on with the next. Returns (outcome, detail) per case."""
+    results: List[Tuple[str, str]] = []
+    while len(results) < len(cases):
+        read_fd, write_fd = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            os.close(read_fd)
+            _child(cases[len(results):], write_fd, memory_limit)
+        os.close(write_fd)
+        buffer, note, timed_out = b"", "", False
+        deadline = time.monotonic() + time_limit
+        try:
+            while True:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    timed_out = True
+                    os.kill(pid, signal.SIGKILL)
+                    break
+                ready, _, _ = select.select([read_fd], [], [], left)
+                if not ready:
+                    continue
+                chunk = os.read(read_fd, 1 << 16)
+                if not chunk:
+                    break
+                buffer += chunk
+                *lines, buffer = buffer.split(b"\n")
+                for line in lines:
+                    answer = json.loads(line)
+                    if "note" in answer:
+                        note += f" while {answer['note']}"
+                    else:
+                        results.append((answer["outcome"], answer["detail"]))
+                        note, deadline = "", time.monotonic() + time_limit
+        finally:
+            os.close(read_fd)
+            _, status = os.waitpid(pid, 0)
+        if len(results) < len(cases):  # the child died in (or hung on) the next case
+            died = "far_abort" if KNOWN_CORE_ABORT in note else "signal"
+            if timed_out:
+                results.append(("hang", f"no answer in {time_limit:g} s{note}"))
+            elif os.WIFSIGNALED(status):
+                results.append((died, f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"))
+            else:
+                results.append((died, f"exit status {os.WEXITSTATUS(status)} without an answer{note}"))
+    return results
+
+
+def _prepare_driver() -> None:
+    """Imports what the children use, once, before any fork; one thread everywhere."""
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    import torch
+    torch.set_num_threads(1)
+    import edgepath  # noqa: F401
+    import edgepath.shapes  # noqa: F401
+
+
+# ---- the driver ------------------------------------------------------------------------------
+
+def make_case(seeds: Dict[str, List[str]], seed_dir: str, seed: int, i: int,
+              kinds: List[str]) -> Tuple[str, bytes, List[str]]:
+    """Case ``i``: its loader (round robin over ``kinds``), its bytes, its mutations."""
+    rng = random.Random(f"{seed}:{i}")
+    kind = kinds[i % len(kinds)]
+    with open(os.path.join(seed_dir, rng.choice(seeds[kind])), "rb") as f:
+        data = f.read()
+    data, names = corpus.mutate(kind, data, rng)
+    return kind, data, names
+
+
+BATCH = 25  # cases per batch of files (and at most per child)
+
+
+def fuzz(cases: int, seed: int, kinds: List[str], save: Optional[str], log=None,
+         time_limit: float = TIME_LIMIT, start: int = 0, quiet: bool = False) -> Dict:
+    _prepare_driver()
+    counts: Dict[str, Counter] = defaultdict(Counter)
+    work = tempfile.mkdtemp(prefix="edgepath-fuzz-")
+    try:
+        seed_dir = os.path.join(work, "seeds")
+        os.mkdir(seed_dir)
+        seeds = corpus.write_seeds(seed_dir)
+        began = time.monotonic()
+        done = 0
+        for first in range(start, start + cases, BATCH):
+            numbers = range(first, min(first + BATCH, start + cases))
+            # The XML seed refers to the other seeds: each batch runs beside fresh copies.
+            case_dir = os.path.join(work, "case")
+            shutil.rmtree(case_dir, ignore_errors=True)
+            shutil.copytree(seed_dir, case_dir)
+            batch = []
+            for i in numbers:
+                kind, data, names = make_case(seeds, seed_dir, seed, i, kinds)
+                path = os.path.join(case_dir, f"{kind}-{seed}-{i}{corpus.KINDS[kind]}")
+                with open(path, "wb") as f:
+                    f.write(data)
+                batch.append((i, kind, path, names))
+            results = run_batch([(kind, path) for _, kind, path, _ in batch], time_limit)
+            for (i, kind, path, names), (outcome, detail) in zip(batch, results):
+                counts[kind][outcome] += 1
+                if log is not None:
+                    log.write(json.dumps({"case": i, "seed": seed, "kind": kind,
+                                          "mutations": names, "outcome": outcome,
+                                          "detail": detail[-800:]}) + "\n")
+                if outcome in BAD or outcome == "unnamed":
+                    if not quiet:
+                        print(f"case {i} ({kind}, {'+'.join(names)}): {outcome}: {detail[-300:]}",
+                              file=sys.stderr)
+                    if save and outcome in BAD:
+                        os.makedirs(save, exist_ok=True)
+                        shutil.copy(path, os.path.join(save, os.path.basename(path)))
+            if log is not None:
+                log.flush()
+            done += len(batch)
+            if not quiet and done % 500 < BATCH:
+                print(f"{done}/{cases} cases, {time.monotonic() - began:.0f} s",
+                      file=sys.stderr, flush=True)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return counts
+
+
+def replay(directory: str, time_limit: float = TIME_LIMIT) -> Dict[str, Tuple[str, str]]:
+    """Runs every regression file of ``directory`` (beside a copy of the seeds, which XML
+    files may refer to): {file name: (outcome, detail)}."""
+    _prepare_driver()
+    results = {}
+    work = tempfile.mkdtemp(prefix="edgepath-fuzz-")
+    try:
+        corpus.write_seeds(work)
+        for name in sorted(os.listdir(directory)):
+            if name.startswith(".") or name.endswith((".md", ".txt")):
+                continue
+            path = os.path.join(work, name)
+            shutil.copy(os.path.join(directory, name), path)
+            results[name] = run_batch([(kind_of(name), path)], time_limit)[0]
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return results
+
+
+def print_table(counts: Dict[str, Counter], out=sys.stdout) -> None:
+    print(f"{'loader':<11}" + "".join(f"{o:>11}" for o in OUTCOMES) + f"{'total':>8}", file=out)
+    total = Counter()
+    for kind in corpus.KINDS:
+        if kind in counts:
+            c = counts[kind]
+            total.update(c)
+            print(f"{kind:<11}" + "".join(f"{c[o]:>11}" for o in OUTCOMES) +
+                  f"{sum(c.values()):>8}", file=out)
+    print(f"{'all':<11}" + "".join(f"{total[o]:>11}" for o in OUTCOMES) +
+          f"{sum(total.values()):>8}", file=out)
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--cases", type=int, default=1000, help="number of cases (default 1000)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the mutations (default 0)")
+    parser.add_argument("--start", type=int, default=0, help="first case number (default 0)")
+    parser.add_argument("--kinds", default=",".join(corpus.KINDS),
+                        help=f"loaders, comma-separated (default all: {','.join(corpus.KINDS)})")
+    parser.add_argument("--save", metavar="DIR", help="copy inputs that crash, hang or raise "
+                                                      "unexpectedly into DIR")
+    parser.add_argument("--log", metavar="FILE", help="one JSON line per case")
+    parser.add_argument("--time-limit", type=float, default=TIME_LIMIT,
+                        help=f"seconds per case before it counts as a hang (default {TIME_LIMIT:g})")
+    parser.add_argument("--replay", metavar="DIR", help="run the files of DIR instead")
+    parser.add_argument("-q", "--quiet", action="store_true")
+    args = parser.parse_args(argv)
+    if args.replay:
+        results = replay(args.replay, args.time_limit)
+        for name, (outcome, detail) in results.items():
+            print(f"{name}: {outcome}: {detail[-300:]}")
+        return 1 if any(o in BAD for o, _ in results.values()) else 0
+    kinds = [k.strip() for k in args.kinds.split(",") if k.strip()]
+    unknown = [k for k in kinds if k not in corpus.KINDS]
+    if unknown or not kinds:
+        parser.error(f"--kinds: unknown {unknown}; choose from {', '.join(corpus.KINDS)}")
+    log = open(args.log, "a") if args.log else None
+    try:
+        counts = fuzz(args.cases, args.seed, kinds, args.save, log, args.time_limit, args.start,
+                      args.quiet)
+    finally:
+        if log:
+            log.close()
+    print(f"seed {args.seed}, cases {args.start}..{args.start + args.cases - 1}")
+    print_table(counts)
+    return 1 if any(c[o] for c in counts.values() for o in BAD) else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
