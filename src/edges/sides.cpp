@@ -10,9 +10,9 @@ namespace {
 // Hits on anything but the edge's own faces closer than this fraction of the distance (plus the
 // coordinates' magnitude) before x are taken for x itself: rounding, not occlusion.
 constexpr float kEdgeRounding = 1e-6f;
-// Own faces met again after skipping them (a ray grazing their plane) before the sample is
-// dropped.
-constexpr int kMaxOwnSkips = 4;
+// Faces skipped along the ray (own faces met again where the ray grazes their plane, and near
+// misses, see meets_triangle) before the sample is dropped.
+constexpr int kMaxSkips = 8;
 
 bool same_position(const Vec3f& a, const Vec3f& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
 
@@ -46,6 +46,23 @@ Hit hit_at_edge(const Mesh& m, int mesh, int64_t f, const Vec3f& p0, const Vec3f
     return h;
 }
 
+// Whether the line through o and x meets triangle f of mesh m, in double precision. Embree's
+// float test reports rays that pass outside a triangle by up to about 1e-4 of its size (in
+// barycentric terms) as hits, and a float ray's direction is itself off by some 1e-7: a ray
+// through the point of a fold's edge passes that close to the slivers that border it on a
+// scanned mesh's outline (faces within 1e-5 rad of edge-on), and would take one of them for
+// the far side or for an occluder.
+bool meets_triangle(const Mesh& m, int64_t f, const Vec3d& o, const Vec3d& x) {
+    const int32_t* t = m.indices + 3 * f;
+    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
+    const Vec3d d = x - o, q = cross(d, e2);
+    const double det = dot(e1, q);
+    if (det == 0.0) return false;
+    const Vec3d w = o - p0;
+    const double b1 = dot(w, q) / det, b2 = dot(d, cross(w, e1)) / det;
+    return b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
+}
+
 }  // namespace
 
 double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f& c) {
@@ -73,15 +90,19 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
     const Vec3f x = p0 + (p1 - p0) * s;
     if (!(t_x > ray.tmin)) return false;  // behind the eye (an orthographic camera's film plane)
 
-    // The first hit on anything but the edge's own faces: before x, x is hidden; past x, it is
-    // what the outer side of a fold or a boundary sees.
-    auto own = [&](const Hit& h) { return h.mesh == e.mesh && (h.prim == e.f0 || h.prim == e.f1); };
+    // The first hit on anything but the edge's own faces that the ray truly meets: before x, x
+    // is hidden; past x, it is what the outer side of a fold or a boundary sees.
+    const Vec3d o_exact(ray.origin), x_exact = Vec3d(p0) + (Vec3d(p1) - Vec3d(p0)) * double(s);
+    auto skip = [&](const Hit& h) {
+        if (h.mesh == e.mesh && (h.prim == e.f0 || h.prim == e.f1)) return true;
+        return !meets_triangle(scene.meshes[size_t(h.mesh)], h.prim, o_exact, x_exact);
+    };
     FirstHit beyond;
     Ray r = ray;
     for (int k = 0;; ++k) {
         beyond.found = scene.intersect(r, beyond.hit);
-        if (!beyond.found || !own(beyond.hit)) break;
-        if (k == kMaxOwnSkips) return false;
+        if (!beyond.found || !skip(beyond.hit)) break;
+        if (k == kMaxSkips) return false;
         r.tmin = std::nextafter(beyond.hit.t, std::numeric_limits<float>::infinity());
     }
     const float rounding = kEdgeRounding * (t_x + max_abs_component(x));
