@@ -151,7 +151,7 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     // An edge in the plane of the surface at the shading point (its own triangle's, a coplanar
     // neighbour's) is seen only along grazing directions, where the surface itself is the
     // boundary and nothing changes as the edge moves within the plane: no contribution. (Tested
-    // against the lift off the surface: within it, the side rays would see a difference of the
+    // against the lift off the surface: within it, the two sides would differ by something of the
     // order of the lift alone.)
     const float lift = ray_offset_scale(sp.p);
     if (std::abs(dot(v0 - sp.p, sp.ng)) <= lift && std::abs(dot(v1 - sp.p, sp.ng)) <= lift) return d_p;
