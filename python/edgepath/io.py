@@ -334,10 +334,32 @@ def _ply_indices(path: str, values: np.ndarray, first_row: int) -> np.ndarray:
     return values.astype(np.int64)
 
 
+def _ply_strip_triangles(strips, restart: int) -> np.ndarray:
+    """Triangles (M, 3) of triangle strips (index lists; -1, or ``restart``, starts a new strip).
+    Triangle j of a strip is (s[j], s[j+1], s[j+2]), its first two corners swapped for odd j so
+    that all keep one winding; triangles with a repeated index (used to join strips) are
+    dropped."""
+    out = []
+    for strip in strips:
+        strip = np.asarray(strip).astype(np.int64)
+        cuts = np.flatnonzero((strip < 0) | (strip == restart))
+        for part in np.split(strip, cuts):
+            part = part[(part >= 0) & (part != restart)]
+            if len(part) < 3:
+                continue
+            a, b, c = part[:-2], part[1:-1], part[2:]
+            odd = (np.arange(len(a)) % 2).astype(bool)
+            tri = np.stack([np.where(odd, b, a), np.where(odd, a, b), c], 1)
+            out.append(tri[(tri[:, 0] != tri[:, 1]) & (tri[:, 1] != tri[:, 2]) & (tri[:, 0] != tri[:, 2])])
+    return np.concatenate(out) if out else np.zeros((0, 3), np.int64)
+
+
 def load_ply(path: PathLike) -> Mesh:
     """Loads a PLY mesh (ASCII or binary, little or big endian) as one Mesh: vertex positions
     (x, y, z), normals (nx, ny, nz) and uvs (u, v; or s, t / texture_u, texture_v) where the
-    file has them, one per vertex; polygons are split into triangle fans. uvs are kept as
+    file has them, one per vertex; polygons are split into triangle fans, triangle strips
+    (``element tristrips`` with a ``vertex_indices`` list, -1 between strips) into their
+    triangles. uvs are kept as
     stored (v = 0 is the top row of a texture, as Mitsuba reads PLY files). Other elements and
     properties are skipped."""
     path = _existing(path, "PLY file")
@@ -369,8 +391,10 @@ def load_ply(path: PathLike) -> Mesh:
         raise ValueError(f"{path}: no vertex element with x, y, z")
     face = values.get("face", {})
     key = "vertex_indices" if "vertex_indices" in face else "vertex_index"
-    if key not in face:
-        raise ValueError(f"{path}: no face element with vertex_indices")
+    strips = values.get("tristrips", {})
+    strip_key = "vertex_indices" if "vertex_indices" in strips else "vertex_index"
+    if key not in face and strip_key not in strips:
+        raise ValueError(f"{path}: no face element with vertex_indices (nor tristrips)")
     with np.errstate(over="ignore", invalid="ignore"):
         vertices = np.stack([vertex[k] for k in "xyz"], 1).astype(np.float32)
     if not np.isfinite(vertices).all():
@@ -378,14 +402,18 @@ def load_ply(path: PathLike) -> Mesh:
         raise ValueError(f"{path}: element 'vertex' row {bad}: position {vertices[bad].tolist()} "
                          "is not finite (as float32)")
     triangles = []
-    polygons = face[key]
+    if strip_key in strips:
+        item = next(p[2] for p in dict((e[0], e[2]) for e in elements)["tristrips"] if p[0] == strip_key)
+        restart = np.iinfo(item).max if np.dtype(item).kind == "u" else -1
+        triangles.append(_ply_strip_triangles(strips[strip_key], restart))
+    polygons = face.get(key, [])
     block = None
     if polygons and len({len(p) for p in polygons}) == 1:  # all faces of one size: vectorised
         block = _ply_indices(path, np.array(polygons).reshape(len(polygons), -1), 0)
     if block is not None and block.shape[1] >= 3:
         k = block.shape[1]
         fans = [np.stack([block[:, 0], block[:, j], block[:, j + 1]], 1) for j in range(1, k - 1)]
-        triangles = [np.stack(fans, 1).reshape(-1, 3)]  # each face's triangles together
+        triangles.append(np.stack(fans, 1).reshape(-1, 3))  # each face's triangles together
     else:
         for i, p in enumerate(polygons):
             p = _ply_indices(path, np.asarray(p), i)

@@ -923,7 +923,8 @@ class _Loader:
                     self.fail(node, "eta and k must be constants")
                 f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
             else:
-                name = self.string_value(props.pop("material")) if "material" in props else "Cu"
+                # Mitsuba's default: "none", a perfect white reflector (eta 0, k 1: F0 = 1)
+                name = self.string_value(props.pop("material")) if "material" in props else "none"
                 if name not in CONDUCTOR_F0:
                     self.fail(node, f"conductor material '{name}' is not supported (supported: "
                                     f"{', '.join(CONDUCTOR_F0)}; or give eta and k)")

@@ -110,13 +110,17 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     }
     if (m.normals) {
         check_finite(m.normals, m.num_normals * 3, f + ".normals");
-        for (int64_t k = 0; k < m.num_normals; ++k)
-            if (!(length(Vec3f::load(m.normals + 3 * k)) > 0.f)) fail(f + ".normals", "normal " + str(k) + " is zero");
         if (m.normal_indices)
             check_indices(m.normal_indices, m.num_triangles, m.num_normals, f + ".normal_indices", "normals");
         else if (m.num_normals != m.num_vertices)
             fail(f + ".normals", "has " + str(m.num_normals) + " rows but there are " + str(m.num_vertices) +
                                      " vertices and no normal_indices");
+        // Only the normals some triangle uses must have a direction: a vertex no face uses (real
+        // scans have them) has no meaningful normal, and normal computations give it zero.
+        const int32_t* used = m.normal_indices ? m.normal_indices : m.indices;
+        for (int64_t k = 0; k < 3 * m.num_triangles; ++k)
+            if (!(length(Vec3f::load(m.normals + 3 * int64_t(used[k]))) > 0.f))
+                fail(f + ".normals", "normal " + str(used[k]) + " (of triangle " + str(k / 3) + ") is zero");
     } else if (m.normal_indices) {
         fail(f + ".normal_indices", "given without normals");
     }

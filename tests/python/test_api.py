@@ -206,6 +206,21 @@ def test_bad_input_raises_value_error_naming_the_field(mutate, field):
         render_small(scene)
 
 
+def test_unused_vertex_with_zero_normal_renders_and_used_one_is_rejected():
+    # Scans have vertices no face uses; a normal computation gives them a zero normal. Only a
+    # normal some triangle uses must have a direction.
+    scene = make_scene(resolution=(16, 16))
+    tri = scene.meshes[0]
+    tri.normals = torch.tensor([[0., 0., -1.]] * 3)
+    reference = ep.render(scene, spp=4, seed=3)
+    tri.vertices = torch.cat([tri.vertices, torch.tensor([[5., 5., 5.]])])
+    tri.normals = torch.cat([tri.normals, torch.zeros(1, 3)])
+    assert torch.equal(ep.render(scene, spp=4, seed=3), reference)
+    tri.normals[1] = 0.0
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.normals: normal 1 \(of triangle 0\) is zero"):
+        render_small(scene)
+
+
 def test_empty_mesh_is_rejected():
     scene = make_scene(resolution=(16, 16))
     scene.meshes[0].vertices = torch.zeros(0, 3)

@@ -99,6 +99,30 @@ def test_load_ply_quads_and_empty_faces(tmp_path):
         ep.load_ply(lines)
 
 
+def test_load_ply_tristrips(tmp_path):
+    # A 2x3 grid of vertices (0 1 2 over 3 4 5) as one strip of 4 triangles, then, after a -1,
+    # a strip whose repeated index (a join between strips) makes a degenerate triangle.
+    strip = [3, 0, 4, 1, 5, 2, -1, 2, 2, 5, 6]
+    positions = [0, 1, 0, 1, 1, 0, 2, 1, 0, 0, 0, 0, 1, 0, 0, 2, 0, 0, 3, 1, 0]
+    # odd triangles of a strip swap their first two corners: one winding throughout
+    expected = [[3, 0, 4], [4, 0, 1], [4, 1, 5], [5, 1, 2], [5, 2, 6]]
+    header = ("ply\nformat {} 1.0\nelement vertex 7\nproperty float x\nproperty float y\n"
+              "property float z\nelement tristrips 1\nproperty list int {} vertex_indices\nend_header\n")
+    ascii_file = tmp_path / "strip_ascii.ply"
+    ascii_file.write_text(header.format("ascii", "int") + " ".join(map(str, positions)) + "\n"
+                          + " ".join(map(str, [len(strip)] + strip)) + "\n")
+    binary_file = tmp_path / "strip_binary.ply"  # unsigned indices: -1 is stored as 2^32 - 1
+    binary_file.write_bytes(header.format("binary_big_endian", "uint").encode()
+                            + struct.pack(">21f", *positions)
+                            + struct.pack(f">i{len(strip)}I", len(strip), *[i % 2**32 for i in strip]))
+    for path in (ascii_file, binary_file):
+        mesh = ep.load_ply(path)
+        assert mesh.indices.tolist() == expected
+        corners = mesh.vertices[mesh.indices.long()]
+        normals = torch.linalg.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+        assert (normals[:, 2] < 0).all()
+
+
 # (file contents, the error message expected)
 PLY_ERRORS = [
     ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"

@@ -1,0 +1,148 @@
+#include "edges/sides.h"
+
+#include <cmath>
+#include <limits>
+
+namespace edgepath {
+
+namespace {
+
+// Hits on anything but the edge's own faces closer than this fraction of the distance (plus the
+// coordinates' magnitude) before x are taken for x itself: rounding, not occlusion.
+constexpr float kEdgeRounding = 1e-6f;
+// Faces skipped along the ray (own faces met again where the ray grazes their plane, and near
+// misses, see meets_triangle) before the sample is dropped.
+constexpr int kMaxSkips = 8;
+
+bool same_position(const Vec3f& a, const Vec3f& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
+
+// The vertex of face f that is at neither end of the edge (p0, p1); false if none (degenerate).
+bool third_vertex(const Mesh& m, int64_t f, const Vec3f& p0, const Vec3f& p1, Vec3f& c) {
+    const int32_t* t = m.indices + 3 * f;
+    for (int k = 0; k < 3; ++k) {
+        const Vec3f v = m.vertex(t[k]);
+        if (!same_position(v, p0) && !same_position(v, p1)) {
+            c = v;
+            return true;
+        }
+    }
+    return false;
+}
+
+// The hit on face f at the edge point x = p0 + s (p1 - p0), at distance t along the ray.
+Hit hit_at_edge(const Mesh& m, int mesh, int64_t f, const Vec3f& p0, const Vec3f& p1, float s, float t) {
+    const int32_t* tri = m.indices + 3 * f;
+    float b[3];
+    for (int k = 0; k < 3; ++k) {
+        const Vec3f v = m.vertex(tri[k]);
+        b[k] = same_position(v, p0) ? 1.f - s : (same_position(v, p1) ? s : 0.f);
+    }
+    Hit h;
+    h.mesh = mesh;
+    h.prim = f;
+    h.b1 = b[1];
+    h.b2 = b[2];
+    h.t = t;
+    return h;
+}
+
+// Whether the line through o and x meets triangle f of mesh m, in double precision. Embree's
+// float test reports rays that pass outside a triangle by up to about 1e-4 of its size (in
+// barycentric terms) as hits, and a float ray's direction is itself off by some 1e-7: a ray
+// through the point of a fold's edge passes that close to the slivers that border it on a
+// scanned mesh's outline (faces within 1e-5 rad of edge-on), and would take one of them for
+// the far side or for an occluder.
+bool meets_triangle(const Mesh& m, int64_t f, const Vec3d& o, const Vec3d& x) {
+    const int32_t* t = m.indices + 3 * f;
+    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
+    const Vec3d d = x - o, q = cross(d, e2);
+    const double det = dot(e1, q);
+    if (det == 0.0) return false;
+    const Vec3d w = o - p0;
+    const double b1 = dot(w, q) / det, b2 = dot(d, cross(w, e1)) / det;
+    return b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
+}
+
+}  // namespace
+
+double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f& c) {
+    if (eye.parallel) {
+        const Vec3d a(e0 - c), b(e1 - c);
+        return dot(cross(a, b), Vec3d(eye.dir));
+    }
+    const Vec3d a(e0 - eye.origin), b(e1 - eye.origin);
+    return dot(cross(a, b), Vec3d(c - eye.origin));
+}
+
+bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
+    if (e.kind == EdgeKind::Boundary) return true;
+    const Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
+    Vec3f c0, c1;
+    if (!third_vertex(m, e.f0, p0, p1, c0) || !third_vertex(m, e.f1, p0, p1, c1)) return true;
+    const double s0 = side_of(eye, p0, p1, c0), s1 = side_of(eye, p0, p1, c1);
+    return (s0 > 0.0) == (s1 > 0.0);
+}
+
+bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray& ray, float s, float t_x,
+                FirstHit& upper, FirstHit& lower) {
+    const Mesh& m = scene.meshes[size_t(e.mesh)];
+    const Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
+    const Vec3f x = p0 + (p1 - p0) * s;
+    if (!(t_x > ray.tmin)) return false;  // behind the eye (an orthographic camera's film plane)
+
+    // The first hit on anything but the edge's own faces that the ray truly meets: before x, x
+    // is hidden; past x, it is what the outer side of a fold or a boundary sees.
+    const Vec3d o_exact(ray.origin), x_exact = Vec3d(p0) + (Vec3d(p1) - Vec3d(p0)) * double(s);
+    auto skip = [&](const Hit& h) {
+        if (h.mesh == e.mesh && (h.prim == e.f0 || h.prim == e.f1)) return true;
+        return !meets_triangle(scene.meshes[size_t(h.mesh)], h.prim, o_exact, x_exact);
+    };
+    FirstHit beyond;
+    Ray r = ray;
+    for (int k = 0;; ++k) {
+        beyond.found = scene.intersect(r, beyond.hit);
+        if (!beyond.found || !skip(beyond.hit)) break;
+        if (k == kMaxSkips) return false;
+        r.tmin = std::nextafter(beyond.hit.t, std::numeric_limits<float>::infinity());
+    }
+    const float rounding = kEdgeRounding * (t_x + max_abs_component(x));
+    if (beyond.found && beyond.hit.t < t_x - rounding) return false;
+
+    // The own faces on each side; where both lie on one side, the nearer one just off the edge:
+    // moving the ray by u towards that side moves its hit on face i's plane (normal n) nearer by
+    // an amount proportional to (n . u) / (n . d).
+    const Vec3d d(ray.dir);
+    const Vec3d up_dir = eye.parallel ? cross(d, Vec3d(p1 - p0)) : cross(Vec3d(p0 - eye.origin), Vec3d(p1 - eye.origin));
+    int64_t near_face[2] = {-1, -1};  // upper, lower
+    double nearness[2] = {0.0, 0.0};
+    bool any = false;
+    for (int64_t f : {e.f0, e.f1}) {
+        Vec3f c;
+        if (f < 0 || !third_vertex(m, f, p0, p1, c)) continue;
+        const double side = side_of(eye, p0, p1, c);
+        if (side == 0.0) continue;
+        const int k = side > 0.0 ? 0 : 1;
+        const Vec3d n(m.face_normal(f));
+        const double nd = dot(n, d);
+        if (nd == 0.0) continue;
+        const double near = (k == 0 ? 1.0 : -1.0) * dot(n, up_dir) / nd;
+        if (near_face[k] < 0 || near > nearness[k]) {
+            near_face[k] = f;
+            nearness[k] = near;
+        }
+        any = true;
+    }
+    if (!any) return false;
+    FirstHit* out[2] = {&upper, &lower};
+    for (int k = 0; k < 2; ++k) {
+        if (near_face[k] < 0) {
+            *out[k] = beyond;
+        } else {
+            out[k]->found = true;
+            out[k]->hit = hit_at_edge(m, e.mesh, near_face[k], p0, p1, s, t_x);
+        }
+    }
+    return true;
+}
+
+}  // namespace edgepath
