@@ -20,6 +20,10 @@ std::shared_ptr<const Scene> build_scene(const SceneDesc& desc);
 int image_width(const Scene& scene);
 int image_height(const Scene& scene);
 
+// Triangles of meshes[mesh] that the scene skips as degenerate (zero area, or too thin for a
+// normal in float: scene/geometry.h). They render as nothing and get zero gradients.
+int64_t degenerate_triangles(const Scene& scene, int mesh);
+
 // Renders into `image`, (image_height, image_width, 3) float32, row 0 at the top, linear.
 // Deterministic for a given seed whatever the thread count.
 RenderStats render(const Scene& scene, const RenderOptions& options, float* image);

@@ -15,6 +15,7 @@
 #include "scene/camera.h"
 #include "scene/desc.h"
 #include "scene/envmap.h"
+#include "scene/geometry.h"
 #include "scene/texture.h"
 
 namespace edgepath {
@@ -57,6 +58,7 @@ struct Mesh {
     Texture emission;
     bool two_sided_emission = false;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
+    int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
     Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
     // cross(v1 - v0, v2 - v0) of triangle f: the face normal (by the winding), not normalised.
@@ -66,6 +68,11 @@ struct Mesh {
         return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
     }
     bool is_emitter() const { return !emission.empty(); }
+    // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
+    bool is_degenerate(int64_t f) const {
+        const int32_t* t = indices + 3 * f;
+        return is_degenerate_triangle(vertex(t[0]), vertex(t[1]), vertex(t[2]));
+    }
 };
 
 struct Material {
