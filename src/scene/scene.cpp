@@ -62,19 +62,13 @@ void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, con
                             str(i / 3) + ")");
 }
 
-void check_vec3(const float* v, const std::string& field) {
-    for (int i = 0; i < 3; ++i)
-        if (!std::isfinite(v[i])) fail(field, "value " + str(v[i]) + " is not finite");
-}
-
-// Finite values within +-kMaxCoordinate (rows of 3: a point or vertex).
-void check_coordinates(const float* v, int64_t n, const std::string& field, const char* what) {
+// Finite values within +-kMaxCoordinate; n / 3 rows, named "vertex i" if there are several.
+void check_coordinates(const float* v, int64_t n, const std::string& field) {
     for (int64_t i = 0; i < n; ++i) {
-        if (!std::isfinite(v[i]))
-            fail(field, "value " + str(v[i]) + " of " + what + " " + str(i / 3) + " is not finite");
+        const std::string value = "value " + str(v[i]) + (n > 3 ? " of vertex " + str(i / 3) : std::string());
+        if (!std::isfinite(v[i])) fail(field, value + " is not finite");
         if (std::abs(v[i]) > kMaxCoordinate)
-            fail(field, "value " + str(v[i]) + " of " + what + " " + str(i / 3) + " is out of range (|x| <= " +
-                            str(kMaxCoordinate) + ")");
+            fail(field, value + " is out of range (|x| <= " + str(kMaxCoordinate) + ")");
     }
 }
 
@@ -87,9 +81,9 @@ void check_radiance(const TextureDesc& t, float scale, const std::string& field)
 }
 
 void validate_camera(const CameraDesc& c) {
-    check_coordinates(c.position, 3, "camera.position", "point");
-    check_coordinates(c.look_at, 3, "camera.look_at", "point");
-    check_coordinates(c.up, 3, "camera.up", "vector");
+    check_coordinates(c.position, 3, "camera.position");
+    check_coordinates(c.look_at, 3, "camera.look_at");
+    check_coordinates(c.up, 3, "camera.up");
     if (c.width < 1 || c.height < 1 || int64_t(c.width) * c.height > kMaxPixels)
         fail("camera.resolution", "must be positive with at most " + str(kMaxPixels) + " pixels, got (" +
                                       str(c.height) + ", " + str(c.width) + ")");
@@ -128,7 +122,7 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     std::string f = "meshes[" + str(i) + "]";
     if (m.num_vertices < 1 || m.vertices == nullptr) fail(f + ".vertices", "mesh has no vertices");
     if (m.num_triangles < 1 || m.indices == nullptr) fail(f + ".indices", "mesh has no triangles");
-    check_coordinates(m.vertices, m.num_vertices * 3, f + ".vertices", "vertex");
+    check_coordinates(m.vertices, m.num_vertices * 3, f + ".vertices");
     check_indices(m.indices, m.num_triangles, m.num_vertices, f + ".indices", "vertices");
     if (m.uvs) {
         check_finite(m.uvs, m.num_uvs * 2, f + ".uvs");
@@ -317,6 +311,7 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     const int32_t* tri = m.indices + 3 * prim;
     Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
     sp.p = v0 * b0 + v1 * b1 + v2 * b2;
+    sp.p_error = triangle_point_error(v0, v1, v2, b0, b1, b2);
     sp.ng = normalize(cross(v1 - v0, v2 - v0));
     if (m.normals) {
         const int32_t* ni = m.normal_indices + 3 * prim;
@@ -393,6 +388,9 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
     ls.hit.b1 = b.x;
     ls.hit.b2 = b.y;
     ls.hit.t = dist;
+    ls.p = q.p;
+    ls.p_error = q.p_error;
+    ls.ng = q.ng;
     ls.pdf = light_distribution.pmf(li) / lt.area * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }
