@@ -4,6 +4,7 @@ calls, memory over many calls, values the core would silently misread, and the p
 ray offsets far from the origin."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -36,17 +37,11 @@ def run_child(code: str, *args, timeout=120):
                           text=True, timeout=timeout)
 
 
-CHILD_PRELUDE = """
+# What a child process starts with: this file's small_scene.
+CHILD_PRELUDE = f"""
 import sys, time, torch, edgepath as ep
-def small_scene(resolution=(16, 16), **camera_args):
-    camera = dict(position=torch.tensor([0., 0., -5.]), look_at=torch.tensor([0., 0., 0.]),
-                  resolution=resolution)
-    camera.update(camera_args)
-    tri = ep.Mesh(torch.tensor([[-1., -1., 0.], [0., 1., 0.], [1., -1., 0.]]),
-                  torch.tensor([[0, 1, 2]]), material=ep.Material(diffuse=torch.tensor([.8, .4, .2])))
-    lamp = ep.Mesh(torch.tensor([[-2., -2., -7.], [2., -2., -7.], [2., 2., -7.], [-2., 2., -7.]]),
-                   torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor([20., 20., 20.]))
-    return ep.Scene(ep.Camera(**camera), [tri, lamp])
+sys.path.insert(0, {str(os.path.dirname(os.path.abspath(__file__)))!r})
+from test_robustness import small_scene
 """
 
 
@@ -76,7 +71,6 @@ print("alive")
 """)
     assert result.returncode == 0, result.stderr[-2000:]
     assert "alive" in result.stdout
-    import re
     assert re.search("ValueError: " + field, result.stdout), result.stdout
 
 
