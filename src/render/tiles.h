@@ -1,7 +1,6 @@
 // Parallel loop over the output image in tiles (oneTBB), shared by every pass.
 #pragma once
 #include <algorithm>
-#include <limits>
 #include <map>
 #include <mutex>
 #include <stdexcept>
@@ -103,7 +102,8 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         PathRecord rec;
-        rec.vertices.reserve(size_t(opt.max_bounces) + 1);
+        // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
+        rec.vertices.reserve(size_t(std::min(opt.max_bounces, 63)) + 1);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < x1; ++x) {
                 uint64_t pixel = film_pixel_index(scene, x, y);

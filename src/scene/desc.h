@@ -50,7 +50,8 @@ struct MeshDesc {
 // environment's scale), so that a path's throughput times it stays finite.
 constexpr float kMaxCoordinate = 1e16f;
 constexpr float kMaxRadiance = 1e16f;
-// The film's pixel count (its product must index pixels in int32 arithmetic of callers).
+// The film's pixel count: a pixel's index fits in int32, and the default number of primary
+// edge samples (pixels times spp) in int64.
 constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;
 
 enum class CameraType { Perspective = 0, Orthographic = 1 };

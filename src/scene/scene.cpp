@@ -62,13 +62,13 @@ void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, con
                             str(i / 3) + ")");
 }
 
-// Finite values within +-kMaxCoordinate; n / 3 rows, named "vertex i" if there are several.
+// Finite values within +-kMaxCoordinate: a point (n = 3) or n / 3 vertices.
 void check_coordinates(const float* v, int64_t n, const std::string& field) {
     for (int64_t i = 0; i < n; ++i) {
+        const bool finite = std::isfinite(v[i]);
+        if (finite && std::abs(v[i]) <= kMaxCoordinate) continue;
         const std::string value = "value " + str(v[i]) + (n > 3 ? " of vertex " + str(i / 3) : std::string());
-        if (!std::isfinite(v[i])) fail(field, value + " is not finite");
-        if (std::abs(v[i]) > kMaxCoordinate)
-            fail(field, value + " is out of range (|x| <= " + str(kMaxCoordinate) + ")");
+        fail(field, value + (finite ? " is out of range (|x| <= " + str(kMaxCoordinate) + ")" : " is not finite"));
     }
 }
 

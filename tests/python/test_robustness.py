@@ -283,6 +283,18 @@ def test_input_the_core_would_misread_is_refused(name):
         ep.render(make(), spp=options.pop("spp", 1), **options)
 
 
+def test_huge_max_bounces_works():
+    """max_bounces up to 2**31 - 1 renders and differentiates (paths end when they escape) instead
+    of reserving room for 2**31 vertices per path."""
+    s = small_scene()
+    s.meshes[0].vertices.requires_grad_(True)
+    image = ep.render(s, spp=1, max_bounces=2**31 - 1)
+    image.sum().backward()
+    assert torch.isfinite(image).all() and torch.isfinite(s.meshes[0].vertices.grad).all()
+    with pytest.raises(ValueError, match=r"max_bounces: must be <= 2147483647"):
+        ep.render(s, spp=1, max_bounces=2**31)
+
+
 def test_camera_to_world_with_uniform_scale_is_the_same_camera():
     """A rotation times a uniform scale is allowed and renders as the unscaled matrix."""
     scaled = to_world_at()
