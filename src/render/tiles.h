@@ -2,6 +2,7 @@
 #pragma once
 #include <algorithm>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <string>
@@ -37,13 +38,14 @@ inline int thread_count(const RenderOptions& opt) {
 // The task arena of a pass with `threads` threads: one per thread count, made on first use and
 // kept for the life of the process. (oneTBB keeps 7-15 KiB for every arena that was created
 // and destroyed with workers in it: an arena per call leaked that much per call. The arenas are
-// never destroyed, so that none is torn down at exit after oneTBB itself.)
+// never destroyed, nor is the map that holds them, so that none is torn down at exit after
+// oneTBB itself.)
 inline tbb::task_arena& pass_arena(int threads) {
     static std::mutex mutex;
-    static std::map<int, tbb::task_arena*> arenas;
+    static std::map<int, std::unique_ptr<tbb::task_arena>>& arenas = *new std::map<int, std::unique_ptr<tbb::task_arena>>;
     std::lock_guard<std::mutex> lock(mutex);
-    tbb::task_arena*& arena = arenas[threads];
-    if (!arena) arena = new tbb::task_arena(threads);
+    std::unique_ptr<tbb::task_arena>& arena = arenas[threads];
+    if (!arena) arena = std::make_unique<tbb::task_arena>(threads);
     return *arena;
 }
 
