@@ -419,7 +419,8 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
 
     // Where the camera rays land (in the same order), as origins of shadow and bounce rays.
     struct Origin {
-        Vec3f p, ng, front;  // front: ng turned towards the camera
+        SurfacePoint sp;
+        Vec3f front;  // ng turned towards the camera
     };
     std::vector<Origin> origins;
     origins.reserve(rs.camera.size());
@@ -427,7 +428,7 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
         Hit h;
         if (!scene.intersect(r, h)) continue;
         SurfacePoint sp = scene.surface_point(h);
-        origins.push_back({sp.p, sp.ng, dot(sp.ng, r.dir) < 0.f ? sp.ng : -sp.ng});
+        origins.push_back({sp, dot(sp.ng, r.dir) < 0.f ? sp.ng : -sp.ng});
     }
     if (origins.empty()) return rs;
 
@@ -444,7 +445,7 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
         for (int attempt = 0; attempt < 16; ++attempt) {
             const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
             const bool env = scene.env_sampled && (!scene.light_distribution.valid() || k % 2 == 1);
-            if (!(env ? scene.sample_env(u1, u2, ls) : scene.sample_area_light(o.p, u0, u1, u2, ls))) continue;
+            if (!(env ? scene.sample_env(u1, u2, ls) : scene.sample_area_light(o.sp.p, u0, u1, u2, ls))) continue;
             if (!have) first = ls, have = true;
             if (dot(ls.dir, o.front) > 0.f) {
                 first = ls;
@@ -455,9 +456,7 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
             first.dir = o.front;
             first.dist = std::numeric_limits<float>::infinity();
         }
-        Ray r = spawn_ray(o.p, o.ng, first.dir);
-        r.tmax = std::isfinite(first.dist) ? first.dist * (1.f - kShadowEpsilon) : first.dist;
-        rs.shadow.push_back(r);
+        rs.shadow.push_back(shadow_ray(o.sp, first));
     }
 
     // Bounce rays: cosine-distributed about the visible side of the surface.
@@ -465,7 +464,7 @@ RaySet make_rays(const Scene& scene, const RenderOptions& opt, const RenderStats
     for (uint64_t k = 0; k < stats.bounce_rays; ++k) {
         const Origin& o = origins[k % origins.size()];
         Vec3f dir = Frame(o.front).to_world(square_to_cosine_hemisphere(rng.next_float(), rng.next_float()));
-        rs.bounce.push_back(spawn_ray(o.p, o.ng, normalize(dir)));
+        rs.bounce.push_back(spawn_ray(o.sp, normalize(dir)));
     }
     return rs;
 }

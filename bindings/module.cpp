@@ -11,10 +11,14 @@
 #include <nanobind/stl/string.h>
 #include <nanobind/stl/vector.h>
 
+#include <atomic>
+#include <chrono>
 #include <cstdint>
+#include <future>
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <thread>
 #include <vector>
 
 #include "edgepath.h"
@@ -213,9 +217,56 @@ edgepath::RenderOptions render_options(const nb::dict& d) {
     return o;
 }
 
+// How often the calling thread looks for signals while the core works.
+constexpr std::chrono::milliseconds kSignalPoll(20);
+
+// Runs `call` (a core call taking `opt`) on a thread of its own, the GIL released, while this
+// thread checks for signals every kSignalPoll: a signal handler that raises (Ctrl-C's
+// KeyboardInterrupt) cancels the core call (RenderOptions::cancel), which stops within a
+// sample; once it has, the Python exception propagates. The core's own exceptions propagate as
+// usual.
+template <class Call>
+auto interruptible(edgepath::RenderOptions& opt, Call&& call) -> decltype(call()) {
+    std::atomic<bool> cancel{false};
+    opt.cancel = &cancel;
+    std::packaged_task<decltype(call())()> task(std::forward<Call>(call));
+    auto result = task.get_future();
+    bool interrupted = false;
+    {
+        nb::gil_scoped_release release;
+        std::thread worker(std::move(task));
+        while (result.wait_for(kSignalPoll) != std::future_status::ready) {
+            nb::gil_scoped_acquire acquire;
+            if (PyErr_CheckSignals() != 0) {
+                interrupted = true;
+                cancel = true;
+                break;
+            }
+        }
+        worker.join();
+    }
+    opt.cancel = nullptr;
+    if (interrupted) throw nb::python_error();  // the handler's exception, still pending
+    return result.get();
+}
+
+// Builds the scene (GIL released) and warns, once per mesh and count, about the degenerate
+// triangles it skips.
 std::shared_ptr<const edgepath::Scene> build(const edgepath::SceneDesc& desc) {
-    nb::gil_scoped_release release;
-    return edgepath::build_scene(desc);
+    std::shared_ptr<const edgepath::Scene> scene;
+    {
+        nb::gil_scoped_release release;
+        scene = edgepath::build_scene(desc);
+    }
+    for (size_t i = 0; i < desc.meshes.size(); ++i) {
+        const int64_t n = edgepath::degenerate_triangles(*scene, int(i));
+        if (n > 0 && PyErr_WarnFormat(PyExc_RuntimeWarning, 1,
+                                      "meshes[%zu]: %lld of %lld triangles are degenerate (zero area) and are "
+                                      "skipped: they render as nothing and get zero gradients",
+                                      i, (long long)n, (long long)desc.meshes[i].num_triangles) != 0)
+            throw nb::python_error();
+    }
+    return scene;
 }
 
 // An (H, W, 3) float32 image buffer of the size the scene renders.
@@ -235,14 +286,10 @@ nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::lis
                 nb::object envmap, nb::handle image, const nb::dict& options) {
     Described d;
     describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
+    edgepath::RenderOptions opt = render_options(options);
     std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
     const ImageOut out = image_buffer(image, *scene, "image");
-    edgepath::RenderStats stats;
-    {
-        nb::gil_scoped_release release;
-        stats = edgepath::render(*scene, opt, out.data());
-    }
+    const edgepath::RenderStats stats = interruptible(opt, [&] { return edgepath::render(*scene, opt, out.data()); });
     nb::dict result;
     result["camera_rays"] = stats.camera_rays;
     result["shadow_rays"] = stats.shadow_rays;
@@ -366,18 +413,16 @@ struct GradientCall {
 
 void render_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options) {
-    const GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads);
+    GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads);
     const FloatView a = c.adjoint(adjoint, "the image");
-    nb::gil_scoped_release release;
-    edgepath::render_gradients(*c.scene, c.opt, a.data(), c.slots);
+    interruptible(c.opt, [&] { edgepath::render_gradients(*c.scene, c.opt, a.data(), c.slots); });
 }
 
 void derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options) {
-    const GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions);
+    GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions);
     const ImageOut out = image_buffer(image, *c.scene, "image");
-    nb::gil_scoped_release release;
-    edgepath::derivative_image(*c.scene, c.opt, c.slots, out.data());
+    interruptible(c.opt, [&] { edgepath::derivative_image(*c.scene, c.opt, c.slots, out.data()); });
 }
 
 // ---- output channels -------------------------------------------------------------------------
@@ -411,16 +456,13 @@ nb::dict render_channels(const nb::dict& camera, const nb::list& materials, cons
                          nb::handle ids, const nb::dict& options) {
     Described d;
     describe(d, camera, materials, meshes, envmap);
-    const edgepath::RenderOptions opt = render_options(options);
+    edgepath::RenderOptions opt = render_options(options);
     const edgepath::ChannelLayout layout = channel_layout(channels);
     std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
     const ImageOut v = channel_buffer<ImageOut>(values, *scene, layout.num_values, "values", "float32");
     const IdsOut i = channel_buffer<IdsOut>(ids, *scene, layout.num_ids, "ids", "int32");
-    edgepath::RenderStats stats;
-    {
-        nb::gil_scoped_release release;
-        stats = edgepath::render_channels(*scene, opt, layout, v.data(), i.data());
-    }
+    const edgepath::RenderStats stats =
+        interruptible(opt, [&] { return edgepath::render_channels(*scene, opt, layout, v.data(), i.data()); });
     nb::dict result;
     result["camera_rays"] = stats.camera_rays;
     result["shadow_rays"] = stats.shadow_rays;
@@ -431,19 +473,17 @@ nb::dict render_channels(const nb::dict& camera, const nb::list& materials, cons
 void channel_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                        nb::object envmap, const std::vector<std::string>& channels, nb::handle adjoint,
                        const nb::dict& grads, const nb::dict& options) {
-    const GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads);
+    GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads);
     const FloatView a = c.adjoint(adjoint, "the channels' values");
-    nb::gil_scoped_release release;
-    edgepath::channel_gradients(*c.scene, c.opt, c.layout, a.data(), c.slots);
+    interruptible(c.opt, [&] { edgepath::channel_gradients(*c.scene, c.opt, c.layout, a.data(), c.slots); });
 }
 
 void channel_derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                               nb::object envmap, const std::vector<std::string>& channels,
                               const nb::dict& directions, nb::handle values, const nb::dict& options) {
-    const GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions);
+    GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions);
     const ImageOut out = channel_buffer<ImageOut>(values, *c.scene, c.layout.num_values, "values", "float32");
-    nb::gil_scoped_release release;
-    edgepath::channel_derivative_image(*c.scene, c.opt, c.layout, c.slots, out.data());
+    interruptible(c.opt, [&] { edgepath::channel_derivative_image(*c.scene, c.opt, c.layout, c.slots, out.data()); });
 }
 
 // Moves `values` into a numpy array of the given shape (owned by a capsule).

@@ -22,4 +22,8 @@ std::shared_ptr<const Scene> build_scene(const SceneDesc& desc);
 int image_width(const Scene& scene);
 int image_height(const Scene& scene);
 
+// Triangles of meshes[mesh] that the scene skips as degenerate (zero area, or too thin for a
+// normal in float: scene/geometry.h). They render as nothing and get zero gradients.
+int64_t degenerate_triangles(const Scene& scene, int mesh);
+
 }  // namespace edgepath

@@ -16,6 +16,7 @@ import numpy as np
 import torch
 
 _INT32_MIN, _INT32_MAX = -(2**31), 2**31 - 1
+INT32_MAX = _INT32_MAX
 
 # A shape spec is a tuple of ints (exact sizes) and strings (any size >= `min_rows`, named in
 # messages), e.g. ("N", 3).
@@ -135,13 +136,15 @@ def number(value, field: str) -> float:
     fail(field, f"expected a number, got {type(value).__name__}")
 
 
-def integer(value, field: str, minimum: Optional[int] = None) -> int:
-    """A Python int (not bool), optionally at least `minimum`."""
+def integer(value, field: str, minimum: Optional[int] = None, maximum: Optional[int] = None) -> int:
+    """A Python int (not bool), optionally at least `minimum` and at most `maximum`."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         fail(field, f"expected an int, got {type(value).__name__}")
     value = int(value)
     if minimum is not None and value < minimum:
         fail(field, f"must be >= {minimum}, got {value}")
+    if maximum is not None and value > maximum:
+        fail(field, f"must be <= {maximum}, got {value}")
     return value
 
 

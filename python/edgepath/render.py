@@ -29,6 +29,8 @@ SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1}
+MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
+MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
 # A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
 # ("meshes", i, "vertices" | "uvs" | "normals" | "emission"),
@@ -410,11 +412,13 @@ def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mi
         edge_sampling=v.choice(edge_sampling, "edge_sampling", EDGE_SAMPLING),
         primary_edges=v.boolean(primary_edges, "primary_edges"),
         secondary_edges=v.boolean(secondary_edges, "secondary_edges"),
-        edge_samples=0 if edge_samples is None else v.integer(edge_samples, "edge_samples", minimum=1),
-        spp=v.integer(spp, "spp", minimum=1),
-        max_bounces=v.integer(max_bounces, "max_bounces", minimum=0),
+        edge_samples=0 if edge_samples is None else v.integer(edge_samples, "edge_samples", minimum=1,
+                                                              maximum=MAX_EDGE_SAMPLES),
+        spp=v.integer(spp, "spp", minimum=1, maximum=v.INT32_MAX),
+        max_bounces=v.integer(max_bounces, "max_bounces", minimum=0, maximum=v.INT32_MAX),
         seed=_seed(seed),
-        num_threads=0 if num_threads is None else v.integer(num_threads, "num_threads", minimum=1),
+        num_threads=0 if num_threads is None else v.integer(num_threads, "num_threads", minimum=1,
+                                                            maximum=v.INT32_MAX),
         sampling=v.choice(sampling, "sampling", SAMPLING),
     )
 
@@ -486,8 +490,7 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         if any(x is not None for x in (camera.position, camera.look_at, camera.up)):
             v.fail(f, "give either to_world or position/look_at/up, not both")
         m = v.float_tensor(camera.to_world, "camera.to_world", (4, 4))
-        if float(torch.linalg.det(m[:3, :3].detach())) < 0:
-            v.fail("camera.to_world", "mirrors the image (negative determinant); not supported")
+        _check_camera_to_world(m.detach(), camera.camera_type == "perspective")
         position, look_at, up = frame_from_to_world(m)
     else:
         if camera.position is None:
@@ -508,6 +511,8 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         v.fail("camera.resolution", f"expected (height, width), got {resolution!r}")
     height = v.integer(resolution[0], "camera.resolution", minimum=1)
     width = v.integer(resolution[1], "camera.resolution", minimum=1)
+    if height * width > MAX_PIXELS:
+        v.fail("camera.resolution", f"({height}, {width}) has more than {MAX_PIXELS} pixels")
 
     flat.camera = {
         "position": values[0:3],
@@ -528,7 +533,40 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
             v.fail("camera.crop_window", f"expected (x, y, width, height), got {crop!r}")
         x, y = (v.integer(c, "camera.crop_window", minimum=0) for c in crop[:2])
         w, h = (v.integer(c, "camera.crop_window", minimum=1) for c in crop[2:])
-        flat.camera["crop_window"] = [x, y, w, h]  # fitting in the film: checked by the core
+        if x + w > width or y + h > height:
+            v.fail("camera.crop_window", f"({x}, {y}, {w}, {h}) does not fit in the film of "
+                                         f"{width}x{height}")
+        flat.camera["crop_window"] = [x, y, w, h]
+
+
+def _check_camera_to_world(m: torch.Tensor, perspective: bool) -> None:
+    """What the camera takes from ``to_world`` (its translation, and its y and z columns as up and
+    forward) describes it only if the matrix is a rotation times a uniform scale plus a
+    translation (for an orthographic camera, the z column's length does not matter): anything
+    else (a NaN or a shear in the ignored x column, a bottom row other than (0, 0, 0, 1)) would
+    render another camera than the matrix describes."""
+    f = "camera.to_world"
+    m = m.to(torch.float64)
+    if not bool(torch.isfinite(m).all()):
+        v.fail(f, "contains NaN or Inf")
+    if not torch.equal(m[3], torch.tensor([0.0, 0.0, 0.0, 1.0], dtype=torch.float64)):
+        v.fail(f, f"bottom row must be (0, 0, 0, 1), got {tuple(m[3].tolist())}")
+    columns = m[:3, :3].T
+    lengths = columns.norm(dim=1)
+    if not bool((lengths > 0).all()):
+        v.fail(f, "has a zero column in its 3x3 part")
+    unit = columns / lengths[:, None]
+    for i, j in ((0, 1), (0, 2), (1, 2)):
+        cosine = float(unit[i] @ unit[j])
+        if abs(cosine) > 1e-3:
+            v.fail(f, f"columns {i} and {j} are not orthogonal (cosine {cosine:.3g}): a camera's "
+                      "to_world must be a rotation with a uniform scale and a translation")
+    scaled = lengths if perspective else lengths[:2]
+    if float(scaled.max() - scaled.min()) > 1e-3 * float(scaled.max()):
+        v.fail(f, f"scales its axes differently ({', '.join(f'{x:.6g}' for x in scaled.tolist())}): "
+                  "a camera's to_world must be a rotation with a uniform scale and a translation")
+    if float(torch.linalg.det(m[:3, :3])) < 0:
+        v.fail(f, "mirrors the image (negative determinant); not supported")
 
 
 def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict:

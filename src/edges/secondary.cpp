@@ -153,12 +153,12 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     // boundary and nothing changes as the edge moves within the plane: no contribution. (Tested
     // against the lift off the surface: within it, the two sides would differ by something of the
     // order of the lift alone.)
-    const float lift = ray_offset_scale(sp.p);
+    const float lift = length(offset_ray_origin(sp.p, sp.p_error, sp.ng, sp.ng) - sp.p);
     if (std::abs(dot(v0 - sp.p, sp.ng)) <= lift && std::abs(dot(v1 - sp.p, sp.ng)) <= lift) return d_p;
     // Everything is measured from the origin the rays towards x leave from: p lifted off the
     // surface as spawn_ray lifts it. (Measured from p itself, at grazing angles the lift alone
     // can carry both rays past the same side of the edge.)
-    const Vec3f p = spawn_ray(sp.p, sp.ng, x - sp.p).origin;
+    const Vec3f p = spawn_ray(sp, x - sp.p).origin;
     const float dist = length(x - p);
     if (!(dist > 0.f)) return d_p;
     const Vec3f w = (x - p) / dist;

@@ -58,7 +58,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             Vec3f wi = frame.to_local(ls.dir);
             Vec3f f = bsdf_eval(bp, wo, wi);
             if (is_black(f)) return;
-            Ray shadow = shadow_ray(sp.p, sp.ng, ls.dir, ls.dist);
+            Ray shadow = shadow_ray(sp, ls);
             ++counters.shadow;
             if (scene.occluded(shadow)) return;
             float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
@@ -87,7 +87,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             rv->next_dir = dir;
             rv->next_inv_pdf = 1.f / bs.pdf;
         }
-        ray = spawn_ray(sp.p, sp.ng, dir);
+        ray = spawn_ray(sp, dir);
         ++counters.bounce;
         if (!scene.intersect(ray, hit)) {
             if (scene.has_envmap && use_hits) {

@@ -36,6 +36,7 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
                 uint64_t pixel = film_pixel_index(scene, x, y);
                 double sum[3] = {0, 0, 0};
                 for (int s = 0; s < opt.spp; ++s) {
+                    if (opt.cancelled()) return;
                     Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                     Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
                     Vec3f L = trace_path(scene, opt, scene.camera.generate_ray(film.x, film.y), rng, c);
@@ -67,6 +68,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                 if (nv > 0) {
                     double sum[kMaxChannelValues] = {};
                     for (int s = 0; s < opt.spp; ++s) {
+                        if (opt.cancelled()) return;
                         Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                         const Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
                         const Ray ray = scene.camera.generate_ray(film.x, film.y);

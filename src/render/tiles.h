@@ -1,9 +1,13 @@
 // Parallel loop over the output image in tiles (oneTBB), shared by every pass.
 #pragma once
 #include <algorithm>
+#include <map>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <tbb/blocked_range.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -13,46 +17,75 @@
 
 namespace edgepath {
 
+// Primary edge samples are drawn in chunks indexed by int64: the count must leave room for
+// rounding up to whole chunks.
+constexpr int64_t kMaxEdgeSamples = int64_t(1) << 62;
+
 inline void check_options(const RenderOptions& opt) {
     if (opt.spp < 1) throw std::invalid_argument("spp: must be at least 1, got " + std::to_string(opt.spp));
-    if (opt.edge_samples < 0)
-        throw std::invalid_argument("edge_samples: must be non-negative, got " + std::to_string(opt.edge_samples));
+    if (opt.edge_samples < 0 || opt.edge_samples > kMaxEdgeSamples)
+        throw std::invalid_argument("edge_samples: must be in [0, 2**62], got " + std::to_string(opt.edge_samples));
     if (opt.max_bounces < 0)
         throw std::invalid_argument("max_bounces: must be non-negative, got " + std::to_string(opt.max_bounces));
 }
 
+// Threads a pass runs on: num_threads, at most the machine's (more would only wait).
 inline int thread_count(const RenderOptions& opt) {
-    return opt.num_threads > 0 ? opt.num_threads : tbb::this_task_arena::max_concurrency();
+    const int cores = tbb::info::default_concurrency();
+    return opt.num_threads > 0 ? std::min(opt.num_threads, cores) : cores;
+}
+
+// The task arena of a pass with `threads` threads: one per thread count, made on first use and
+// kept for the life of the process. (oneTBB keeps 7-15 KiB for every arena that was created
+// and destroyed with workers in it: an arena per call leaked that much per call. The arenas are
+// never destroyed, nor is the map that holds them, so that none is torn down at exit after
+// oneTBB itself.)
+inline tbb::task_arena& pass_arena(int threads) {
+    static std::mutex mutex;
+    static std::map<int, std::unique_ptr<tbb::task_arena>>& arenas = *new std::map<int, std::unique_ptr<tbb::task_arena>>;
+    std::lock_guard<std::mutex> lock(mutex);
+    std::unique_ptr<tbb::task_arena>& arena = arenas[threads];
+    if (!arena) arena = std::make_unique<tbb::task_arena>(threads);
+    return *arena;
+}
+
+inline void throw_if_cancelled(const RenderOptions& opt) {
+    if (opt.cancelled()) throw Cancelled();
 }
 
 // Calls tile_fn(x0, y0, x1, y1) for tiles of the output image, in parallel on opt.num_threads.
+// Once opt is cancelled no tile starts (tile_fn should stop early too) and this throws Cancelled.
 template <class TileFn>
 void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_fn) {
     constexpr int kTileSize = 16;
     const int W = scene.out_width, H = scene.out_height;
     const int tiles_x = (W + kTileSize - 1) / kTileSize, tiles_y = (H + kTileSize - 1) / kTileSize;
-    tbb::task_arena arena(thread_count(opt));
-    arena.execute([&] {
+    pass_arena(thread_count(opt)).execute([&] {
         tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
             for (int tile = range.begin(); tile < range.end(); ++tile) {
+                if (opt.cancelled()) return;
                 int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
                 tile_fn(x0, y0, std::min(x0 + kTileSize, W), std::min(y0 + kTileSize, H));
             }
         });
     });
+    throw_if_cancelled(opt);
 }
 
-// Calls fn(begin, end) over [0, n) in chunks, in parallel on opt.num_threads.
+// Calls fn(begin, end) over [0, n) in chunks, in parallel on opt.num_threads; once opt is
+// cancelled no chunk starts and this throws Cancelled.
 template <class ChunkFn>
 void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&& fn) {
-    tbb::task_arena arena(thread_count(opt));
-    arena.execute([&] {
+    pass_arena(thread_count(opt)).execute([&] {
         tbb::parallel_for(tbb::blocked_range<int64_t>(0, (n + chunk - 1) / chunk, 1),
                           [&](const tbb::blocked_range<int64_t>& range) {
-                              for (int64_t c = range.begin(); c < range.end(); ++c)
+                              for (int64_t c = range.begin(); c < range.end(); ++c) {
+                                  if (opt.cancelled()) return;
                                   fn(c * chunk, std::min(n, (c + 1) * chunk));
+                              }
                           });
     });
+    throw_if_cancelled(opt);
 }
 
 // Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
@@ -71,11 +104,13 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         PathRecord rec;
-        rec.vertices.reserve(size_t(opt.max_bounces) + 1);
+        // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
+        rec.vertices.reserve(size_t(std::min(opt.max_bounces, 63)) + 1);
         for (int y = y0; y < y1; ++y)
             for (int x = x0; x < x1; ++x) {
                 uint64_t pixel = film_pixel_index(scene, x, y);
                 for (int s = 0; s < opt.spp; ++s) {
+                    if (opt.cancelled()) return;
                     Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                     rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (pixel * uint64_t(opt.spp) + uint64_t(s)));
                     rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);

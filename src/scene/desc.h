@@ -2,7 +2,9 @@
 // the Python bindings (or a C++ program) fill these structs, `Scene::build` validates them
 // once and builds everything the kernels need. Nothing here owns or modifies memory.
 #pragma once
+#include <atomic>
 #include <cstdint>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -40,6 +42,17 @@ struct MeshDesc {
     TextureDesc emission;                // 3 channels; empty: not an emitter
     bool two_sided_emission = false;     // false: emits on the side of the face normal only
 };
+
+// The ranges the kernels (and Embree, whose rays must stay within about 1.8e18) assume, checked
+// when a scene is built. Coordinates: vertex positions, the camera's position, look_at and up,
+// and an orthographic camera's half extents; within this bound every hit point, offset ray
+// origin and squared distance stays finite in float. Radiance: emitted radiance (times the
+// environment's scale), so that a path's throughput times it stays finite.
+constexpr float kMaxCoordinate = 1e16f;
+constexpr float kMaxRadiance = 1e16f;
+// The film's pixel count: a pixel's index fits in int32, and the default number of primary
+// edge samples (pixels times spp) in int64.
+constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;
 
 enum class CameraType { Perspective = 0, Orthographic = 1 };
 enum class FilterType { Box = 0, Gaussian = 1 };
@@ -98,6 +111,16 @@ struct RenderOptions {
     bool secondary_edges = true;   // silhouettes seen from shading points
     int64_t edge_samples = 0;      // primary edge samples; 0: one per output pixel per spp
     EdgeSampling edge_sampling = EdgeSampling::Importance;
+    // Optional: another thread sets it to stop the call. The loops stop taking work within a
+    // sample and the call throws Cancelled; its outputs are then unspecified.
+    const std::atomic<bool>* cancel = nullptr;
+
+    bool cancelled() const { return cancel && cancel->load(std::memory_order_relaxed); }
+};
+
+// Thrown by a call whose RenderOptions::cancel was set.
+struct Cancelled : std::runtime_error {
+    Cancelled() : std::runtime_error("cancelled") {}
 };
 
 // Counters a render reports (for benchmarks).

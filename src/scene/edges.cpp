@@ -4,6 +4,7 @@
 #include <cstring>
 #include <unordered_map>
 #include "scene/desc.h"
+#include "scene/geometry.h"
 
 namespace edgepath {
 
@@ -87,6 +88,11 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
     half.reserve(size_t(m.num_triangles) * 3);
     for (int64_t f = 0; f < m.num_triangles; ++f) {
         const int32_t* t = m.indices + 3 * f;
+        // A degenerate face is not there (the scene skips it): its neighbours' edges with it
+        // are boundaries.
+        if (is_degenerate_triangle(Vec3f::load(m.vertices + 3 * int64_t(t[0])), Vec3f::load(m.vertices + 3 * int64_t(t[1])),
+                                   Vec3f::load(m.vertices + 3 * int64_t(t[2]))))
+            continue;
         for (int k = 0; k < 3; ++k) {
             int32_t a = t[k], b = t[(k + 1) % 3];
             int64_t wa = weld[size_t(a)], wb = weld[size_t(b)];

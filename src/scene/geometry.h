@@ -5,6 +5,17 @@
 
 namespace edgepath {
 
+// A triangle too thin for its normal to be computed in float: twice its area (|cross(e1, e2)|,
+// in double) at most 1e-6 of the product of the two edge lengths, i.e. the sine of its angle at
+// v0 below 1e-6 (zero area, coincident vertices). Relative, so a mesh moved or scaled anywhere
+// keeps its triangles. Such triangles are skipped: never hit, not sampled, no edges.
+constexpr double kDegenerateSine = 1e-6;
+
+inline bool is_degenerate_triangle(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2) {
+    const Vec3d e1 = Vec3d(v1) - Vec3d(v0), e2 = Vec3d(v2) - Vec3d(v0);
+    return !(length(cross(e1, e2)) > kDegenerateSine * length(e1) * length(e2));
+}
+
 template <class T>
 struct TriangleHit {
     T t = 0, b1 = 0, b2 = 0;

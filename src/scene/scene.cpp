@@ -7,6 +7,8 @@
 #include <stdexcept>
 #include <string>
 
+#include "scene/geometry.h"
+
 namespace edgepath {
 
 namespace {
@@ -59,45 +61,68 @@ void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, con
                             str(i / 3) + ")");
 }
 
-void check_vec3(const float* v, const std::string& field) {
-    for (int i = 0; i < 3; ++i)
-        if (!std::isfinite(v[i])) fail(field, "value " + str(v[i]) + " is not finite");
+// Finite values within +-kMaxCoordinate: a point (n = 3) or n / 3 vertices.
+void check_coordinates(const float* v, int64_t n, const std::string& field) {
+    for (int64_t i = 0; i < n; ++i) {
+        const bool finite = std::isfinite(v[i]);
+        if (finite && std::abs(v[i]) <= kMaxCoordinate) continue;
+        const std::string value = "value " + str(v[i]) + (n > 3 ? " of vertex " + str(i / 3) : std::string());
+        fail(field, value + (finite ? " is out of range (|x| <= " + str(kMaxCoordinate) + ")" : " is not finite"));
+    }
+}
+
+// Radiance values at most kMaxRadiance (after `scale`).
+void check_radiance(const TextureDesc& t, float scale, const std::string& field) {
+    for (int64_t i = 0; i < t.num_values(); ++i)
+        if (t.data[i] * double(scale) > kMaxRadiance)
+            fail(field, "radiance " + str(t.data[i] * double(scale)) + " at flat index " + str(i) +
+                            " is out of range (at most " + str(kMaxRadiance) + ")");
 }
 
 void validate_camera(const CameraDesc& c) {
-    check_vec3(c.position, "camera.position");
-    check_vec3(c.look_at, "camera.look_at");
-    check_vec3(c.up, "camera.up");
-    if (c.width < 1 || c.height < 1)
-        fail("camera.resolution", "must be positive, got (" + str(c.height) + ", " + str(c.width) + ")");
+    check_coordinates(c.position, 3, "camera.position");
+    check_coordinates(c.look_at, 3, "camera.look_at");
+    check_coordinates(c.up, 3, "camera.up");
+    if (c.width < 1 || c.height < 1 || int64_t(c.width) * c.height > kMaxPixels)
+        fail("camera.resolution", "must be positive with at most " + str(kMaxPixels) + " pixels, got (" +
+                                      str(c.height) + ", " + str(c.width) + ")");
     Vec3f f = Vec3f::load(c.look_at) - Vec3f::load(c.position);
     if (!(length(f) > 0.f)) fail("camera.look_at", "equals camera.position");
     Vec3f r = cross(normalize(f), Vec3f::load(c.up));
     if (!(length(r) > 1e-6f)) fail("camera.up", "is zero or parallel to the viewing direction");
     if (c.type == CameraType::Perspective && !(c.fov > 0.f && c.fov < 180.f))
         fail("camera.fov", "must be in (0, 180) degrees, got " + str(c.fov));
-    if (c.type == CameraType::Orthographic && !(c.ortho_scale > 0.f && std::isfinite(c.ortho_scale)))
-        fail("camera.ortho_scale", "must be positive, got " + str(c.ortho_scale));
+    if (c.type == CameraType::Orthographic &&
+        !(c.ortho_scale > 0.f && c.ortho_scale <= kMaxCoordinate &&
+          double(c.ortho_scale) * c.height / c.width <= kMaxCoordinate))
+        fail("camera.ortho_scale", "must be positive with half extents at most " + str(kMaxCoordinate) + ", got " +
+                                       str(c.ortho_scale));
     if (c.filter == FilterType::Gaussian && !(c.filter_stddev > 0.f && c.filter_stddev < 100.f))
         fail("camera.filter_stddev", "must be positive, got " + str(c.filter_stddev));
-    int cw = c.crop_width ? c.crop_width : c.width, ch = c.crop_height ? c.crop_height : c.height;
+    const int64_t cw = c.crop_width ? c.crop_width : c.width, ch = c.crop_height ? c.crop_height : c.height;
     if (c.crop_x < 0 || c.crop_y < 0 || cw < 1 || ch < 1 || c.crop_x + cw > c.width || c.crop_y + ch > c.height)
         fail("camera.crop_window", "(" + str(c.crop_x) + ", " + str(c.crop_y) + ", " + str(cw) + ", " + str(ch) +
                                        ") does not fit in the film of " + str(c.width) + "x" + str(c.height));
+}
+
+// The rows of a 3x3 row-major matrix are orthonormal (to a tolerance that lets an optimised
+// rotation drift a little) and it does not mirror.
+bool is_rotation(const float* m) {
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            double d = 0;
+            for (int k = 0; k < 3; ++k) d += double(m[3 * i + k]) * m[3 * j + k];
+            if (std::abs(d - (i == j ? 1.0 : 0.0)) > 1e-2) return false;
+        }
+    return dot(cross(Vec3d(Vec3f::load(m)), Vec3d(Vec3f::load(m + 3))), Vec3d(Vec3f::load(m + 6))) > 0.0;
 }
 
 void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     std::string f = "meshes[" + str(i) + "]";
     if (m.num_vertices < 1 || m.vertices == nullptr) fail(f + ".vertices", "mesh has no vertices");
     if (m.num_triangles < 1 || m.indices == nullptr) fail(f + ".indices", "mesh has no triangles");
-    check_finite(m.vertices, m.num_vertices * 3, f + ".vertices");
+    check_coordinates(m.vertices, m.num_vertices * 3, f + ".vertices");
     check_indices(m.indices, m.num_triangles, m.num_vertices, f + ".indices", "vertices");
-    for (int64_t t = 0; t < m.num_triangles; ++t) {
-        Vec3f a = Vec3f::load(m.vertices + 3 * m.indices[3 * t]), b = Vec3f::load(m.vertices + 3 * m.indices[3 * t + 1]),
-              c = Vec3f::load(m.vertices + 3 * m.indices[3 * t + 2]);
-        Vec3d n = cross(Vec3d(b - a), Vec3d(c - a));
-        if (!(length(n) > 0.0)) fail(f + ".indices", "triangle " + str(t) + " is degenerate (zero area)");
-    }
     if (m.uvs) {
         check_finite(m.uvs, m.num_uvs * 2, f + ".uvs");
         if (m.uv_indices)
@@ -126,7 +151,10 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     }
     if (m.material < 0 || m.material >= num_materials)
         fail(f + ".material", "index " + str(m.material) + " out of range for " + str(num_materials) + " materials");
-    if (!m.emission.empty()) check_texture(m.emission, 3, f + ".emission", true);
+    if (!m.emission.empty()) {
+        check_texture(m.emission, 3, f + ".emission", true);
+        check_radiance(m.emission, 1.f, f + ".emission");
+    }
 }
 
 }  // namespace
@@ -167,8 +195,10 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     if (desc.has_envmap) {
         check_texture(desc.envmap.values, 3, "envmap.values", true);
         check_finite(desc.envmap.to_world, 9, "envmap.to_world");
+        if (!is_rotation(desc.envmap.to_world)) fail("envmap.to_world", "is not a rotation");
         if (!(desc.envmap.scale >= 0.f && std::isfinite(desc.envmap.scale)))
             fail("envmap.scale", "must be finite and non-negative, got " + str(desc.envmap.scale));
+        check_radiance(desc.envmap.values, desc.envmap.scale, "envmap.values");
     }
 
     std::shared_ptr<Scene> s(new Scene());
@@ -215,7 +245,14 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
         std::copy(md.vertices, md.vertices + 3 * md.num_vertices, vb);
         uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                                       3 * sizeof(uint32_t), size_t(md.num_triangles)));
-        for (int64_t k = 0; k < 3 * md.num_triangles; ++k) ib[k] = uint32_t(md.indices[k]);
+        for (int64_t t = 0; t < md.num_triangles; ++t) {
+            const int32_t* tri = md.indices + 3 * t;
+            // A degenerate triangle goes to Embree collapsed to one point: it keeps its primitive
+            // id (hits index the caller's triangles) and has exactly zero area, so no ray hits it.
+            const bool skip = m.is_degenerate(t);
+            m.num_degenerate += skip;
+            for (int k = 0; k < 3; ++k) ib[3 * t + k] = uint32_t(tri[skip ? 0 : k]);
+        }
         rtcCommitGeometry(g);
         rtcAttachGeometryByID(s->rtc_, g, unsigned(i));
         rtcReleaseGeometry(g);
@@ -225,7 +262,7 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
             double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
             for (int64_t t = 0; t < m.num_triangles; ++t) {
                 Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
-                float area = 0.5f * length(cross(b - a, c - a));
+                float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
                 s->lights.push_back({int(i), t, area});
                 light_weights.push_back(area * power);
             }
@@ -277,6 +314,7 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     const int32_t* tri = m.indices + 3 * prim;
     Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
     sp.p = v0 * b0 + v1 * b1 + v2 * b2;
+    sp.p_error = triangle_point_error(v0, v1, v2, b0, b1, b2);
     sp.ng = normalize(cross(v1 - v0, v2 - v0));
     if (m.normals) {
         const int32_t* ni = m.normal_indices + 3 * prim;
@@ -353,6 +391,9 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
     ls.hit.b1 = b.x;
     ls.hit.b2 = b.y;
     ls.hit.t = dist;
+    ls.p = q.p;
+    ls.p_error = q.p_error;
+    ls.ng = q.ng;
     ls.pdf = light_distribution.pmf(li) / lt.area * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }

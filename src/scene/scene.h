@@ -15,6 +15,7 @@
 #include "scene/camera.h"
 #include "scene/desc.h"
 #include "scene/envmap.h"
+#include "scene/geometry.h"
 #include "scene/texture.h"
 
 namespace edgepath {
@@ -57,6 +58,7 @@ struct Mesh {
     Texture emission;
     bool two_sided_emission = false;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
+    int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
     Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
     // cross(v1 - v0, v2 - v0) of triangle f: the face normal (by the winding), not normalised.
@@ -66,6 +68,11 @@ struct Mesh {
         return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
     }
     bool is_emitter() const { return !emission.empty(); }
+    // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
+    bool is_degenerate(int64_t f) const {
+        const int32_t* t = indices + 3 * f;
+        return is_degenerate_triangle(vertex(t[0]), vertex(t[1]), vertex(t[2]));
+    }
 };
 
 struct Material {
@@ -82,6 +89,7 @@ struct Hit {
 
 struct SurfacePoint {
     Vec3f p;
+    Vec3f p_error;  // bound on p's rounding error, per component (math/ray.h)
     Vec3f ng;  // geometric normal, cross(v1 - v0, v2 - v0) normalised
     Vec3f ns;  // shading normal (interpolated normals, or ng)
     Vec2f uv;  // interpolated uvs, or the barycentrics (b1, b2) when the mesh has none
@@ -96,7 +104,18 @@ struct LightSample {
     Vec3f radiance;      // emitted radiance towards the shading point
     float pdf = 0.f;     // solid angle, including the choice of the triangle
     Hit hit;             // the point on an area light (mesh, triangle, barycentrics)
+    Vec3f p, p_error, ng;  // that point, its error bound and geometric normal (area lights)
 };
+
+// A ray leaving the surface at sp in direction d.
+inline Ray spawn_ray(const SurfacePoint& sp, const Vec3f& d) { return spawn_ray(sp.p, sp.p_error, sp.ng, d); }
+
+// The shadow ray from sp towards the light sample ls: to its point on an area light, or along
+// its direction for the environment.
+inline Ray shadow_ray(const SurfacePoint& sp, const LightSample& ls) {
+    if (!std::isfinite(ls.dist)) return spawn_ray(sp, ls.dir);
+    return spawn_ray_to(sp.p, sp.p_error, sp.ng, ls.p, ls.p_error, ls.ng);
+}
 
 class Scene {
 public:

@@ -1,0 +1,184 @@
+// Ray offsets bounded by the hit point's rounding error, degenerate triangles, cancellation and
+// the ranges Scene::build enforces.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "edgepath.h"
+#include "sampling/rng.h"
+#include "scene/scene.h"
+#include "scene/shapes.h"
+
+namespace edgepath {
+namespace {
+
+struct Fixture {
+    std::vector<float> kd{0.5f, 0.5f, 0.5f}, ks{0.f, 0.f, 0.f}, rough{0.5f}, le{1.f, 1.f, 1.f};
+    MeshData mesh;
+    SceneDesc desc;
+
+    static TextureDesc tex(const std::vector<float>& v) {
+        TextureDesc t;
+        t.data = v.data();
+        t.height = t.width = 1;
+        t.channels = int(v.size());
+        return t;
+    }
+    // One mesh with `vertices` / `indices`, a camera at `eye` looking at `target`.
+    Fixture(std::vector<float> vertices, std::vector<int32_t> indices, Vec3f eye = Vec3f(0, 0, -5),
+            Vec3f target = Vec3f(0, 0, 0)) {
+        mesh.vertices = std::move(vertices);
+        mesh.indices = std::move(indices);
+        for (int k = 0; k < 3; ++k) {
+            desc.camera.position[k] = eye[k];
+            desc.camera.look_at[k] = target[k];
+        }
+        desc.camera.width = desc.camera.height = 8;
+        MaterialDesc m;
+        m.diffuse = tex(kd);
+        m.specular = tex(ks);
+        m.roughness = tex(rough);
+        desc.materials.push_back(m);
+        desc.meshes.push_back(mesh.desc(0));
+    }
+};
+
+std::string build_error(const SceneDesc& d) {
+    try {
+        build_scene(d);
+    } catch (const std::invalid_argument& e) {
+        return e.what();
+    }
+    return "";
+}
+
+// Rays leaving random points of random triangles, to either side, placed far from the origin
+// or tiny, never meet their own triangle again (a relative epsilon failed at 1e5 and 1e-5).
+TEST(RayOffset, SpawnedRaysNeverHitTheirOwnTriangle) {
+    Rng rng(7, 1);
+    for (double place : {0.0, 1e3, 1e5, -3e6}) {
+        for (double scale : {1e-5, 1.0, 1e3}) {
+            std::vector<float> v;
+            for (int k = 0; k < 9; ++k) v.push_back(float(place + scale * (2.0 * rng.next_double() - 1.0)));
+            Fixture f(v, {0, 1, 2});
+            auto scene = build_scene(f.desc);
+            for (int i = 0; i < 2000; ++i) {
+                const float b1 = rng.next_float(), b2 = rng.next_float() * (1.f - b1);
+                const SurfacePoint sp = scene->surface_point(0, 0, b1, b2);
+                Vec3f d = normalize(Vec3f(rng.next_float() - 0.5f, rng.next_float() - 0.5f, rng.next_float() - 0.5f));
+                if (i % 2) d = normalize(d + sp.ng * (i % 4 == 1 ? 1e-3f : -1e-3f) - sp.ng * dot(d, sp.ng));  // grazing
+                Hit hit;
+                ASSERT_FALSE(scene->intersect(spawn_ray(sp, d), hit))
+                    << "place " << place << " scale " << scale << " sample " << i;
+            }
+        }
+    }
+}
+
+// A shadow ray between two points of two parallel triangles facing each other is unoccluded
+// (it must neither hit its own triangle nor the target's), at any placement.
+TEST(RayOffset, ShadowRaysReachTheirTarget) {
+    Rng rng(3, 2);
+    for (double place : {0.0, 1e4, 1e5}) {
+        std::vector<float> v;
+        for (double z : {0.0, 1.0})
+            for (auto xy : {std::pair{-1.0, -1.0}, std::pair{1.0, -1.0}, std::pair{0.0, 1.0}}) {
+                v.push_back(float(place + xy.first));
+                v.push_back(float(place + xy.second));
+                v.push_back(float(place + z));
+            }
+        Fixture f(v, {0, 1, 2, 3, 5, 4}, Vec3f(float(place), float(place), float(place - 5)),
+                  Vec3f(float(place), float(place), float(place)));
+        auto scene = build_scene(f.desc);
+        for (int i = 0; i < 2000; ++i) {
+            const float a1 = rng.next_float(), a2 = rng.next_float() * (1.f - a1);
+            const float c1 = rng.next_float(), c2 = rng.next_float() * (1.f - c1);
+            const SurfacePoint p = scene->surface_point(0, 0, a1, a2), q = scene->surface_point(0, 1, c1, c2);
+            ASSERT_FALSE(scene->occluded(spawn_ray_to(p.p, p.p_error, p.ng, q.p, q.p_error, q.ng)))
+                << "place " << place << " sample " << i;
+        }
+    }
+}
+
+TEST(Robust, DegenerateTrianglesAreSkippedNotRefused) {
+    // Triangle 0 real; 1 has coincident vertices; 2 three collinear ones; 3 a sliver of angle
+    // 3e-8 (its far vertex one float off the line of the others).
+    Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0, -0.5f, 0.5f, -1, 0.5f, 0.5f, -1, 0, 0.5f, -1, 1.5f, 0.50000006f, -1},
+              {0, 1, 2, 3, 4, 4, 3, 5, 4, 3, 4, 6});
+    auto scene = build_scene(f.desc);
+    EXPECT_EQ(degenerate_triangles(*scene, 0), 3);
+    EXPECT_EQ(scene->edges().size(), 3u);
+    for (const Edge& e : scene->edges()) EXPECT_EQ(e.f0, 0) << "an edge of a degenerate face";
+    // The camera ray through the centre passes through triangle 2's line and hits triangle 0.
+    Hit hit;
+    Ray r;
+    r.origin = Vec3f(0.f, 0.5f, -5.f);
+    r.dir = Vec3f(0.f, 0.f, 1.f);
+    ASSERT_TRUE(scene->intersect(r, hit));
+    EXPECT_EQ(hit.prim, 0);
+}
+
+TEST(Robust, RangesAreCheckedWhenTheSceneIsBuilt) {
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1e17f, 0}, {0, 1, 2});
+        EXPECT_NE(build_error(f.desc).find("meshes[0].vertices: value 1e+17 of vertex 2 is out of range"),
+                  std::string::npos)
+            << build_error(f.desc);
+    }
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2}, Vec3f(0, 0, -2e18f));
+        EXPECT_NE(build_error(f.desc).find("camera.position"), std::string::npos);
+    }
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2});
+        f.desc.camera.type = CameraType::Orthographic;
+        f.desc.camera.ortho_scale = 1e19f;
+        EXPECT_NE(build_error(f.desc).find("camera.ortho_scale"), std::string::npos);
+    }
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2});
+        f.desc.camera.crop_x = 2147483647;
+        f.desc.camera.crop_width = 2;
+        f.desc.camera.crop_height = 2;
+        EXPECT_NE(build_error(f.desc).find("camera.crop_window"), std::string::npos);
+    }
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2});
+        std::vector<float> bright{1e38f, 1e38f, 1e38f};
+        f.desc.meshes[0].emission = Fixture::tex(bright);
+        EXPECT_NE(build_error(f.desc).find("meshes[0].emission: radiance"), std::string::npos);
+    }
+    {
+        Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2});
+        std::vector<float> sky(3, 1.f);
+        f.desc.has_envmap = true;
+        f.desc.envmap.values = Fixture::tex(sky);
+        for (float& x : f.desc.envmap.to_world) x = 0.f;
+        EXPECT_NE(build_error(f.desc).find("envmap.to_world: is not a rotation"), std::string::npos);
+    }
+}
+
+TEST(Robust, CancelledCallsStopAndThrow) {
+    Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2});
+    auto scene = build_scene(f.desc);
+    std::atomic<bool> cancel{true};
+    RenderOptions opt;
+    opt.spp = 1 << 30;  // would take hours
+    opt.cancel = &cancel;
+    std::vector<float> image(8 * 8 * 3), adjoint(8 * 8 * 3, 1.f), grad(9, 0.f);
+    EXPECT_THROW(render(*scene, opt, image.data()), Cancelled);
+    SceneGradients g;
+    g.meshes.resize(1);
+    g.meshes[0].vertices.grad = grad.data();
+    EXPECT_THROW(render_gradients(*scene, opt, adjoint.data(), g), Cancelled);
+    cancel = false;
+    opt.spp = 1;
+    EXPECT_NO_THROW(render(*scene, opt, image.data()));
+}
+
+}  // namespace
+}  // namespace edgepath
