@@ -11,7 +11,7 @@
 #include "edgepath.h"
 #include "sampling/rng.h"
 #include "scene/scene.h"
-#include "scene/shapes.h"
+#include "support/shapes.h"
 
 namespace edgepath {
 namespace {
