@@ -10,8 +10,6 @@ and memory cap, and every outcome is classified:
               C++ exception that reached Python as RuntimeError, ...)
   signal      the child died by a signal (abort, segfault, the memory cap)
   hang        the child ran past the time cap
-  far_abort   ``signal`` while rendering a scene with coordinates beyond 1e18, which Embree's
-              ray checks abort on until the core refuses such scenes when it builds them
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
 imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
@@ -46,7 +44,7 @@ from typing import Dict, List, Optional, Tuple
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import corpus  # noqa: E402
 
-BAD = ("unexpected", "signal", "hang", "far_abort")
+BAD = ("unexpected", "signal", "hang")
 OUTCOMES = ("ok", "error", "unnamed") + BAD
 
 # Per case: seconds of wall time, bytes of address space beyond what the driver had mapped.
@@ -112,23 +110,6 @@ def _names_source(message: str, path: str) -> bool:
     return os.path.basename(path) in message or "seed" in message
 
 
-# Coordinates this far from the origin are beyond what Embree's ray checks accept: until the
-# core refuses them when it builds a scene, rendering them aborts. A case that dies rendering
-# such a scene is reported as that known cause (``KNOWN_CORE_ABORT`` in its detail).
-FAR = 1e18
-KNOWN_CORE_ABORT = "coordinates beyond Embree's range"
-
-
-def _extent(scene) -> float:
-    """The largest coordinate of the scene's meshes and camera."""
-    import torch
-    values = [m.vertices.detach().abs().max() for m in scene.meshes if m.vertices.numel()]
-    camera = scene.camera
-    values += [t.detach().abs().max() for t in (camera.position, camera.look_at, camera.to_world)
-               if isinstance(t, torch.Tensor)]
-    return max((float(v) for v in values), default=0.0)
-
-
 def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
     """Runs one case in this process: (outcome, detail). Only ``run_batch``'s children call it;
     ``report`` gets a note before the render (the detail if the render kills the process)."""
@@ -140,8 +121,7 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
         if scene is None:
             return "ok", "nothing to render"
         stage = "render"
-        extent = _extent(scene)
-        report(f"rendering{' ' + KNOWN_CORE_ABORT if extent > FAR else ''} (up to {extent:.3g})")
+        report("rendering")
         for mesh in scene.meshes:
             mesh.vertices.requires_grad_(True)
         image = ep.render(scene, spp=1, max_bounces=bounces, num_threads=1)
@@ -228,13 +208,12 @@ def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
             os.close(read_fd)
             _, status = os.waitpid(pid, 0)
         if len(results) < len(cases):  # the child died in (or hung on) the next case
-            died = "far_abort" if KNOWN_CORE_ABORT in note else "signal"
             if timed_out:
                 results.append(("hang", f"no answer in {time_limit:g} s{note}"))
             elif os.WIFSIGNALED(status):
-                results.append((died, f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"))
+                results.append(("signal", f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"))
             else:
-                results.append((died, f"exit status {os.WEXITSTATUS(status)} without an answer{note}"))
+                results.append(("signal", f"exit status {os.WEXITSTATUS(status)} without an answer{note}"))
     return results
 
 

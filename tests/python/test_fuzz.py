@@ -20,10 +20,6 @@ import fuzz  # noqa: E402
 
 
 def _check(outcome: str, detail: str, what: str) -> None:
-    if outcome == "far_abort":
-        # Expected to fail until the core refuses scenes beyond Embree's coordinate range
-        # when it builds them; then this branch is never taken and the assertion below holds.
-        pytest.xfail(f"{what}: {detail}")
     assert outcome in ("ok", "error"), f"{what}: {outcome}: {detail}"
 
 
@@ -58,7 +54,7 @@ def test_fuzz_slice(tmp_path):
         counts[case["outcome"]] = counts.get(case["outcome"], 0) + 1
     assert counts.get("ok", 0) > 50 and counts.get("error", 0) > 50, counts  # both are exercised
     bad = [c for c in cases if c["outcome"] not in ("ok", "error")]
-    for case in sorted(bad, key=lambda c: c["outcome"] == "far_abort"):
+    for case in bad:
         _check(case["outcome"], case["detail"],
                f"case {case['case']} of seed {case['seed']} ({case['kind']}, "
                f"{'+'.join(case['mutations'])})")
