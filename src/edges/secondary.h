@@ -6,8 +6,7 @@
 // N = (v0 - p) x (v1 - p), and contributes
 //   integral over the arc of (w . dN/dparameter) / |N| (F_u - F_l) dl,
 //   dl = |(I - w w^T)(v1 - v0)| / |x - p| dt,   x = v0 + t (v1 - v0).
-// F_u, F_l are estimated by tracing the rest of the path from p on each side, in the limit at x
-// (edges/sides.h): f(wo, w) times the light arriving from either side.
+// F_u, F_l are estimated by tracing the rest of the path from p a small angle to each side.
 // Gradients go to v0 and v1 and to p (and through p back along the path to the camera).
 //
 // Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one descent per vertex,

@@ -56,6 +56,12 @@ inline FirstHit first_hit(const Scene& scene, const Ray& ray) {
     return f;
 }
 
+// Whether two rays meet the same triangle, or both leave the scene (the two sides of an edge
+// sample that sees no discontinuity).
+inline bool same_surface(const FirstHit& a, const FirstHit& b) {
+    return a.found == b.found && (!a.found || (a.hit.mesh == b.hit.mesh && a.hit.prim == b.hit.prim));
+}
+
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
 // `record` is given, also records the path for the gradient pass; when `first` is given, it is
 // the ray's intersection (not traced again).

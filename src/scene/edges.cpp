@@ -40,20 +40,12 @@ struct HalfEdge {
     int32_t a, b;    // the face's own vertex indices, in the face's order
 };
 
-// The unit face normal, in double: whether two faces are coplanar is decided to far below the
-// angles between the faces of dense meshes.
-Vec3d face_normal(const MeshDesc& m, int64_t f) {
+Vec3f face_normal(const MeshDesc& m, int64_t f) {
     const int32_t* t = m.indices + 3 * f;
-    const Vec3d p0(Vec3f::load(m.vertices + 3 * int64_t(t[0]))), p1(Vec3f::load(m.vertices + 3 * int64_t(t[1]))),
-        p2(Vec3f::load(m.vertices + 3 * int64_t(t[2])));
+    Vec3f p0 = Vec3f::load(m.vertices + 3 * int64_t(t[0])), p1 = Vec3f::load(m.vertices + 3 * int64_t(t[1])),
+          p2 = Vec3f::load(m.vertices + 3 * int64_t(t[2]));
     return normalize(cross(p1 - p0, p2 - p0));
 }
-
-// Faces whose normals agree to 1 - cos(angle) below this are coplanar (angle below about
-// 1.4e-6 rad: float rounding of the vertices of a planar polygon). Not a looser tolerance: at a
-// silhouette the eye lies in the plane of the faces, so the outline of a nearly flat region of
-// a dense mesh runs along edges whose faces are a small fraction of a degree apart.
-constexpr double kCoplanar = 1e-12;
 
 // The shading normal a face uses at one of its vertices (vertex index v of face f).
 Vec3f shading_normal(const MeshDesc& m, int64_t f, int32_t v) {
@@ -109,7 +101,7 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
         const size_t count = j - i;
         if (count == 2) {
             const HalfEdge &h0 = half[i], &h1 = half[i + 1];
-            const Vec3d n0 = face_normal(m, h0.face), n1 = face_normal(m, h1.face);
+            const Vec3f n0 = face_normal(m, h0.face), n1 = face_normal(m, h1.face);
             bool shading_jump = m.normals == nullptr;
             if (!shading_jump) {
                 // Split normals along the edge: a shading discontinuity.
@@ -130,7 +122,7 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 }
             }
             shading_jump = shading_jump || uv_jump;
-            const bool coplanar = dot(n0, n1) > 1.0 - kCoplanar;
+            const bool coplanar = dot(n0, n1) > 1.f - 1e-6f;
             if (!coplanar || uv_jump || (shading_jump && m.normals != nullptr)) {
                 Edge e;
                 e.mesh = mesh_index;
