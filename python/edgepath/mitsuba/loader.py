@@ -20,8 +20,8 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import torch
 
-from .io import _texture_rgb, imread, load_obj, load_ply, to_srgb
-from .scene import Camera, EnvironmentMap, Material, Mesh, Scene
+from ..io import _texture_rgb, imread, load_obj, load_ply, to_srgb
+from ..scene import Camera, EnvironmentMap, Material, Mesh, Scene
 
 PathLike = Union[str, os.PathLike]
 
@@ -174,7 +174,7 @@ class MitsubaScene:
     def render(self, **options) -> torch.Tensor:
         """``ep.render`` of the scene with the file's spp, max_bounces and seed (keyword
         arguments override them)."""
-        from .render import render
+        from ..render import render
         args = {"spp": self.spp, "seed": self.seed,
                 "max_bounces": UNBOUNDED_MAX_BOUNCES if self.max_bounces is None else self.max_bounces}
         args.update(options)
