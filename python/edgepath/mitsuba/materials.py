@@ -1,0 +1,170 @@
+"""BSDFs of Mitsuba scene files (diffuse, roughconductor, roughplastic, twosided), mapped onto
+edgepath's diffuse + GGX ``Material``, approximately where Mitsuba's model differs (see
+docs/scene-files.md)."""
+
+from __future__ import annotations
+
+import warnings
+from typing import Dict
+
+import torch
+
+from ..scene import Material
+from .textures import colour
+from .xml import Node, Reader
+
+# Reflectance at normal incidence (linear RGB) of Mitsuba's named conductors, from common
+# tables of measured metals; Mitsuba itself uses spectral eta/k (an approximation, see docs).
+CONDUCTOR_F0 = {
+    "none": (1.0, 1.0, 1.0),
+    "Ag": (0.972, 0.960, 0.915),
+    "Al": (0.913, 0.922, 0.924),
+    "Au": (1.000, 0.782, 0.344),
+    "Co": (0.662, 0.655, 0.634),
+    "Cr": (0.550, 0.556, 0.554),
+    "Cu": (0.955, 0.638, 0.538),
+    "Fe": (0.562, 0.565, 0.578),
+    "Ni": (0.660, 0.609, 0.526),
+    "Pt": (0.673, 0.637, 0.585),
+    "Ti": (0.542, 0.497, 0.449),
+}
+
+# Mitsuba's named indices of refraction.
+NAMED_IOR = {
+    "vacuum": 1.0, "helium": 1.000036, "hydrogen": 1.000132, "air": 1.000277,
+    "carbon dioxide": 1.00045, "water": 1.3330, "acetone": 1.36, "ethanol": 1.361,
+    "carbon tetrachloride": 1.461, "glycerol": 1.4729, "benzene": 1.501,
+    "silicone oil": 1.52045, "bromine": 1.661, "water ice": 1.31, "fused quartz": 1.458,
+    "pyrex": 1.470, "acrylic glass": 1.49, "polypropylene": 1.49, "bk7": 1.5046,
+    "sodium chloride": 1.544, "amber": 1.55, "pet": 1.5750, "diamond": 2.419,
+}
+
+
+# Mitsuba's names of the Material fields a BSDF type sets (parameters() adds .value / .data).
+# A material made without a <bsdf> (a shape's default) is a diffuse one.
+DIFFUSE_KEYS = {"diffuse": "reflectance"}
+BSDF_KEYS = {"diffuse": DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
+                                                       "roughness": "alpha"},
+             "roughconductor": {"roughness": "alpha"}}
+
+
+def load_bsdf(ctx: Reader, node: Node) -> Material:
+    if id(node) in ctx.bsdf_cache:
+        return ctx.bsdf_cache[id(node)]
+    kind = node.attrs.get("type")
+    props, nested = ctx.properties(node)
+    if kind == "twosided":
+        inner = [c for c in nested if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1 or len(nested) != 1:
+            ctx.fail(node, "twosided takes exactly one BSDF (different BSDFs per side are "
+                           "not supported)")
+        base = load_bsdf(ctx, ctx.deref(inner[0], ("bsdf",)))
+        props.pop(inner[0].attrs.get("name"), None)
+        ctx.leftovers(node, props, "bsdf")
+        material = Material(diffuse=base.diffuse, specular=base.specular,
+                            roughness=base.roughness, two_sided=True)
+        ctx.result.bsdf_keys[id(material)] = {
+            k: "brdf_0." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
+    else:
+        for child in nested:
+            if child.tag != "texture" and child.tag != "ref":
+                ctx.fail(child, "unexpected element inside <bsdf>")
+            if child.tag == "texture" and "name" not in child.attrs:
+                ctx.fail(child, "a texture inside a <bsdf> needs a name (the property it sets)")
+        refs = [c for c in nested if c.tag == "ref"]
+        for r in refs:
+            props[ctx.attr(r, "name")] = r
+        material = simple_bsdf(ctx, node, kind, props)
+        ctx.result.bsdf_keys[id(material)] = BSDF_KEYS[kind]
+    ctx.bsdf_cache[id(node)] = material
+    if "id" in node.attrs:
+        ctx.result.bsdfs[node.attrs["id"]] = material
+    return material
+
+
+def roughness_alpha(ctx: Reader, node: Node, props: Dict[str, Node]):
+    dist = ctx.string_value(props.pop("distribution")) if "distribution" in props else "beckmann"
+    if dist not in ("ggx", "beckmann"):
+        ctx.fail(node, f"distribution '{dist}': expected ggx or beckmann")
+    if dist == "beckmann":
+        warnings.warn(f"{ctx.path}:{node.line}: {node.describe()}: the Beckmann distribution "
+                      "(Mitsuba's default) is rendered as GGX with the same alpha",
+                      stacklevel=5)
+    if "alpha_u" in props or "alpha_v" in props:
+        if "alpha" in props or "alpha_u" not in props or "alpha_v" not in props:
+            ctx.fail(node, "give alpha, or both alpha_u and alpha_v")
+        u = ctx.float_value(props.pop("alpha_u"))
+        v = ctx.float_value(props.pop("alpha_v"))
+        if u != v:
+            ctx.fail(node, "anisotropic roughness (alpha_u != alpha_v) is not supported")
+        return u
+    if "alpha" in props:
+        value = colour(ctx, props.pop("alpha"), channels=1)
+        return float(value[0]) if value.dim() == 1 else value
+    return 0.1
+
+
+def ior_value(ctx: Reader, node: Node, props: Dict[str, Node], name: str,
+              default: float) -> float:
+    if name not in props:
+        return default
+    p = props.pop(name)
+    if p.tag == "string":
+        key = ctx.string_value(p).lower()
+        if key not in NAMED_IOR:
+            ctx.fail(p, f"unknown IOR name '{key}' (known: {', '.join(sorted(NAMED_IOR))})")
+        return NAMED_IOR[key]
+    return ctx.float_value(p)
+
+
+def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> Material:
+    if "sample_visible" in props:  # a sampling choice: the same expected image
+        ctx.bool_value(props.pop("sample_visible"))
+    if kind == "diffuse":
+        reflectance = colour(ctx, props.pop("reflectance")) if "reflectance" in props else \
+            torch.full((3,), 0.5)
+        ctx.leftovers(node, props, "bsdf")
+        return Material(diffuse=reflectance)
+    if kind == "roughconductor":
+        alpha = roughness_alpha(ctx, node, props)
+        if "material" in props and ("eta" in props or "k" in props):
+            ctx.fail(node, "give material or eta and k, not both")
+        if "eta" in props or "k" in props:
+            if "eta" not in props or "k" not in props:
+                ctx.fail(node, "give both eta and k")
+            eta, k = colour(ctx, props.pop("eta")), colour(ctx, props.pop("k"))
+            if eta.dim() != 1 or k.dim() != 1:
+                ctx.fail(node, "eta and k must be constants")
+            f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
+        else:
+            # Mitsuba's default: "none", a perfect white reflector (eta 0, k 1: F0 = 1)
+            name = ctx.string_value(props.pop("material")) if "material" in props else "none"
+            if name not in CONDUCTOR_F0:
+                ctx.fail(node, f"conductor material '{name}' is not supported (supported: "
+                               f"{', '.join(CONDUCTOR_F0)}; or give eta and k)")
+            f0 = torch.tensor(CONDUCTOR_F0[name])
+        if "specular_reflectance" in props:
+            f0 = f0 * colour(ctx, props.pop("specular_reflectance"))
+        ctx.leftovers(node, props, "bsdf")
+        return Material(diffuse=torch.zeros(3), specular=f0.to(torch.float32).contiguous(),
+                        roughness=alpha)
+    if kind == "roughplastic":
+        alpha = roughness_alpha(ctx, node, props)
+        int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["polypropylene"])
+        ext_ior = ior_value(ctx, node, props, "ext_ior", NAMED_IOR["air"])
+        if not int_ior > 0 or not ext_ior > 0:
+            ctx.fail(node, "indices of refraction must be > 0")
+        if "nonlinear" in props:
+            if ctx.bool_value(props["nonlinear"]):
+                ctx.fail(props["nonlinear"], "nonlinear=true is not supported")
+            props.pop("nonlinear")
+        diffuse = colour(ctx, props.pop("diffuse_reflectance")) \
+            if "diffuse_reflectance" in props else torch.full((3,), 0.5)
+        f0 = ((int_ior - ext_ior) / (int_ior + ext_ior)) ** 2
+        specular = torch.full((3,), f0)
+        if "specular_reflectance" in props:
+            specular = specular * colour(ctx, props.pop("specular_reflectance"))
+        ctx.leftovers(node, props, "bsdf")
+        return Material(diffuse=diffuse, specular=specular.contiguous(), roughness=alpha)
+    ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, roughconductor, "
+                   "roughplastic, twosided)")
