@@ -15,6 +15,8 @@
 #include <chrono>
 #include <cstdint>
 #include <future>
+#include <memory>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -250,23 +252,50 @@ auto interruptible(edgepath::RenderOptions& opt, Call&& call) -> decltype(call()
     return result.get();
 }
 
-// Builds the scene (GIL released) and warns, once per mesh and count, about the degenerate
-// triangles it skips.
-std::shared_ptr<const edgepath::Scene> build(const edgepath::SceneDesc& desc) {
-    std::shared_ptr<const edgepath::Scene> scene;
+// A core scene kept across calls (Python: Scene._core_cache): each call updates it from the
+// call's description, which rebuilds only what changed (edgepath::update_scene).
+struct SceneCache {
+    std::mutex mutex;
+    std::shared_ptr<edgepath::Scene> scene;
+};
+
+// The built scene one call uses: the cache's, updated and held (locked) for the call, or a
+// scene of its own when there is no cache or another thread holds it.
+struct CallScene {
+    std::unique_lock<std::mutex> lock;
+    std::shared_ptr<edgepath::Scene> scene;
+    edgepath::Scene& operator*() const { return *scene; }
+};
+
+// Builds or updates the scene (GIL released) and warns, once per mesh and count, about the
+// degenerate triangles it skips.
+CallScene build(const edgepath::SceneDesc& desc, SceneCache* cache) {
+    CallScene c;
     {
         nb::gil_scoped_release release;
-        scene = edgepath::build_scene(desc);
+        if (cache) c.lock = std::unique_lock<std::mutex>(cache->mutex, std::try_to_lock);
+        if (c.lock.owns_lock() && cache->scene) {
+            try {
+                edgepath::update_scene(*cache->scene, desc);
+            } catch (...) {
+                cache->scene.reset();  // half updated: built afresh next time
+                throw;
+            }
+            c.scene = cache->scene;
+        } else {
+            c.scene = edgepath::build_scene(desc);
+            if (c.lock.owns_lock()) cache->scene = c.scene;
+        }
     }
     for (size_t i = 0; i < desc.meshes.size(); ++i) {
-        const int64_t n = edgepath::degenerate_triangles(*scene, int(i));
+        const int64_t n = edgepath::degenerate_triangles(*c.scene, int(i));
         if (n > 0 && PyErr_WarnFormat(PyExc_RuntimeWarning, 1,
                                       "meshes[%zu]: %lld of %lld triangles are degenerate (zero area) and are "
                                       "skipped: they render as nothing and get zero gradients",
                                       i, (long long)n, (long long)desc.meshes[i].num_triangles) != 0)
             throw nb::python_error();
     }
-    return scene;
+    return c;
 }
 
 // An (H, W, 3) float32 image buffer of the size the scene renders.
@@ -282,19 +311,94 @@ ImageOut image_buffer(nb::handle obj, const edgepath::Scene& scene, const std::s
     return out;
 }
 
-nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
-                nb::object envmap, nb::handle image, const nb::dict& options) {
-    Described d;
-    describe(d, camera, materials, meshes, envmap);
-    edgepath::RenderOptions opt = render_options(options);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
-    const ImageOut out = image_buffer(image, *scene, "image");
-    const edgepath::RenderStats stats = interruptible(opt, [&] { return edgepath::render(*scene, opt, out.data()); });
+nb::dict stats_dict(const edgepath::RenderStats& stats) {
     nb::dict result;
     result["camera_rays"] = stats.camera_rays;
     result["shadow_rays"] = stats.shadow_rays;
     result["bounce_rays"] = stats.bounce_rays;
     return result;
+}
+
+nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
+                nb::object envmap, nb::handle image, const nb::dict& options, SceneCache* cache) {
+    Described d;
+    describe(d, camera, materials, meshes, envmap);
+    edgepath::RenderOptions opt = render_options(options);
+    const CallScene scene = build(d.desc, cache);
+    const ImageOut out = image_buffer(image, *scene, "image");
+    return stats_dict(interruptible(opt, [&] { return edgepath::render(*scene, opt, out.data()); }));
+}
+
+// ---- many views ------------------------------------------------------------------------------
+// One scene (built or updated once) seen by several cameras of one film size: `cameras` is a
+// list of camera dicts; view k renders with cameras[k] and the options of the call.
+std::vector<edgepath::CameraDesc> camera_descs(const nb::list& cameras) {
+    if (cameras.size() == 0) fail("cameras", "no view");
+    std::vector<edgepath::CameraDesc> out;
+    for (size_t k = 0; k < cameras.size(); ++k) out.push_back(camera_desc(nb::cast<nb::dict>(cameras[k])));
+    return out;
+}
+
+// (V, H, W, C) float32 buffer: V views of the size the scene renders.
+template <class View>
+View views_buffer(nb::handle obj, const edgepath::Scene& scene, size_t views, size_t channels,
+                  const std::string& field, const char* what) {
+    View out;
+    const size_t height = edgepath::image_height(scene), width = edgepath::image_width(scene);
+    if (!nb::try_cast(obj, out, false) || out.ndim() != 4 || out.shape(0) != views || out.shape(1) != height ||
+        out.shape(2) != width || out.shape(3) != channels)
+        fail(field, std::string("expected ") + what + " C-contiguous float32 CPU array of shape (" +
+                        std::to_string(views) + ", " + std::to_string(height) + ", " + std::to_string(width) +
+                        ", " + std::to_string(channels) + ")");
+    return out;
+}
+
+// The core names a camera's fields "camera.<field>": view k's are "cameras[k].<field>".
+[[noreturn]] void rethrow_for_view(const std::invalid_argument& e, size_t k) {
+    const std::string what = e.what();
+    if (what.rfind("camera", 0) != 0) throw;
+    throw std::invalid_argument("cameras[" + std::to_string(k) + "]" + what.substr(6));
+}
+
+// The scene for a call over `views`, seen by views[0], every view's camera validated.
+CallScene build_views(const edgepath::SceneDesc& desc, const std::vector<edgepath::CameraDesc>& views,
+                      SceneCache* cache) {
+    CallScene scene;
+    try {
+        scene = build(desc, cache);
+    } catch (const std::invalid_argument& e) {
+        rethrow_for_view(e, 0);
+    }
+    for (size_t k = 1; k < views.size(); ++k) try {
+            edgepath::set_scene_camera(*scene, views[k]);
+        } catch (const std::invalid_argument& e) {
+            rethrow_for_view(e, k);
+        }
+    return scene;
+}
+
+// Renders view k into images[k]; the counters are summed over the views.
+nb::dict render_views(const nb::list& cameras, const nb::list& materials, const nb::list& meshes,
+                      nb::object envmap, nb::handle images, const nb::dict& options, SceneCache* cache) {
+    const std::vector<edgepath::CameraDesc> views = camera_descs(cameras);
+    Described d;
+    describe(d, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap);
+    edgepath::RenderOptions opt = render_options(options);
+    const CallScene scene = build_views(d.desc, views, cache);
+    const ImageOut out = views_buffer<ImageOut>(images, *scene, views.size(), 3, "images", "a");
+    const size_t pixels = out.size() / views.size();
+    const edgepath::RenderStats stats = interruptible(opt, [&] {
+        edgepath::RenderStats sum;
+        for (size_t k = 0; k < views.size(); ++k) {
+            edgepath::set_scene_camera(*scene, views[k]);
+            const edgepath::RenderStats s = edgepath::render(*scene, opt, out.data() + k * pixels);
+            sum.camera_rays += s.camera_rays;
+            sum.shadow_rays += s.shadow_rays;
+            sum.bounce_rays += s.bounce_rays;
+        }
+        return sum;
+    });
+    return stats_dict(stats);
 }
 
 // ---- gradient slots --------------------------------------------------------------------------
@@ -385,17 +489,18 @@ struct GradientCall {
     edgepath::ChannelLayout layout = edgepath::ChannelLayout::radiance();
     SlotViews views;
     edgepath::SceneGradients slots;
-    std::shared_ptr<const edgepath::Scene> scene;
+    CallScene scene;
 
     GradientCall(bool reverse, const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                  nb::object envmap, const nb::dict& options, const std::vector<std::string>* channels,
-                 const nb::dict& slot_dict)
+                 const nb::dict& slot_dict, SceneCache* cache)
         : views{reverse, {}, {}} {
         describe(d, camera, materials, meshes, envmap);
         opt = render_options(options);
         if (channels) layout = channel_layout(*channels);
         slots = gradient_slots(views, slot_dict, d.desc);
-        scene = build(d.desc);
+        edgepath::number_slots(slots);
+        scene = build(d.desc, cache);
     }
     GradientCall(const GradientCall&) = delete;
     GradientCall& operator=(const GradientCall&) = delete;
@@ -412,15 +517,46 @@ struct GradientCall {
 };
 
 void render_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
-                      nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options) {
-    GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads);
+                      nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options,
+                      SceneCache* cache) {
+    GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads, cache);
     const FloatView a = c.adjoint(adjoint, "the image");
     interruptible(c.opt, [&] { edgepath::render_gradients(*c.scene, c.opt, a.data(), c.slots); });
 }
 
+// The gradient pass of render_views: `adjoints` (V, H, W, 3); the scene's gradients (`grads`,
+// without "camera") summed over the views into one set of buffers, view k's camera gradient
+// into camera_grads[k] (None: not wanted).
+void render_views_gradients(const nb::list& cameras, const nb::list& materials, const nb::list& meshes,
+                            nb::object envmap, nb::handle adjoints, const nb::dict& grads,
+                            const nb::list& camera_grads, const nb::dict& options, SceneCache* cache) {
+    const std::vector<edgepath::CameraDesc> views = camera_descs(cameras);
+    if (grads.contains("camera")) fail("gradients.camera", "give the cameras' gradients in camera_grads");
+    if (camera_grads.size() != views.size()) fail("camera_grads", "must have one entry per view");
+    GradientCall c(true, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, options, nullptr, grads, cache);
+    std::vector<edgepath::GradSlot> camera_slots;
+    for (size_t k = 0; k < views.size(); ++k) {
+        nb::dict one;
+        if (!camera_grads[k].is_none()) one["camera"] = camera_grads[k];
+        camera_slots.push_back(c.views.slot(one, "camera", edgepath::kCameraParams,
+                                            "camera_grads[" + std::to_string(k) + "]"));
+        camera_slots.back().key = c.slots.camera.key;
+    }
+    const FloatView a = views_buffer<FloatView>(adjoints, *c.scene, views.size(), 3, "adjoint", "a");
+    const size_t pixels = a.size() / views.size();
+    interruptible(c.opt, [&] {
+        for (size_t k = 0; k < views.size(); ++k) {
+            edgepath::set_scene_camera(*c.scene, views[k]);
+            c.slots.camera = camera_slots[k];
+            edgepath::render_gradients(*c.scene, c.opt, a.data() + k * pixels, c.slots);
+        }
+    });
+}
+
 void derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
-                      nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options) {
-    GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions);
+                      nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options,
+                      SceneCache* cache) {
+    GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions, cache);
     const ImageOut out = image_buffer(image, *c.scene, "image");
     interruptible(c.opt, [&] { edgepath::derivative_image(*c.scene, c.opt, c.slots, out.data()); });
 }
@@ -453,35 +589,31 @@ Out channel_buffer(nb::handle obj, const edgepath::Scene& scene, int channels, c
 
 nb::dict render_channels(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                          nb::object envmap, const std::vector<std::string>& channels, nb::handle values,
-                         nb::handle ids, const nb::dict& options) {
+                         nb::handle ids, const nb::dict& options, SceneCache* cache) {
     Described d;
     describe(d, camera, materials, meshes, envmap);
     edgepath::RenderOptions opt = render_options(options);
     const edgepath::ChannelLayout layout = channel_layout(channels);
-    std::shared_ptr<const edgepath::Scene> scene = build(d.desc);
+    const CallScene scene = build(d.desc, cache);
     const ImageOut v = channel_buffer<ImageOut>(values, *scene, layout.num_values, "values", "float32");
     const IdsOut i = channel_buffer<IdsOut>(ids, *scene, layout.num_ids, "ids", "int32");
-    const edgepath::RenderStats stats =
-        interruptible(opt, [&] { return edgepath::render_channels(*scene, opt, layout, v.data(), i.data()); });
-    nb::dict result;
-    result["camera_rays"] = stats.camera_rays;
-    result["shadow_rays"] = stats.shadow_rays;
-    result["bounce_rays"] = stats.bounce_rays;
-    return result;
+    return stats_dict(
+        interruptible(opt, [&] { return edgepath::render_channels(*scene, opt, layout, v.data(), i.data()); }));
 }
 
 void channel_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                        nb::object envmap, const std::vector<std::string>& channels, nb::handle adjoint,
-                       const nb::dict& grads, const nb::dict& options) {
-    GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads);
+                       const nb::dict& grads, const nb::dict& options, SceneCache* cache) {
+    GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads, cache);
     const FloatView a = c.adjoint(adjoint, "the channels' values");
     interruptible(c.opt, [&] { edgepath::channel_gradients(*c.scene, c.opt, c.layout, a.data(), c.slots); });
 }
 
 void channel_derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                               nb::object envmap, const std::vector<std::string>& channels,
-                              const nb::dict& directions, nb::handle values, const nb::dict& options) {
-    GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions);
+                              const nb::dict& directions, nb::handle values, const nb::dict& options,
+                              SceneCache* cache) {
+    GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions, cache);
     const ImageOut out = channel_buffer<ImageOut>(values, *c.scene, c.layout.num_values, "values", "float32");
     interruptible(c.opt, [&] { edgepath::channel_derivative_image(*c.scene, c.opt, c.layout, c.slots, out.data()); });
 }
@@ -572,25 +704,60 @@ NB_MODULE(_core, m) {
         }
     });
 
+    nb::class_<SceneCache>(m, "SceneCache",
+                           "A core scene kept across calls: pass it as `cache` to the render and "
+                           "gradient functions, which update it from their description.")
+        .def(nb::init<>())
+        .def(
+            "counts",
+            [](SceneCache& c) {
+                nb::dict d;
+                edgepath::SceneBuildCounts n;
+                {
+                    // Waits for a call that holds the scene.
+                    nb::gil_scoped_release release;
+                    std::lock_guard<std::mutex> lock(c.mutex);
+                    if (c.scene) n = edgepath::scene_build_counts(*c.scene);
+                }
+                d["builds"] = n.builds;
+                d["refits"] = n.refits;
+                d["reuses"] = n.reuses;
+                return d;
+            },
+            "How often the kept scene was built, refitted and reused (zeros before its first "
+            "build; a failed update drops it and starts the counts again).");
+
     m.def("render", &render, "camera"_a, "materials"_a, "meshes"_a, "envmap"_a.none(),
-          "image"_a, "options"_a,
+          "image"_a, "options"_a, "cache"_a.none() = nb::none(),
           "Renders the described scene into `image` (H, W, 3) float32, in place. Returns the "
           "render counters as a dict.");
+    m.def("render_views", &render_views, "cameras"_a, "materials"_a, "meshes"_a,
+          "envmap"_a.none(), "images"_a, "options"_a, "cache"_a.none() = nb::none(),
+          "Renders the scene once per camera into `images` (V, H, W, 3) float32, in place; one "
+          "scene build. Returns the render counters summed over the views.");
     m.def("render_gradients", &render_gradients, "camera"_a, "materials"_a, "meshes"_a,
-          "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a,
+          "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a, "cache"_a.none() = nb::none(),
           "Adds d(sum(adjoint * image))/d(parameter) into the buffers of `gradients`.");
+    m.def("render_views_gradients", &render_views_gradients, "cameras"_a, "materials"_a,
+          "meshes"_a, "envmap"_a.none(), "adjoint"_a, "gradients"_a, "camera_grads"_a,
+          "options"_a, "cache"_a.none() = nb::none(),
+          "render_gradients over the views of render_views: the scene's gradients summed over "
+          "the views, view k's camera gradient into camera_grads[k].");
     m.def("derivative_image", &derivative_image, "camera"_a, "materials"_a, "meshes"_a,
-          "envmap"_a.none(), "directions"_a, "image"_a, "options"_a,
+          "envmap"_a.none(), "directions"_a, "image"_a, "options"_a, "cache"_a.none() = nb::none(),
           "Writes the derivative of the image along `directions` into `image` (H, W, 3).");
     m.def("render_channels", &render_channels, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "channels"_a, "values"_a, "ids"_a, "options"_a,
+          "cache"_a.none() = nb::none(),
           "Renders the named channels: the continuous ones into `values` (H, W, C) float32, the "
           "ids into `ids` (H, W, K) int32, in place. Returns the render counters as a dict.");
     m.def("channel_gradients", &channel_gradients, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "channels"_a, "adjoint"_a, "gradients"_a, "options"_a,
+          "cache"_a.none() = nb::none(),
           "Adds d(sum(adjoint * values))/d(parameter) into the buffers of `gradients`.");
     m.def("channel_derivative_image", &channel_derivative_image, "camera"_a, "materials"_a,
           "meshes"_a, "envmap"_a.none(), "channels"_a, "directions"_a, "values"_a, "options"_a,
+          "cache"_a.none() = nb::none(),
           "Writes the derivative of the channels' values along `directions` into `values`.");
     m.def("imread", &imread, "path"_a,
           "Reads a PNG/JPEG (linearised) or EXR file as a float32 (H, W, C) numpy array.");

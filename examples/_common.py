@@ -32,8 +32,10 @@ def parser(description: str, iterations: int, size: int, spp: int) -> argparse.A
 
 def run(main) -> None:
     """A script's entry point: ``main(command line)``; with ``--metrics FILE`` the figures it
-    returns are written to FILE as JSON (tensors as nested lists)."""
+    returns are written to FILE as JSON (tensors as nested lists), unless it returns None."""
     figures = main(sys.argv[1:])
+    if figures is None:
+        return
     option = argparse.ArgumentParser(add_help=False)
     option.add_argument("--metrics", default=None)
     path = option.parse_known_args()[0].metrics

@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 import threading
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import torch
 import torch.autograd.forward_ad as fwad
@@ -51,6 +51,7 @@ class FlatScene:
     height: int = 0  # size of the rendered image (the crop window if one is set)
     width: int = 0
     params: Dict[Slot, torch.Tensor] = field(default_factory=dict)
+    cache: Optional[object] = None  # the scene's _core.SceneCache (kept across calls)
 
     def core_args(self):
         return self.camera, self.materials, self.meshes, self.envmap
@@ -106,7 +107,8 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
            backward_spp: Optional[int] = None,
            backward_seed: Optional[int] = None, primary_edges: bool = True,
            secondary_edges: bool = True, edge_samples: Optional[int] = None,
-           edge_sampling: str = "importance") -> torch.Tensor:
+           edge_sampling: str = "importance",
+           cameras: Optional[Sequence[Camera]] = None) -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
 
@@ -126,12 +128,30 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     primary edge samples (default: one per output pixel per backward sample);
     ``edge_sampling``: "importance" (primary: silhouettes by clipped film length, stratified;
     secondary: the edge hierarchy, with a second sample towards the lights) or "uniform" (every
-    edge by world length: the baseline, for comparison)."""
+    edge by world length: the baseline, for comparison).
+
+    Many views: with ``cameras`` (a list of ``Camera`` of one film size), renders the scene once
+    per camera (``scene.camera`` is not used) and returns (V, H, W, 3), view k exactly the image
+    ``render`` gives with ``scene.camera = cameras[k]`` and the same options (the same seed for
+    every view); the scene is built once for all of them, and the backward pass is one core
+    call that sums the scene's gradients over the views. Each camera's parameters are
+    differentiable as ``scene.camera``'s are.
+
+    The core scene (the ray-tracing BVH, the edge list) is kept on ``scene`` across calls and
+    updated from what changed: nothing is rebuilt when only materials, lights, textures, the
+    environment or the camera change, the BVH is refitted when only vertices move, and rebuilt
+    when the topology does (``Scene.build_counts`` counts them)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
                              secondary_edges, edge_samples, edge_sampling)
-    flat = flatten_scene(scene)
+    if cameras is not None:
+        flat, views, view_params = _flatten_views(scene, cameras)
+    else:
+        flat = flatten_scene(scene)
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
-    if not attached or not torch.is_grad_enabled():
+    attached_views = [] if cameras is None else [(k, t) for k, t in enumerate(view_params) if t.requires_grad]
+    if (not attached and not attached_views) or not torch.is_grad_enabled():
+        if cameras is not None:
+            return render_views_flat(flat, views, options)
         image, _ = render_flat(flat, options)
         return image
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
@@ -139,7 +159,80 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
                                   num_threads, sampling, primary_edges, secondary_edges,
                                   edge_samples, edge_sampling)
     slots = [slot for slot, _ in attached]
+    if cameras is not None:
+        return _RenderViewsFunction.apply(flat, views, options, grad_options, slots,
+                                          [k for k, _ in attached_views],
+                                          *[t for _, t in attached + attached_views])
     return _RenderFunction.apply(flat, options, grad_options, slots, *[t for _, t in attached])
+
+
+def _flatten_views(scene: Scene, cameras) -> Tuple[FlatScene, List[dict], List[torch.Tensor]]:
+    """The flat scene seen by cameras[0] (without a camera slot: each view's is apart), the
+    cameras' core descriptions and their attached parameter vectors."""
+    if not isinstance(cameras, (list, tuple)) or len(cameras) == 0:
+        v.fail("cameras", f"expected a non-empty list of edgepath.Camera, got {cameras!r}")
+    views, params, size = [], [], None
+    for k, camera in enumerate(cameras):
+        one = FlatScene(camera={})
+        try:
+            _flatten_camera(camera, one)
+        except ValueError as error:
+            raise ValueError(re.sub(r"^camera\b", f"cameras[{k}]", str(error))) from None
+        crop = one.camera["crop_window"]
+        film = (one.camera["height"], one.camera["width"], crop)
+        if size is not None and film != size:
+            v.fail(f"cameras[{k}].resolution", f"film {film[:2]} with crop window {film[2]} differs from "
+                                              f"cameras[0]'s {size[:2]} with {size[2]}: the views "
+                                              "of one call share one film size")
+        size = film
+        views.append(one.camera)
+        params.append(one.params[("camera",)])
+    if not isinstance(scene, Scene):
+        v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
+    flat = flatten_scene(Scene(cameras[0], scene.meshes, scene.envmap))
+    del flat.params[("camera",)]
+    flat.cache = _scene_cache(scene)
+    return flat, views, params
+
+
+def render_views_flat(flat: FlatScene, views: List[dict], options: RenderOptions) -> torch.Tensor:
+    """One call into the core for every view: (V, H, W, 3)."""
+    images = torch.empty((len(views), flat.height, flat.width, 3), dtype=torch.float32)
+    _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), cache=flat.cache)
+    return images
+
+
+class _RenderViewsFunction(torch.autograd.Function):
+    """As _RenderFunction for many views. Inputs after the flat scene, the views' cameras and
+    the options: the scene's slots needing gradients, the indices of the views whose camera
+    needs them, then the tracked tensors of both, in that order."""
+
+    @staticmethod
+    def forward(ctx, flat, views, options, grad_options, slots, view_indices, *tensors):
+        images = render_views_flat(flat, views, options)
+        _save_inputs(ctx, flat, tensors)
+        ctx.flat, ctx.views, ctx.grad_options = flat, views, grad_options
+        ctx.slots, ctx.view_indices = slots, view_indices
+        return images
+
+    @staticmethod
+    def backward(ctx, grad_images):
+        flat, n = ctx.flat, len(ctx.slots)
+        _check_saved_inputs(ctx)
+        needed = ctx.needs_input_grad[6:]
+        buffers = {slot: torch.zeros(flat.params[slot].shape, dtype=torch.float32)
+                   for slot, need in zip(ctx.slots, needed[:n]) if need}
+        camera_grads = [None] * len(ctx.views)
+        for k, need, t in zip(ctx.view_indices, needed[n:], ctx.saved_tensors[n:]):
+            if need:
+                camera_grads[k] = torch.zeros(t.shape, dtype=torch.float32)
+        if buffers or any(g is not None for g in camera_grads):
+            adjoint = grad_images.detach().to(torch.float32).contiguous()
+            _call_core(_core.render_views_gradients, ctx.views, *flat.core_args()[1:], adjoint,
+                       flat.slot_buffers(buffers), camera_grads, ctx.grad_options.core(),
+                       cache=flat.cache)
+        gradients = [buffers.get(s) for s in ctx.slots] + [camera_grads[k] for k in ctx.view_indices]
+        return (None,) * 6 + tuple(_first_order_only(ctx, gradients))
 
 
 class _RenderFunction(torch.autograd.Function):
@@ -163,7 +256,7 @@ class _RenderFunction(torch.autograd.Function):
         if buffers:
             adjoint = grad_image.detach().to(torch.float32).contiguous()
             _call_core(_core.render_gradients, *flat.core_args(), adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core())
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache)
         return (None, None, None, None, *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
 
@@ -230,7 +323,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
     if directions:
         _call_core(_core.derivative_image, *flat.core_args(), flat.slot_buffers(directions),
-                   image, options.core())
+                   image, options.core(), cache=flat.cache)
     else:
         image.zero_()
     return image
@@ -298,7 +391,8 @@ def render_channels_flat(flat: FlatScene, names: List[str],
     ni = sum(1 for n in names if n in ID_CHANNELS)
     values = torch.empty((flat.height, flat.width, nv), dtype=torch.float32)
     ids = torch.empty((flat.height, flat.width, ni), dtype=torch.int32)
-    stats = _call_core(_core.render_channels, *flat.core_args(), names, values, ids, options.core())
+    stats = _call_core(_core.render_channels, *flat.core_args(), names, values, ids, options.core(),
+                       cache=flat.cache)
     return values, ids, stats
 
 
@@ -324,7 +418,7 @@ class _ChannelsFunction(torch.autograd.Function):
         if buffers and grad_values is not None:
             adjoint = grad_values.detach().to(torch.float32).contiguous()
             _call_core(_core.channel_gradients, *flat.core_args(), ctx.names, adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core())
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache)
         return (None, None, None, None, None,
                 *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
@@ -346,7 +440,7 @@ def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tens
     values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
     if directions:
         _call_core(_core.channel_derivative_image, *flat.core_args(), names,
-                   flat.slot_buffers(directions), values, options.core())
+                   flat.slot_buffers(directions), values, options.core(), cache=flat.cache)
     else:
         values.zero_()
     return _split_channels(names, values, None)
@@ -426,14 +520,22 @@ def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mi
 def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, dict]:
     """One call into the core. Returns the image and the core's counters."""
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
-    stats = _call_core(_core.render, *flat.core_args(), image, options.core())
+    stats = _call_core(_core.render, *flat.core_args(), image, options.core(), cache=flat.cache)
     return image, stats
+
+
+def _scene_cache(scene: Scene):
+    """The core scene kept on ``scene`` across calls (created on first use)."""
+    cache = getattr(scene, "_core_cache", None)
+    if cache is None:
+        cache = scene._core_cache = _core.SceneCache()
+    return cache
 
 
 def flatten_scene(scene: Scene) -> FlatScene:
     if not isinstance(scene, Scene):
         v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
-    flat = FlatScene(camera={})
+    flat = FlatScene(camera={}, cache=_scene_cache(scene))
     _flatten_camera(scene.camera, flat)
     crop = flat.camera.get("crop_window")
     flat.height = crop[3] if crop else flat.camera["height"]
@@ -454,9 +556,9 @@ def flatten_scene(scene: Scene) -> FlatScene:
 
 # ---- pieces -------------------------------------------------------------------------------
 
-def _call_core(fn, *args):
+def _call_core(fn, *args, cache=None):
     try:
-        return fn(*args)
+        return fn(*args, cache=cache)
     except ValueError as error:
         raise ValueError(_user_field_names(str(error))) from None
 

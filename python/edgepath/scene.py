@@ -146,6 +146,22 @@ class Scene:
         self.camera = camera
         self.meshes = meshes
         self.envmap = envmap
+        # The renderer's own scene (ray-tracing BVH, edge list), kept across renders and
+        # updated from what changed (edgepath.render); never copied with the scene.
+        self._core_cache = None
+
+    def build_counts(self) -> dict:
+        """How often renders of this scene built its ray-tracing structures afresh
+        (``"builds"``: the first render, and any change of topology), refitted them (``"refits"``:
+        only vertex positions moved) and reused them (``"reuses"``: only materials, lights,
+        textures, the environment or the camera changed, or nothing)."""
+        cache = getattr(self, "_core_cache", None)
+        return cache.counts() if cache is not None else {"builds": 0, "refits": 0, "reuses": 0}
+
+    def __getstate__(self):
+        state = dict(self.__dict__)
+        state["_core_cache"] = None
+        return state
 
     def __repr__(self):
         return f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r})"

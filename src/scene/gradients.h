@@ -12,6 +12,10 @@ namespace edgepath {
 struct GradSlot {
     float* grad = nullptr;       // reverse mode
     const float* dir = nullptr;  // forward mode
+    // Where the slot's values sit in a GradSink's cache (number_slots): a key independent of
+    // where the buffer happens to be allocated, so that one thread's sums come out the same,
+    // bit for bit, whatever memory the buffers get.
+    uint32_t key = 0;
     bool wanted() const { return grad != nullptr || dir != nullptr; }
 };
 
@@ -28,6 +32,16 @@ struct SceneGradients {
     GradSlot envmap_rotation;             // 9 values: the row-major to_world rotation
     GradSlot camera;                      // kCameraParams values (see scene/camera.h)
 };
+
+// Gives every slot of `g` a key of its own (GradSlot::key), in a fixed order.
+inline void number_slots(SceneGradients& g) {
+    uint32_t key = 0;
+    for (GradSlot* s : {&g.camera, &g.envmap, &g.envmap_rotation}) s->key = key++;
+    for (auto& m : g.meshes)
+        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission}) s->key = key++;
+    for (auto& m : g.materials)
+        for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness}) s->key = key++;
+}
 
 inline void atomic_add(float* p, float v) {
     float old, desired;
@@ -54,11 +68,12 @@ public:
         }
         if (!slot.grad) return;
         float* p = slot.grad + i;
-        // Up to kWays entries from the home one: two hot parameters whose addresses collide
-        // (a camera parameter and a vertex, say) then both stay in double precision, instead
-        // of flushing each other at every sample (float atomic adds of partial sums, in an
-        // order that depends on the threads' timing).
-        const size_t home = (reinterpret_cast<uintptr_t>(p) >> 2) & (kCacheSize - 1);
+        // The home entry is found from the slot's key and the index, never from the address,
+        // so which entries collide does not depend on the allocation. Up to kWays entries from
+        // the home one: two hot parameters that collide (a camera parameter and a vertex, say)
+        // then both stay in double precision, instead of flushing each other at every sample
+        // (float atomic adds of partial sums, in an order that depends on the threads' timing).
+        const size_t home = size_t(uint64_t(i) + uint64_t(slot.key) * kKeyStride) & (kCacheSize - 1);
         Entry* free_entry = nullptr;
         for (int k = 0; k < kWays; ++k) {
             Entry& e = cache_[(home + size_t(k)) & (kCacheSize - 1)];
@@ -97,6 +112,7 @@ public:
 
 private:
     static constexpr int kCacheSize = 256, kWays = 4;
+    static constexpr uint64_t kKeyStride = 97;  // slots' first values spread over the cache
     unsigned evict_ = 0;
     struct Entry {
         float* ptr;

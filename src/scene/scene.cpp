@@ -160,7 +160,10 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
 }  // namespace
 
 const std::vector<Edge>& Scene::edges() const {
-    std::call_once(edges_once_, [this] {
+    if (edges_ready_.load(std::memory_order_acquire)) return edges_;
+    std::lock_guard<std::mutex> lock(edges_mutex_);
+    if (!edges_ready_.load(std::memory_order_relaxed)) {
+        edges_.clear();
         for (size_t i = 0; i < meshes.size(); ++i) {
             const Mesh& m = meshes[i];
             MeshDesc d;
@@ -174,7 +177,8 @@ const std::vector<Edge>& Scene::edges() const {
             d.uv_indices = m.uv_indices;
             build_mesh_edges(d, int32_t(i), edges_);
         }
-    });
+        edges_ready_.store(true, std::memory_order_release);
+    }
     return edges_;
 }
 
@@ -182,7 +186,9 @@ Scene::~Scene() {
     if (rtc_) rtcReleaseScene(rtc_);
 }
 
-std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
+namespace {
+
+void validate(const SceneDesc& desc) {
     validate_camera(desc.camera);
     if (desc.meshes.empty()) fail("meshes", "the scene has no meshes");
     for (size_t i = 0; i < desc.materials.size(); ++i) {
@@ -200,33 +206,116 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
             fail("envmap.scale", "must be finite and non-negative, got " + str(desc.envmap.scale));
         check_radiance(desc.envmap.values, desc.envmap.scale, "envmap.values");
     }
+}
 
+template <class T>
+std::vector<T> copy_of(const T* data, int64_t n) {
+    return data ? std::vector<T>(data, data + n) : std::vector<T>();
+}
+
+template <class T>
+bool same(const std::vector<T>& kept, const T* data, int64_t n) {
+    if (!data) return kept.empty();
+    return kept.size() == size_t(n) && std::equal(kept.begin(), kept.end(), data);
+}
+
+// The index buffer Embree gets for triangle t: a degenerate triangle collapsed to its first
+// vertex (it keeps its primitive id, so hits index the caller's triangles, and has exactly zero
+// area, so no ray hits it). Returns whether it is degenerate.
+bool embree_triangle(const Mesh& m, int64_t t, uint32_t* out) {
+    const int32_t* tri = m.indices + 3 * t;
+    const bool skip = m.is_degenerate(t);
+    for (int k = 0; k < 3; ++k) out[k] = uint32_t(tri[skip ? 0 : k]);
+    return skip;
+}
+
+}  // namespace
+
+std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     std::shared_ptr<Scene> s(new Scene());
-    const CameraDesc& cd = desc.camera;
-    s->camera = Camera::from_desc(cd);
-    s->camera_params = TCameraParams<float>::from_desc(cd);
-    s->filter.build(cd.filter, cd.filter_stddev);
-    s->crop_x = cd.crop_x;
-    s->crop_y = cd.crop_y;
-    s->out_width = cd.crop_width ? cd.crop_width : cd.width;
-    s->out_height = cd.crop_height ? cd.crop_height : cd.height;
+    s->update(desc);
+    return s;
+}
 
+Scene::Update Scene::update(const SceneDesc& desc) {
+    validate(desc);
+    const size_t n = desc.meshes.size();
+    bool same_topology = rtc_ != nullptr && kept_.size() == n;
+    bool same_vertices = same_topology, same_shading = same_topology;
+    for (size_t i = 0; i < n && same_topology; ++i) {
+        const MeshDesc& md = desc.meshes[i];
+        const Kept& k = kept_[i];
+        same_topology = md.num_vertices == k.num_vertices && same(k.indices, md.indices, 3 * md.num_triangles) &&
+                        same(k.uv_indices, md.uv_indices, 3 * md.num_triangles) &&
+                        same(k.normal_indices, md.normal_indices, 3 * md.num_triangles) &&
+                        (md.uvs == nullptr) == (k.num_uvs < 0) && (md.uvs == nullptr || md.num_uvs == k.num_uvs) &&
+                        (md.normals == nullptr) == (k.num_normals < 0) &&
+                        (md.normals == nullptr || md.num_normals == k.num_normals);
+        if (!same_topology) break;
+        same_vertices = same_vertices && same(k.vertices, md.vertices, 3 * md.num_vertices);
+        same_shading = same_shading && same(k.uvs, md.uvs, 2 * md.num_uvs) &&
+                       same(k.normals, md.normals, 3 * md.num_normals);
+    }
+    set_views(desc);
+    Update what = Update::Reused;
+    if (!same_topology || (!same_vertices && !refit_geometry())) {
+        // A scene whose vertices have moved once is built for refitting from then on (Embree's
+        // refittable BVH traces a little slower than its static one).
+        build_geometry(refittable_ || (same_topology && !same_vertices));
+        what = Update::Built;
+    } else if (!same_vertices) {
+        what = Update::Refit;
+    }
+    if (what != Update::Reused || !same_shading) {
+        // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use.
+        edges_ready_.store(false, std::memory_order_relaxed);
+        kept_.resize(n);
+        for (size_t i = 0; i < n; ++i) {
+            const MeshDesc& md = desc.meshes[i];
+            Kept& k = kept_[i];
+            k.num_vertices = md.num_vertices;
+            k.vertices = copy_of(md.vertices, 3 * md.num_vertices);
+            k.indices = copy_of(md.indices, 3 * md.num_triangles);
+            k.uv_indices = copy_of(md.uv_indices, 3 * md.num_triangles);
+            k.normal_indices = copy_of(md.normal_indices, 3 * md.num_triangles);
+            k.num_uvs = md.uvs ? md.num_uvs : -1;
+            k.uvs = copy_of(md.uvs, 2 * md.num_uvs);
+            k.num_normals = md.normals ? md.num_normals : -1;
+            k.normals = copy_of(md.normals, 3 * md.num_normals);
+        }
+    }
+    build_lights();
+    ++(what == Update::Built ? stats_.builds : what == Update::Refit ? stats_.refits : stats_.reuses);
+    return what;
+}
+
+void Scene::set_camera(const CameraDesc& cd) {
+    validate_camera(cd);
+    camera = Camera::from_desc(cd);
+    camera_params = TCameraParams<float>::from_desc(cd);
+    filter.build(cd.filter, cd.filter_stddev);
+    crop_x = cd.crop_x;
+    crop_y = cd.crop_y;
+    out_width = cd.crop_width ? cd.crop_width : cd.width;
+    out_height = cd.crop_height ? cd.crop_height : cd.height;
+}
+
+void Scene::set_views(const SceneDesc& desc) {
+    set_camera(desc.camera);
+    materials.clear();
     for (const MaterialDesc& md : desc.materials) {
         Material m;
         m.diffuse = Texture(md.diffuse);
         m.specular = Texture(md.specular);
         m.roughness = Texture(md.roughness);
         m.two_sided = md.two_sided;
-        s->materials.push_back(m);
+        materials.push_back(m);
     }
 
-    RTCDevice device = shared_device();
-    s->rtc_ = rtcNewScene(device);
-    rtcSetSceneFlags(s->rtc_, RTC_SCENE_FLAG_ROBUST);
-    std::vector<double> light_weights;
+    meshes.resize(desc.meshes.size());
     for (size_t i = 0; i < desc.meshes.size(); ++i) {
         const MeshDesc& md = desc.meshes[i];
-        Mesh m;
+        Mesh& m = meshes[i];
         m.vertices = md.vertices;
         m.num_vertices = md.num_vertices;
         m.indices = md.indices;
@@ -238,47 +327,87 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
         m.material = md.material;
         m.emission = Texture(md.emission);
         m.two_sided_emission = md.two_sided_emission;
-
-        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-        float* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                                3 * sizeof(float), size_t(md.num_vertices)));
-        std::copy(md.vertices, md.vertices + 3 * md.num_vertices, vb);
-        uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                      3 * sizeof(uint32_t), size_t(md.num_triangles)));
-        for (int64_t t = 0; t < md.num_triangles; ++t) {
-            const int32_t* tri = md.indices + 3 * t;
-            // A degenerate triangle goes to Embree collapsed to one point: it keeps its primitive
-            // id (hits index the caller's triangles) and has exactly zero area, so no ray hits it.
-            const bool skip = m.is_degenerate(t);
-            m.num_degenerate += skip;
-            for (int k = 0; k < 3; ++k) ib[3 * t + k] = uint32_t(tri[skip ? 0 : k]);
-        }
-        rtcCommitGeometry(g);
-        rtcAttachGeometryByID(s->rtc_, g, unsigned(i));
-        rtcReleaseGeometry(g);
-
-        if (m.is_emitter()) {
-            m.light_offset = int64_t(s->lights.size());
-            double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
-            for (int64_t t = 0; t < m.num_triangles; ++t) {
-                Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
-                float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
-                s->lights.push_back({int(i), t, area});
-                light_weights.push_back(area * power);
-            }
-        }
-        s->meshes.push_back(m);
     }
-    rtcCommitScene(s->rtc_);
-    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
 
-    s->light_distribution.build(light_weights);
+    has_envmap = desc.has_envmap;
+    envmap = Envmap();
+    env_sampled = false;
     if (desc.has_envmap) {
-        s->has_envmap = true;
-        s->envmap.build(desc.envmap);
-        s->env_sampled = s->envmap.dist.valid() && s->envmap.scale > 0.f;
+        envmap.build(desc.envmap);
+        env_sampled = envmap.dist.valid() && envmap.scale > 0.f;
     }
-    return s;
+}
+
+void Scene::build_geometry(bool refittable) {
+    RTCDevice device = shared_device();
+    if (rtc_) rtcReleaseScene(rtc_);
+    rtc_ = rtcNewScene(device);
+    rtcSetSceneFlags(rtc_, refittable ? RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC : RTC_SCENE_FLAG_ROBUST);
+    for (size_t i = 0; i < meshes.size(); ++i) {
+        Mesh& m = meshes[i];
+        RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
+        if (refittable) rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
+        float* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
+                                                                3 * sizeof(float), size_t(m.num_vertices)));
+        std::copy(m.vertices, m.vertices + 3 * m.num_vertices, vb);
+        uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
+                                                                      3 * sizeof(uint32_t), size_t(m.num_triangles)));
+        m.num_degenerate = 0;
+        for (int64_t t = 0; t < m.num_triangles; ++t) m.num_degenerate += embree_triangle(m, t, ib + 3 * t);
+        rtcCommitGeometry(g);
+        rtcAttachGeometryByID(rtc_, g, unsigned(i));
+        rtcReleaseGeometry(g);
+    }
+    rtcCommitScene(rtc_);
+    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
+    refittable_ = refittable;
+}
+
+bool Scene::refit_geometry() {
+    if (!refittable_) return false;
+    // Which triangles are degenerate depends on the positions; a change of that changes the
+    // index buffer Embree holds, which a refit does not take: rebuilt instead.
+    for (size_t i = 0; i < meshes.size(); ++i) {
+        const Mesh& m = meshes[i];
+        const uint32_t* ib =
+            static_cast<const uint32_t*>(rtcGetGeometryBufferData(rtcGetGeometry(rtc_, unsigned(i)), RTC_BUFFER_TYPE_INDEX, 0));
+        uint32_t tri[3];
+        for (int64_t t = 0; t < m.num_triangles; ++t) {
+            embree_triangle(m, t, tri);
+            if (tri[0] != ib[3 * t] || tri[1] != ib[3 * t + 1] || tri[2] != ib[3 * t + 2]) return false;
+        }
+    }
+    for (size_t i = 0; i < meshes.size(); ++i) {
+        const Mesh& m = meshes[i];
+        RTCGeometry g = rtcGetGeometry(rtc_, unsigned(i));
+        float* vb = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
+        std::copy(m.vertices, m.vertices + 3 * m.num_vertices, vb);
+        rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
+        rtcCommitGeometry(g);
+    }
+    rtcCommitScene(rtc_);
+    if (rtcGetDeviceError(shared_device()) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene refit failed");
+    return true;
+}
+
+void Scene::build_lights() {
+    lights.clear();
+    std::vector<double> light_weights;
+    for (size_t i = 0; i < meshes.size(); ++i) {
+        Mesh& m = meshes[i];
+        m.light_offset = -1;
+        if (!m.is_emitter()) continue;
+        m.light_offset = int64_t(lights.size());
+        double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
+        for (int64_t t = 0; t < m.num_triangles; ++t) {
+            Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
+            float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
+            lights.push_back({int(i), t, area});
+            light_weights.push_back(area * power);
+        }
+    }
+    light_distribution = Distribution1D();
+    light_distribution.build(light_weights);
 }
 
 bool Scene::intersect(const Ray& ray, Hit& hit) const {

@@ -1,7 +1,9 @@
 // The scene as the kernels see it: validated views over the caller's arrays, an Embree BVH, and
-// the light-sampling distributions. Built once per render call by build_scene().
+// the light-sampling distributions. Built by build_scene(); update() points it at a new
+// description of the scene and rebuilds only what changed, so that it lives across calls.
 #pragma once
 #include <cstdint>
+#include <atomic>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -126,6 +128,25 @@ public:
     // Validates (std::invalid_argument naming the field) and builds.
     static std::shared_ptr<Scene> build(const SceneDesc& desc);
 
+    // Validates `desc` and points the scene at it (as build() would: afterwards the scene keeps
+    // pointers into the memory `desc` views), rebuilding only what its contents changed, found
+    // by comparing them with copies kept from the last build: the Embree BVH and the edge list
+    // when the topology changes (mesh count, vertex counts, the index arrays, whether uvs and
+    // normals are given); an Embree refit when only vertex positions move (the first time, a
+    // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
+    // one); nothing for materials, textures, emission, lights, the environment and the camera,
+    // which are only views. Returns what it did. Not thread-safe: no other call may use the
+    // scene meanwhile. If it throws, the scene must not be used until an update succeeds.
+    enum class Update { Built, Refit, Reused };
+    Update update(const SceneDesc& desc);
+    struct BuildStats {
+        uint64_t builds = 0, refits = 0, reuses = 0;  // update() calls (build() counts one build)
+    };
+    const BuildStats& build_stats() const { return stats_; }
+    // Another view of the same scene: validates `camera` and replaces the camera, its film and
+    // crop window (nothing else depends on them). Not thread-safe, as update().
+    void set_camera(const CameraDesc& camera);
+
     Camera camera;
     TCameraParams<float> camera_params;  // the same camera, as differentiable parameters
     PixelFilter filter;
@@ -175,8 +196,24 @@ public:
 
 private:
     Scene() = default;
+    void set_views(const SceneDesc& desc);
+    void build_geometry(bool refittable);
+    bool refit_geometry();  // false: it cannot (a build is needed)
+    void build_lights();
+
     RTCScene rtc_ = nullptr;
-    mutable std::once_flag edges_once_;
+    bool refittable_ = false;  // the BVH was built for refitting
+    // The arrays of the last build that the BVH and the edge list depend on, per mesh (uvs and
+    // normals count -1 when not given).
+    struct Kept {
+        int64_t num_vertices = 0, num_uvs = -1, num_normals = -1;
+        std::vector<float> vertices, uvs, normals;
+        std::vector<int32_t> indices, uv_indices, normal_indices;
+    };
+    std::vector<Kept> kept_;
+    BuildStats stats_;
+    mutable std::mutex edges_mutex_;
+    mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
 };
 

@@ -1,0 +1,228 @@
+"""The core scene kept across renders (``Scene._core_cache``): whatever changes between calls,
+the image and the gradients equal those of a scene built afresh, bit for bit (one thread: the
+gradient sums are then in a fixed order), and only what changed is rebuilt (``build_counts``).
+"""
+
+import pytest
+import torch
+
+import edgepath as ep
+
+SPP = 2
+RES = (20, 24)
+
+
+def make_scene():
+    """A box on a floor under a square lamp, with an environment map; the parameters a test
+    may differentiate are leaves that require grad."""
+    box_v, box_i = ep.shapes.box(center=(0.0, 0.5, 0.0), half=(0.5, 0.5, 0.5))
+    floor_v, floor_i = ep.shapes.quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]])
+    lamp_v, lamp_i = ep.shapes.quad([[-0.5, 3, -0.5], [0.5, 3, -0.5], [0.5, 3, 0.5], [-0.5, 3, 0.5]])
+    camera = ep.Camera(position=torch.tensor([2.0, 2.5, -4.0], requires_grad=True),
+                       look_at=torch.tensor([0.0, 0.5, 0.0]), fov=40.0, resolution=RES)
+    box = ep.Mesh(box_v.clone().requires_grad_(), box_i,
+                  material=ep.Material(diffuse=torch.tensor([0.6, 0.4, 0.3], requires_grad=True),
+                                       specular=0.2,
+                                       roughness=torch.tensor([0.4], requires_grad=True)))
+    floor = ep.Mesh(floor_v, floor_i, material=ep.Material(diffuse=0.5))
+    lamp = ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([6.0, 6.0, 5.0], requires_grad=True))
+    envmap = ep.EnvironmentMap(values=torch.full((4, 8, 3), 0.2).requires_grad_())
+    return ep.Scene(camera=camera, meshes=[box, floor, lamp], envmap=envmap)
+
+
+def leaves(scene):
+    out = [scene.camera.position] + ([scene.envmap.values] if scene.envmap is not None else [])
+    for mesh in scene.meshes:
+        out += [mesh.vertices, mesh.emission]
+        if mesh.material is not None:
+            out += [mesh.material.diffuse, mesh.material.roughness]
+    return [t for t in out if isinstance(t, torch.Tensor) and t.requires_grad]
+
+
+def image_and_gradients(scene):
+    image = ep.render(scene, spp=SPP, num_threads=1, seed=3, backward_seed=5)
+    weight = torch.linspace(-1.0, 2.0, image.numel()).reshape(image.shape)
+    params = leaves(scene)
+    return image.detach(), torch.autograd.grad((image * weight).sum(), params)
+
+
+def fresh(scene):
+    """The same tensors in a new Scene object: no kept core scene."""
+    return ep.Scene(camera=scene.camera, meshes=list(scene.meshes), envmap=scene.envmap)
+
+
+def assert_same_as_fresh(scene):
+    image, grads = image_and_gradients(scene)
+    image_fresh, grads_fresh = image_and_gradients(fresh(scene))
+    assert torch.equal(image, image_fresh)
+    assert len(grads) == len(grads_fresh)
+    for g, h in zip(grads, grads_fresh):
+        assert torch.equal(g, h)
+
+
+def counts_after(scene, change):
+    before = scene.build_counts()
+    change()
+    assert_same_as_fresh(scene)
+    after = scene.build_counts()
+    return {k: after[k] - before[k] for k in after}
+
+
+def test_gradients_are_bit_reproducible_on_one_thread():
+    """The gradient buffers land at other addresses each call; the sums must not care."""
+    scene = make_scene()
+    _, first = image_and_gradients(fresh(scene))
+    keep = [torch.zeros(1000) for _ in range(50)]  # other allocations in between
+    _, second = image_and_gradients(fresh(scene))
+    del keep
+    for g, h in zip(first, second):
+        assert torch.equal(g, h)
+
+
+def test_each_kind_of_change_gives_the_fresh_scene_and_rebuilds_only_what_it_must():
+    scene = make_scene()
+    box, floor, lamp = scene.meshes
+    assert scene.build_counts() == {"builds": 0, "refits": 0, "reuses": 0}
+    assert_same_as_fresh(scene)
+    # Forward and backward: one build, then the backward pass reuses it.
+    assert scene.build_counts() == {"builds": 1, "refits": 0, "reuses": 1}
+    nothing_rebuilt = {"builds": 0, "refits": 0, "reuses": 2}
+
+    def material_colour():
+        with torch.no_grad():
+            box.material.diffuse.mul_(0.8)
+
+    def roughness():
+        box.material.roughness = torch.tensor([0.25], requires_grad=True)
+
+    def light():
+        with torch.no_grad():
+            lamp.emission.add_(1.0)
+
+    def camera():
+        with torch.no_grad():
+            scene.camera.position.add_(torch.tensor([0.1, -0.1, 0.05]))
+
+    def envmap():
+        with torch.no_grad():
+            scene.envmap.values[1, 2] = 1.5
+
+    for change in (material_colour, roughness, light, camera, envmap):
+        assert counts_after(scene, change) == nothing_rebuilt, change.__name__
+
+    def move_vertices():
+        with torch.no_grad():
+            box.vertices[:, 1] += 0.05 * box.vertices[:, 0]
+
+    # The first move builds a BVH that can be refitted; later moves refit it.
+    assert counts_after(scene, move_vertices) == {"builds": 1, "refits": 0, "reuses": 1}
+    assert counts_after(scene, move_vertices) == {"builds": 0, "refits": 1, "reuses": 1}
+
+    def new_vertices_same_shape():
+        box.vertices = (box.vertices.detach() * 1.01).requires_grad_()
+
+    assert counts_after(scene, new_vertices_same_shape) == {"builds": 0, "refits": 1, "reuses": 1}
+
+    def topology():  # the same shape, other triangles: two faces' winding flipped
+        indices = box.indices.clone()
+        indices[:2] = indices[:2].flip(1)
+        box.indices = indices
+
+    assert counts_after(scene, topology) == {"builds": 1, "refits": 0, "reuses": 1}
+
+    def indices_in_place():
+        with torch.no_grad():
+            box.indices[2:4] = box.indices[2:4].flip(1).clone()
+
+    assert counts_after(scene, indices_in_place) == {"builds": 1, "refits": 0, "reuses": 1}
+
+    def add_mesh():
+        v, i = ep.shapes.box(center=(-1.2, 0.3, 0.5), half=(0.2, 0.3, 0.2))
+        scene.meshes.append(ep.Mesh(v.requires_grad_(), i, material=ep.Material(diffuse=0.3)))
+
+    assert counts_after(scene, add_mesh) == {"builds": 1, "refits": 0, "reuses": 1}
+
+    def remove_envmap():
+        scene.envmap = None
+
+    assert counts_after(scene, remove_envmap) == nothing_rebuilt
+
+
+def test_never_stale():
+    """Edits the kept scene cannot see by shape or identity: in place under no_grad, a new
+    tensor of the same shape and dtype, an int64 index tensor converted anew, uvs that change
+    only the edge list (a uv seam), a degenerate triangle appearing."""
+    scene = make_scene()
+    box = scene.meshes[0]
+    assert_same_as_fresh(scene)
+
+    def vertex_in_place():
+        with torch.no_grad():
+            box.vertices[0, 0] += 0.2
+
+    def swap_vertices_for_equal_copy_then_edit():
+        box.vertices = box.vertices.detach().clone().requires_grad_()
+        with torch.no_grad():
+            box.vertices[3] *= 0.9
+
+    def int64_indices():
+        box.indices = box.indices.to(torch.int64).flip(0)
+
+    def uvs():
+        box.uvs = torch.rand(box.vertices.shape[0], 2, generator=torch.Generator().manual_seed(1))
+
+    def uvs_in_place():
+        with torch.no_grad():
+            box.uvs[0] = torch.tensor([0.9, 0.1])
+
+    def degenerate_triangle():
+        with torch.no_grad():
+            i0, i1, _ = box.indices[5].tolist()
+            box.vertices[i1] = box.vertices[i0]
+
+    for change in (vertex_in_place, swap_vertices_for_equal_copy_then_edit, int64_indices, uvs,
+                   uvs_in_place):
+        change()
+        assert_same_as_fresh(scene)
+    change = degenerate_triangle
+    change()
+    with pytest.warns(RuntimeWarning, match="degenerate"):
+        assert_same_as_fresh(scene)
+
+
+def test_a_failed_update_does_not_leave_a_broken_scene():
+    scene = make_scene()
+    assert_same_as_fresh(scene)
+    good = scene.meshes[0].vertices.detach().clone()
+    with torch.no_grad():
+        scene.meshes[0].vertices[0, 0] = float("nan")
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.vertices"):
+        ep.render(scene, spp=1)
+    with torch.no_grad():
+        scene.meshes[0].vertices.copy_(good)
+    assert_same_as_fresh(scene)
+
+
+def test_a_scene_rendered_from_threads_at_once():
+    """A call that finds the kept scene busy builds one of its own: no waiting, same images."""
+    from concurrent.futures import ThreadPoolExecutor
+    scene = make_scene()
+    with torch.no_grad():
+        expected = ep.render(fresh(scene), spp=SPP, num_threads=1)
+        with ThreadPoolExecutor(4) as pool:
+            images = list(pool.map(lambda _: ep.render(scene, spp=SPP, num_threads=1), range(8)))
+    for image in images:
+        assert torch.equal(image, expected)
+    counts = scene.build_counts()
+    assert counts["builds"] >= 1 and counts["builds"] + counts["reuses"] <= 8
+
+
+def test_copies_do_not_share_the_kept_scene():
+    import copy
+    scene = make_scene()
+    with torch.no_grad():
+        ep.render(scene, spp=1)
+    twin = copy.deepcopy(scene)
+    assert twin.build_counts() == {"builds": 0, "refits": 0, "reuses": 0}
+    with torch.no_grad():
+        assert torch.equal(ep.render(twin, spp=1), ep.render(scene, spp=1))
