@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# Runs the benchmark (forward and backward passes), then the backward-pass memory measurement
-# and the secondary-edge samplers' equal-time comparison.
+# Runs the benchmark (forward and backward passes), then the kept scene and many-views
+# measurement (bench/persist.py), the backward-pass memory measurement and the secondary-edge
+# samplers' equal-time comparison.
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
 # Without a path, looks for the binary in the usual build folders. Options go to the binary
 # (edgepath_bench --help lists them), e.g.  bench/run.sh --runs 9 --csv bench.csv
@@ -25,6 +26,13 @@ if [[ -z "$bin" || ! -x "$bin" ]]; then
     exit 1
 fi
 "$bin" "$@"
+# The scene kept across calls and many views per call, through the Python API (needs the
+# package installed: make setup; make bench puts the venv's python first on PATH).
+if python -c "import edgepath" 2>/dev/null; then
+    python "$root/bench/persist.py"
+else
+    echo "bench/persist.py skipped: the edgepath package is not importable (make setup)"
+fi
 # Memory of a large backward pass, in a process of its own (peak RSS is per process).
 "$bin" --backward-memory --size 1024 --spp 16
 # Secondary edges: the edge hierarchy against uniform sampling at equal time (a minute or two).

@@ -687,6 +687,9 @@ nb::list load_obj(const std::string& path) {
 
 NB_MODULE(_core, m) {
     m.doc() = "edgepath core bindings (internal; use the edgepath package)";
+    // Scenes still alive when the interpreter exits (a module-level scene, an autograd graph in
+    // a reference cycle) hold SceneCache instances; nanobind would report them as leaks.
+    nb::set_leak_warnings(false);
 
     nb::register_exception_translator([](const std::exception_ptr& p, void*) {
         try {

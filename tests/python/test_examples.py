@@ -80,3 +80,18 @@ def test_adversarial(tmp_path):
     assert raised or max(range(len(final)), key=final.__getitem__) == target
     assert len(r["probabilities"]["sphere"]) == 15
     assert (tmp_path / "probabilities.png").is_file()
+
+
+def test_multiview_distributed_matches_one_process(tmp_path):
+    """Two ranks (spawned processes, gloo), each rendering half the views, all-reduce the same
+    gradient one process gets from every view (to float rounding: other summation order)."""
+    import torch
+    options = ("--iterations", "1", "--size", "16", "--spp", "2", "--views", "4")
+    two = run("multiview_distributed", tmp_path / "two", *options, "--ranks", "2")
+    one = run("multiview_distributed", tmp_path / "one", *options, "--ranks", "1")
+    g2, g1 = torch.tensor(two["first_gradient"]), torch.tensor(one["first_gradient"])
+    scale = float(g1.abs().max())
+    assert scale > 0
+    torch.testing.assert_close(g2, g1, rtol=1e-4, atol=1e-5 * scale)
+    assert abs(two["loss"][0] - one["loss"][0]) <= 1e-6 * one["loss"][0]
+    assert (tmp_path / "two" / "result.png").is_file()

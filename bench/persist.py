@@ -1,0 +1,151 @@
+"""The scene kept across calls and many views per call, measured through the Python API (what
+an optimisation loop pays per step), on a scene of about 100k triangles (a finely tessellated
+sphere on a floor under a lamp).
+
+1. Material-only steps: render + backward with respect to a material colour, the colour changed
+   between steps. Before: a new ep.Scene every step, so every call builds the core scene (BVH,
+   light distribution), as every call did before scenes were kept. After: one ep.Scene, whose
+   core scene is reused (its build counts are printed: no build after the first step).
+2. Eight views of one scene: eight ep.render calls (each on a scene of its own, so each builds;
+   and on one kept scene, cameras swapped) against one call with cameras=[...] (one build).
+   Forward only, and render + backward with respect to the vertices.
+
+Configurations alternate within each run, so all see the same machine load; the figures are
+medians over runs, in wall time.
+
+    python bench/persist.py [--runs 5] [--size 256] [--spp 4] [--views 8] [--rings 224]
+"""
+
+import argparse
+import math
+import statistics
+import time
+
+import torch
+
+import edgepath as ep
+
+
+def make_meshes(rings: int):
+    v, i = ep.shapes.sphere(radius=1.0, rings=rings, segments=rings)[:2]
+    sphere = ep.Mesh(v, i, material=ep.Material(diffuse=torch.tensor([0.6, 0.5, 0.4]), specular=0.1,
+                                                roughness=0.3))
+    floor_v, floor_i = ep.shapes.quad([[-4, -1, -4], [-4, -1, 4], [4, -1, 4], [4, -1, -4]])
+    lamp_v, lamp_i = ep.shapes.quad([[-1, 4, -1], [1, 4, -1], [1, 4, 1], [-1, 4, 1]])
+    return [sphere, ep.Mesh(floor_v, floor_i),
+            ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([8.0, 8.0, 7.0]))]
+
+
+def cameras(count: int, size: int):
+    out = []
+    for k in range(count):
+        a = 2 * math.pi * k / count
+        out.append(ep.Camera(position=torch.tensor([3.5 * math.sin(a), 1.5, 3.5 * math.cos(a)]),
+                             look_at=torch.zeros(3), fov=45.0, resolution=(size, size)))
+    return out
+
+
+def timed(fn) -> float:
+    start = time.perf_counter()
+    fn()
+    return time.perf_counter() - start
+
+
+def main():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--runs", type=int, default=5)
+    p.add_argument("--size", type=int, default=256)
+    p.add_argument("--spp", type=int, default=4)
+    p.add_argument("--views", type=int, default=8)
+    p.add_argument("--rings", type=int, default=224, help="sphere tessellation (224: 100k triangles)")
+    args = p.parse_args()
+    meshes = make_meshes(args.rings)
+    triangles = sum(m.indices.shape[0] for m in meshes)
+    views = cameras(args.views, args.size)
+    print(f"scene kept across calls: {triangles} triangles, {args.size}x{args.size}, {args.spp} spp, "
+          f"{torch.get_num_threads()} threads, median of {args.runs} runs")
+
+    # 0. The build alone: a one-pixel render (crop window) of a new scene against the kept one.
+    pixel = ep.Camera(position=views[0].position, look_at=views[0].look_at, fov=45.0,
+                      resolution=(args.size, args.size), crop_window=(0, 0, 1, 1))
+    kept = ep.Scene(pixel, meshes)
+    ep.render(kept, spp=1)
+    build_times, reuse_times = [], []
+    for _ in range(args.runs):
+        build_times.append(timed(lambda: ep.render(ep.Scene(pixel, meshes), spp=1)))
+        reuse_times.append(timed(lambda: ep.render(kept, spp=1)))
+    print(f"one-pixel render: new scene {statistics.median(build_times) * 1e3:.1f} ms, kept scene "
+          f"{statistics.median(reuse_times) * 1e3:.1f} ms (the difference: one scene build)")
+
+    # 1. Material-only steps.
+    diffuse = meshes[0].material.diffuse.clone().requires_grad_()
+    meshes[0].material.diffuse = diffuse
+    kept = ep.Scene(views[0], meshes)
+
+    def step(scene):
+        image = ep.render(scene, spp=args.spp)
+        image.mean().backward()
+        with torch.no_grad():
+            diffuse.sub_(0.01 * diffuse.grad.sign())
+        diffuse.grad = None
+
+    step(kept)  # the first build
+    before = kept.build_counts()
+    fresh_times, kept_times = [], []
+    for _ in range(args.runs):
+        fresh_times.append(timed(lambda: step(ep.Scene(views[0], meshes))))
+        kept_times.append(timed(lambda: step(kept)))
+    after = kept.build_counts()
+    builds = after["builds"] - before["builds"]
+    fresh_t, kept_t = statistics.median(fresh_times), statistics.median(kept_times)
+    print(f"\nmaterial-only step (render + backward w.r.t. a colour), {args.runs} steps each:")
+    print(f"  new scene every step (builds every call)  {fresh_t * 1e3:8.1f} ms/step")
+    print(f"  kept scene                                {kept_t * 1e3:8.1f} ms/step   "
+          f"scene builds {builds}, refits {after['refits'] - before['refits']}, "
+          f"reuses {after['reuses'] - before['reuses']}")
+    print(f"  speed-up {fresh_t / kept_t:.2f}x")
+
+    # 2. Eight views.
+    meshes[0].material.diffuse = diffuse.detach()
+    vertices = meshes[0].vertices.clone().requires_grad_()
+    meshes[0].vertices = vertices
+    kept = ep.Scene(views[0], meshes)
+
+    def calls_fresh(backward):
+        for camera in views:
+            image = ep.render(ep.Scene(camera, meshes), spp=args.spp)
+            if backward:
+                image.mean().backward()
+
+    def calls_kept(backward):
+        for camera in views:
+            kept.camera = camera
+            image = ep.render(kept, spp=args.spp)
+            if backward:
+                image.mean().backward()
+
+    def one_call(backward):
+        images = ep.render(kept, cameras=views, spp=args.spp)
+        if backward:
+            images.mean(dim=(1, 2, 3)).sum().backward()
+
+    print(f"\n{args.views} views of {args.size}x{args.size}:")
+    for backward, label in ((False, "forward"), (True, "render + backward w.r.t. the vertices")):
+        times = {"fresh": [], "kept": [], "one": []}
+        for _ in range(args.runs):
+            with torch.set_grad_enabled(backward):
+                times["fresh"].append(timed(lambda: calls_fresh(backward)))
+                times["kept"].append(timed(lambda: calls_kept(backward)))
+                times["one"].append(timed(lambda: one_call(backward)))
+            vertices.grad = None
+        t = {k: statistics.median(v) for k, v in times.items()}
+        print(f"  {label}:")
+        print(f"    {args.views} calls, a scene each          {t['fresh']:7.3f} s")
+        print(f"    {args.views} calls, one kept scene       {t['kept']:7.3f} s")
+        print(f"    one call, cameras=[...]         {t['one']:7.3f} s")
+        print(f"    ratio {args.views} calls / one call: {t['fresh'] / t['one']:.2f}x (a scene each), "
+              f"{t['kept'] / t['one']:.2f}x (kept scene)")
+
+
+if __name__ == "__main__":
+    main()
