@@ -314,5 +314,93 @@ TEST(Render, SamplingStrategiesAgree) {
     }
 }
 
+// A scene updated across calls (update_scene) renders and differentiates exactly as one built
+// afresh from the same description, and rebuilds only what changed.
+TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
+    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 8, 16);
+    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
+    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
+    auto describe = [&](const ConstTex& diffuse) {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 16, 12, 45);
+        d.materials = {material(diffuse, ks, rough), material(black, black, rough)};
+        d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
+        d.meshes[2].emission = light.desc();
+        return d;
+    };
+    RenderOptions opt;
+    opt.spp = 2;
+    opt.num_threads = 1;
+    const size_t pixels = 16 * 12 * 3;
+    // Image and vertex gradients of `scene`, against a fresh build of `d`.
+    auto expect_fresh = [&](const Scene& scene, const SceneDesc& d) {
+        std::vector<float> a(pixels), b(pixels), adjoint(pixels);
+        for (size_t i = 0; i < pixels; ++i) adjoint[i] = float(i % 7) - 3.f;
+        render(scene, opt, a.data());
+        const auto fresh = build_scene(d);
+        render(*fresh, opt, b.data());
+        EXPECT_EQ(a, b);
+        std::vector<float> ga(ball.vertices.size(), 0.f), gb(ball.vertices.size(), 0.f);
+        SceneGradients g;
+        g.meshes.resize(3);
+        g.meshes[0].vertices.grad = ga.data();
+        render_gradients(scene, opt, adjoint.data(), g);
+        g.meshes[0].vertices.grad = gb.data();
+        render_gradients(*fresh, opt, adjoint.data(), g);
+        EXPECT_EQ(ga, gb);
+    };
+    SceneDesc d = describe(kd);
+    const std::shared_ptr<Scene> scene = build_scene(d);
+    expect_fresh(*scene, d);
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+
+    ConstTex other({0.2f, 0.7f, 0.3f});  // a material only, in memory of its own
+    d = describe(other);
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+    expect_fresh(*scene, d);
+
+    d.camera = camera(Vec3f(-1.f, 1.5f, 4.f), Vec3f(0, 0.2f, 0), 16, 12, 40);
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+    expect_fresh(*scene, d);
+
+    // Vertices moved in place: the first time a refittable build, then refits.
+    for (SceneUpdate expected : {SceneUpdate::Built, SceneUpdate::Refit, SceneUpdate::Refit}) {
+        for (size_t i = 1; i < ball.vertices.size(); i += 3) ball.vertices[i] += 0.05f * ball.vertices[i - 1];
+        EXPECT_EQ(update_scene(*scene, d), expected);
+        expect_fresh(*scene, d);
+    }
+    // Topology: two triangles' winding flipped.
+    std::swap(ball.indices[1], ball.indices[2]);
+    std::swap(ball.indices[4], ball.indices[5]);
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    expect_fresh(*scene, d);
+    // A triangle made degenerate: rebuilt (Embree's index buffer changes), then moved back.
+    const std::vector<float> before = ball.vertices;
+    const int32_t* t = ball.indices.data() + 3 * 20;
+    for (int k = 0; k < 3; ++k) ball.vertices[size_t(3 * t[1] + k)] = ball.vertices[size_t(3 * t[0] + k)];
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_GT(degenerate_triangles(*scene, 0), 0);
+    expect_fresh(*scene, d);
+    ball.vertices = before;
+    d = describe(other);  // the vector may have moved
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_EQ(degenerate_triangles(*scene, 0), 0);
+    expect_fresh(*scene, d);
+    // A mesh more.
+    MeshData box = make_box(Vec3f(1, -1, 0), Vec3f(1.5f, -0.5f, 0.5f));
+    d.meshes.push_back(box.desc(0));
+    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    expect_fresh(*scene, d);
+
+    const SceneBuildCounts n = scene_build_counts(*scene);
+    EXPECT_EQ(n.builds, 6u);
+    EXPECT_EQ(n.refits, 2u);
+    EXPECT_EQ(n.reuses, 3u);
+    // A description that fails validation throws and names the field.
+    d.meshes[0].material = 7;
+    EXPECT_THROW(update_scene(*scene, d), std::invalid_argument);
+}
+
 }  // namespace
 }  // namespace edgepath
