@@ -76,6 +76,33 @@ def main():
         reuse_times.append(timed(lambda: ep.render(kept, spp=1)))
     print(f"one-pixel render: new scene {statistics.median(build_times) * 1e3:.1f} ms, kept scene "
           f"{statistics.median(reuse_times) * 1e3:.1f} ms (the difference: one scene build)")
+    # Vertices moved: the kept scene refits its BVH (after one refittable build).
+    original = meshes[0].vertices
+    refit_times, moved_build_times = [], []
+    for run in range(args.runs + 1):
+        meshes[0].vertices = original * (1.0 + 0.001 * (run + 1))
+        t = timed(lambda: ep.render(kept, spp=1))
+        if run > 0:  # run 0 is the refittable build
+            refit_times.append(t)
+            moved_build_times.append(timed(lambda: ep.render(ep.Scene(pixel, meshes), spp=1)))
+    counts = kept.build_counts()
+    print(f"one-pixel render after the vertices moved: new scene "
+          f"{statistics.median(moved_build_times) * 1e3:.1f} ms, kept scene (refit) "
+          f"{statistics.median(refit_times) * 1e3:.1f} ms; kept scene: {counts}")
+    # Tracing speed of the refittable BVH against the static one.
+    static, refittable = ep.Scene(views[0], meshes), ep.Scene(views[0], meshes)
+    meshes[0].vertices = original
+    ep.render(refittable, spp=1)
+    meshes[0].vertices = original + 1e-4
+    ep.render(refittable, spp=1)  # moved: rebuilt refittable
+    ep.render(static, spp=1)  # built once, static, at the same positions
+    static_times, refittable_times = [], []
+    for _ in range(args.runs):
+        static_times.append(timed(lambda: ep.render(static, spp=args.spp)))
+        refittable_times.append(timed(lambda: ep.render(refittable, spp=args.spp)))
+    print(f"forward render, static BVH {statistics.median(static_times):.3f} s, refittable BVH "
+          f"{statistics.median(refittable_times):.3f} s ({args.size}x{args.size}, {args.spp} spp)")
+    meshes[0].vertices = original
 
     # 1. Material-only steps.
     diffuse = meshes[0].material.diffuse.clone().requires_grad_()
