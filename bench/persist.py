@@ -10,10 +10,10 @@ sphere on a floor under a lamp).
    and on one kept scene, cameras swapped) against one call with cameras=[...] (one build).
    Forward only, and render + backward with respect to the vertices.
 
-Configurations alternate within each run, so all see the same machine load; the figures are
-medians over runs, in wall time.
+Configurations alternate within each run (each first in turn), so all see the same machine
+load; the figures are medians over runs, in wall time.
 
-    python bench/persist.py [--runs 5] [--size 256] [--spp 4] [--views 8] [--rings 224]
+    python bench/persist.py [--runs 5] [--backward-runs 1] [--size 256] [--spp 4] [--views 8] [--rings 224]
 """
 
 import argparse
@@ -57,6 +57,8 @@ def main():
     p.add_argument("--size", type=int, default=256)
     p.add_argument("--spp", type=int, default=4)
     p.add_argument("--views", type=int, default=8)
+    p.add_argument("--backward-runs", type=int, default=1, help="runs of the many-views backward "
+                   "measurement (a minute or more each)")
     p.add_argument("--rings", type=int, default=224, help="sphere tessellation (224: 100k triangles)")
     args = p.parse_args()
     meshes = make_meshes(args.rings)
@@ -157,13 +159,14 @@ def main():
             images.mean(dim=(1, 2, 3)).sum().backward()
 
     print(f"\n{args.views} views of {args.size}x{args.size}:")
+    ways = {"fresh": calls_fresh, "kept": calls_kept, "one": one_call}
     for backward, label in ((False, "forward"), (True, "render + backward w.r.t. the vertices")):
-        times = {"fresh": [], "kept": [], "one": []}
-        for _ in range(args.runs):
+        times = {name: [] for name in ways}
+        for run in range(args.runs if not backward else args.backward_runs):
+            order = list(ways)[run % 3:] + list(ways)[:run % 3]  # each first in turn
             with torch.set_grad_enabled(backward):
-                times["fresh"].append(timed(lambda: calls_fresh(backward)))
-                times["kept"].append(timed(lambda: calls_kept(backward)))
-                times["one"].append(timed(lambda: one_call(backward)))
+                for name in order:
+                    times[name].append(timed(lambda: ways[name](backward)))
             vertices.grad = None
         t = {k: statistics.median(v) for k, v in times.items()}
         print(f"  {label}:")

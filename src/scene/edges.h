@@ -1,4 +1,5 @@
-// The edges where visibility can change: built once per render from the meshes, for the
+// The edges where visibility can change, built from the meshes (Scene::edges: on first use, and
+// again after an update that moved vertices or changed uvs, normals or topology), for the
 // boundary terms of the gradient (edge sampling, see the docs).
 //
 // Faces are made adjacent by welding vertices that share a POSITION (the exact float triple), not
