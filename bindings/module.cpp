@@ -1,6 +1,7 @@
 // edgepath._core: the nanobind module. No logic here: it turns plain Python descriptions
 // (dicts of numbers and CPU arrays, which python/edgepath builds and validates) into the core's
-// SceneDesc as zero-copy views, calls the core, and hands results back as arrays.
+// SceneDesc as zero-copy views, calls the core, and hands results back as arrays. A SceneCache
+// holds a core scene between calls; the core decides what an update rebuilds.
 //
 // Arrays arrive through DLPack (torch tensors, numpy arrays) and are never converted here:
 // a view that is not C-contiguous, on the CPU and of the exact dtype is refused with a
