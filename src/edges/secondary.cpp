@@ -194,6 +194,7 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     if (same_surface(first_u, first_l)) return d_p;  // the edge is hidden from p
     RenderOptions rest = opt_;
     rest.max_bounces = bounces_left;
+    rest.hide_emitters = false;  // these paths start after a bounce
     RayCounters counters;
     Rng rng_u = rng, rng_l = rng;
     rng.next_u32();  // another stream for the next sample's paths

@@ -29,8 +29,11 @@ struct PathVertexRecord {
     // Next-event estimation at this vertex: one sample on the area lights, one on the
     // environment.
     NeeRecord nee_area, nee_env;
-    // Continuation by BSDF sampling.
+    // Continuation by BSDF sampling. A smooth material's (next_delta) direction is a function
+    // of the vertex, and next_inv_pdf the inverse probability of its lobe (next_refract: the
+    // dielectric's transmission).
     bool next = false;
+    bool next_delta = false, next_refract = false;
     Vec3f next_dir;
     float next_inv_pdf = 0.f;
 };
@@ -39,6 +42,7 @@ struct PathRecord {
     Vec2f film;
     uint64_t stream = 0;         // seeds the random numbers the gradient pass adds to this path
     bool camera_missed = false;  // the camera ray left the scene
+    bool emitters_hidden = false;  // RenderOptions::hide_emitters: the first hit's emission not counted
     bool escaped = false;        // the last continuation left the scene
     float escape_weight = 0.f;   // MIS weight of the environment seen by that continuation
     std::vector<PathVertexRecord> vertices;
