@@ -173,7 +173,10 @@ def test_unsupported_elements_name_the_element_and_line(tmp_path, body, message)
 
 @pytest.mark.parametrize("sensor, message", [
     (SENSOR.replace('type="perspective"', 'type="thinlens"'), "unsupported sensor type 'thinlens'"),
-    (SENSOR.replace('type="box"', 'type="tent"'), "unsupported rfilter type 'tent'"),
+    (SENSOR.replace('type="box"/>', 'type="tent"><float name="radius" value="0.25"/></rfilter>'),
+     r"radius 0.25: must be in \[0.5, 100\) pixels"),
+    (SENSOR.replace('<float name="fov" value="40"/>', '<float name="fov" value="40"/>'
+                    '<float name="focus_distance" value="0"/>'), "focus_distance must be > 0"),
     (SENSOR.replace('<rfilter type="box"/>', '<integer name="banner" value="1"/>'),
      "property 'banner' of film 'hdrfilm' is not supported"),
     (SENSOR.replace('<lookat', '<scale x="-1"/><lookat'), "mirrors the image"),
