@@ -33,7 +33,11 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         any = any || mesh_wanted(int(i));
         every = every && mesh_wanted(int(i));
     }
-    if (!any) return;
+    // A wanted index of refraction moves the shading points seen through glass.
+    bool ior = false;
+    for (const SceneGradients::MaterialSlots& m : slots.materials) ior = ior || m.ior.wanted();
+    if (!any && !ior) return;
+    if (!any) every = true;  // only shading points move: every edge alike
     uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
