@@ -19,8 +19,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         record->camera_missed = record->escaped = false;
         record->emitters_hidden = opt.hide_emitters;
     }
-    const bool found = first ? first->found : scene.intersect(ray, hit);
-    if (first) hit = first->hit;
+    const FirstHit f = first ? *first : first_hit(scene, ray, opt.hide_emitters);
+    const bool found = f.found;
+    hit = f.hit;
     if (!found) {
         if (scene.has_envmap && !opt.hide_emitters) L += scene.envmap.eval(ray.dir);
         if (record) record->camera_missed = true;

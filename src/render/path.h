@@ -1,6 +1,8 @@
 // The path tracer: one camera sample's radiance, with next-event estimation on area lights and
 // the environment combined with BSDF sampling by multiple importance sampling.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include "sampling/rng.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
@@ -54,9 +56,20 @@ struct FirstHit {
     Hit hit;
 };
 
-inline FirstHit first_hit(const Scene& scene, const Ray& ray) {
+// How far past a hidden emitter (relative to the distance along the ray) the camera ray
+// resumes: a surface closer behind it than this is skipped with it.
+constexpr float kHiddenEmitterSkip = 1e-5f;
+
+// With `hide_emitters`, area lights are transparent to the camera ray (Mitsuba's
+// hide_emitters skips them): the first intersection past them, its t along the same ray.
+inline FirstHit first_hit(const Scene& scene, const Ray& ray, bool hide_emitters = false) {
     FirstHit f;
     f.found = scene.intersect(ray, f.hit);
+    Ray past = ray;
+    while (hide_emitters && f.found && scene.meshes[size_t(f.hit.mesh)].is_emitter()) {
+        past.tmin = std::max(std::nextafter(f.hit.t, INFINITY), f.hit.t * (1.f + kHiddenEmitterSkip));
+        f.found = scene.intersect(past, f.hit);
+    }
     return f;
 }
 
@@ -68,7 +81,7 @@ inline bool same_surface(const FirstHit& a, const FirstHit& b) {
 
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
 // `record` is given, also records the path for the gradient pass; when `first` is given, it is
-// the ray's intersection (not traced again).
+// the ray's intersection (not traced again), found by first_hit with opt.hide_emitters.
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record = nullptr, const FirstHit* first = nullptr);
 

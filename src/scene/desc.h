@@ -120,9 +120,10 @@ struct RenderOptions {
     bool secondary_edges = true;   // silhouettes seen from shading points
     int64_t edge_samples = 0;      // primary edge samples; 0: one per output pixel per spp
     EdgeSampling edge_sampling = EdgeSampling::Importance;
-    // Emitters seen directly by the camera (area lights, the environment) render black, as
-    // Mitsuba's hide_emitters; seen after a bounce they stay. The gradient follows the image:
-    // no interior term for hidden emission, and the edges see what the image shows.
+    // Emitters seen directly by the camera are hidden, as by Mitsuba's hide_emitters: area
+    // lights are transparent to camera rays (which go on to what lies behind them) and the
+    // environment seen directly is black; seen after a bounce both stay. The gradient follows
+    // the image: no term for hidden emission, and the edges see what the image shows.
     bool hide_emitters = false;
     // Optional: another thread sets it to stop the call. The loops stop taking work within a
     // sample and the call throws Cancelled; its outputs are then unspecified.

@@ -9,6 +9,7 @@ the penumbra, reached through a chain of smooth vertices.
 """
 
 import math
+from pathlib import Path
 
 import pytest
 import torch
@@ -208,3 +209,60 @@ def test_penumbra_through_smooth_chain_matches_finite_difference(case):
     assert abs(fd) > 0.03
     assert d == pytest.approx(fd, rel=tolerance)
     assert abs(interior - fd) > 3 * tolerance * abs(fd)  # the check sees the boundary term
+
+
+# ---- Mitsuba scene files against Mitsuba 3's images ------------------------------------------
+
+SPECULAR_DIR = Path(__file__).resolve().parent / "specular"
+
+
+def _block_means(image, k):
+    return torch.nn.functional.avg_pool2d(image.permute(2, 0, 1)[None], k)[0].permute(1, 2, 0)
+
+
+def _image_error(image, ref, floor=0.02):
+    """Mitsuba's image metric: err = |x - ref| / max(|ref|, floor); (mean, max)."""
+    err = (image.double() - ref.double()).abs() / ref.double().abs().clamp_min(floor)
+    return float(err.mean()), float(err.max())
+
+
+# name: (spp, block size, (error_mean, error_max) of Mitsuba's conformance test with the same
+# kind of light transport: diffuse_albedo_g_i's for indirect light, directly_visible_area_
+# light_radiance's for direct light), applied to the means of k x k blocks of pixels.
+MITSUBA_SCENES = {
+    "cornell_glass_mirror": (256, 4, (0.04, 0.4)),
+    "direct_hidden_emitters": (256, 4, (0.02, 0.2)),
+}
+
+
+@pytest.mark.parametrize("name", list(MITSUBA_SCENES))
+def test_scene_file_matches_mitsuba(name):
+    """Scene files with a glass and a mirror sphere (analytic spheres in Mitsuba, tessellated
+    here), a tent filter, a focus_distance, the direct integrator and hide_emitters, against
+    Mitsuba 3's images (specular/make_references.py): the mean of each channel within 2%,
+    and Mitsuba's metric on blocks of pixels (averaging the noise of both renders)."""
+    spp, k, (mean_max, max_max) = MITSUBA_SCENES[name]
+    loaded = ep.load_mitsuba(SPECULAR_DIR / f"{name}.xml")
+    ref = ep.imread(SPECULAR_DIR / f"{name}.exr")[..., :3].float()
+    image = loaded.render(spp=spp)
+    relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
+    print(name, "channel means", relative.tolist(), "blocks", _image_error(_block_means(image, k), _block_means(ref, k)))
+    assert float(relative.abs().max()) < 0.02
+    mean_err, max_err = _image_error(_block_means(image, k), _block_means(ref, k))
+    assert mean_err < mean_max and max_err < max_max
+
+
+def test_scene_files_map_the_new_elements():
+    cornell = ep.load_mitsuba(SPECULAR_DIR / "cornell_glass_mirror.xml")
+    camera = cornell.scene.camera
+    assert (camera.pixel_filter, camera.filter_radius) == ("tent", 1.0)
+    assert cornell.max_bounces == 5 and not cornell.hide_emitters
+    glass = cornell.shapes["glass_ball"].material
+    assert glass.kind == "dielectric"
+    assert float(glass.ior) == pytest.approx(1.5 / 1.000277)
+    assert cornell.parameters()["glass_ball.bsdf.eta"] is glass.ior
+    mirror = cornell.shapes["mirror_ball"].material
+    assert mirror.kind == "conductor" and torch.equal(mirror.specular, torch.ones(3))
+    direct = ep.load_mitsuba(SPECULAR_DIR / "direct_hidden_emitters.xml")
+    assert direct.max_bounces == 1 and direct.hide_emitters
+    assert torch.allclose(direct.shapes["mirror_ball"].material.specular, torch.tensor([0.9, 0.8, 0.7]))
