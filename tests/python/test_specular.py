@@ -320,3 +320,38 @@ def test_mitsuba_tutorial_cornell_box_loads_and_matches():
     image = loaded.render(spp=256)
     relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
     assert float(relative.abs().max()) < 0.02
+
+
+def _glass_scene(**material):
+    return ep.Scene(camera=_camera(resolution=(4, 4)),
+                    meshes=[_sphere_mesh(ep.Material(**material))], envmap=_constant_env(1.0))
+
+
+@pytest.mark.parametrize("change, field", [
+    (lambda s: setattr(s.meshes[0].material, "kind", "glass"), r"meshes\[0\]\.material\.kind"),
+    (lambda s: setattr(s.meshes[0].material, "ior", -1.5), r"meshes\[0\]\.material\.ior"),
+    (lambda s: setattr(s.meshes[0].material, "ior", 20.0), r"meshes\[0\]\.material\.ior"),
+    (lambda s: setattr(s.meshes[0].material, "ior", float("nan")), r"meshes\[0\]\.material\.ior"),
+    (lambda s: setattr(s.meshes[0].material, "ior", torch.ones(3)), r"meshes\[0\]\.material\.ior"),
+    (lambda s: (setattr(s.camera, "pixel_filter", "tent"), setattr(s.camera, "filter_radius", 0.2)),
+     r"camera\.filter_radius"),
+])
+def test_bad_smooth_material_or_filter_names_the_field(change, field):
+    scene = _glass_scene(kind="dielectric", ior=1.5)
+    change(scene)
+    with pytest.raises(ValueError, match=field):
+        ep.render(scene, spp=1)
+
+
+def test_bad_hide_emitters_and_unsaveable_materials_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="hide_emitters"):
+        ep.render(_glass_scene(kind="dielectric"), spp=1, hide_emitters="yes")
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.material: a dielectric material has no MTL"):
+        ep.save_obj(_glass_scene(kind="dielectric").meshes, tmp_path / "glass.obj")
+    ep.save_obj(_glass_scene(kind="dielectric").meshes, tmp_path / "glass.obj", materials=False)
+
+
+def test_albedo_of_mirror_and_glass_is_zero():
+    for kind in ("conductor", "dielectric"):
+        albedo = ep.render_channels(_glass_scene(kind=kind, diffuse=0.7), ["albedo"], spp=1)["albedo"]
+        assert float(albedo.abs().max()) == 0.0
