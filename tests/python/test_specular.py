@@ -219,6 +219,7 @@ CASES = {
 }
 
 
+@pytest.mark.slow  # 5-14 s each: hundreds of thousands of samples for finite differences
 @pytest.mark.parametrize("case", list(CASES))
 def test_penumbra_through_smooth_chain_matches_finite_difference(case):
     kind, name, direction, spp, eps, tolerance = CASES[case]
