@@ -124,6 +124,7 @@ edgepath::CameraDesc camera_desc(const nb::dict& d) {
     }
     c.filter = static_cast<edgepath::FilterType>(scalar<int>(d, "filter", f));
     c.filter_stddev = scalar<float>(d, "filter_stddev", f);
+    if (has(d, "filter_radius")) c.filter_radius = scalar<float>(d, "filter_radius", f);
     return c;
 }
 
@@ -133,6 +134,8 @@ edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std:
     m.specular = texture(views, item(d, "specular", f), f + ".specular");
     m.roughness = texture(views, item(d, "roughness", f), f + ".roughness");
     m.two_sided = scalar<bool>(d, "two_sided", f);
+    if (has(d, "kind")) m.kind = static_cast<edgepath::MaterialKind>(scalar<int>(d, "kind", f));
+    if (has(d, "ior")) m.ior = texture(views, item(d, "ior", f), f + ".ior");
     return m;
 }
 
@@ -215,6 +218,7 @@ edgepath::RenderOptions render_options(const nb::dict& d) {
     o.sampling = static_cast<edgepath::LightSampling>(scalar<int>(d, "sampling", f));
     o.primary_edges = scalar<bool>(d, "primary_edges", f);
     o.secondary_edges = scalar<bool>(d, "secondary_edges", f);
+    if (has(d, "hide_emitters")) o.hide_emitters = scalar<bool>(d, "hide_emitters", f);
     o.edge_samples = scalar<int64_t>(d, "edge_samples", f);
     o.edge_sampling = static_cast<edgepath::EdgeSampling>(scalar<int>(d, "edge_sampling", f));
     return o;
@@ -474,6 +478,7 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.materials[i].diffuse = views.slot(m, "diffuse", md.diffuse.num_values(), f);
             g.materials[i].specular = views.slot(m, "specular", md.specular.num_values(), f);
             g.materials[i].roughness = views.slot(m, "roughness", md.roughness.num_values(), f);
+            g.materials[i].ior = views.slot(m, "ior", md.ior.num_values(), f);
         }
     }
     return g;

@@ -114,7 +114,7 @@ def render_in_chunks(loaded: MitsubaScene, chunk_spp: int, num_threads=None, sam
     while done < total:
         n = min(chunk_spp, total - done)
         part = render(loaded.scene, spp=n, max_bounces=loaded.max_bounces, seed=loaded.seed + k,
-                      num_threads=num_threads, sampling=sampling)
+                      num_threads=num_threads, sampling=sampling, hide_emitters=loaded.hide_emitters)
         image = part * n if image is None else image + part * n
         done, k = done + n, k + 1
         if not quiet and total > chunk_spp:
@@ -148,7 +148,8 @@ def _cmd_render(args) -> None:
     if channels:
         # One pass at the file's spp: ids come from the pixel centres, so chunks would not help.
         extra = render_channels(loaded.scene, channels, spp=loaded.spp, max_bounces=loaded.max_bounces,
-                                seed=loaded.seed, num_threads=args.threads, sampling=args.sampling)
+                                seed=loaded.seed, num_threads=args.threads, sampling=args.sampling,
+                                hide_emitters=loaded.hide_emitters)
     seconds = time.perf_counter() - start
     outputs = args.output or ["out.png"]
     written = []

@@ -533,6 +533,10 @@ def _mtl_entry(mesh: Mesh, i: int, base: str, stem: str) -> List[str]:
     f = f"meshes[{i}]"
     material = mesh.material if mesh.material is not None else \
         Material(diffuse=0.0 if mesh.emission is not None else 0.5)
+    kind = getattr(material, "kind", "standard")
+    if kind != "standard":
+        raise ValueError(f"{f}.material: a {kind} material has no MTL form (save with "
+                         "materials=False)")
     out = [f"newmtl mesh_{i}"]
     diffuse = material.diffuse
     if isinstance(diffuse, torch.Tensor) and diffuse.dim() == 3:

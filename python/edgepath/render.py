@@ -28,13 +28,14 @@ from .scene import Camera, EnvironmentMap, Material, Mesh, Scene, frame_from_to_
 SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1}
-PIXEL_FILTERS = {"box": 0, "gaussian": 1}
+PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
+MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
 # A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
 # ("meshes", i, "vertices" | "uvs" | "normals" | "emission"),
-# ("materials", i, "diffuse" | "specular" | "roughness").
+# ("materials", i, "diffuse" | "specular" | "roughness" | "ior").
 Slot = Tuple
 
 
@@ -94,12 +95,14 @@ class RenderOptions:
     secondary_edges: bool = True
     edge_samples: int = 0  # 0: one per output pixel per spp
     edge_sampling: int = 0
+    hide_emitters: bool = False
 
     def core(self) -> dict:
         return {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
                 "num_threads": self.num_threads, "sampling": self.sampling,
                 "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
-                "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling}
+                "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling,
+                "hide_emitters": self.hide_emitters}
 
 
 def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
@@ -107,7 +110,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
            backward_spp: Optional[int] = None,
            backward_seed: Optional[int] = None, primary_edges: bool = True,
            secondary_edges: bool = True, edge_samples: Optional[int] = None,
-           edge_sampling: str = "importance",
+           edge_sampling: str = "importance", hide_emitters: bool = False,
            cameras: Optional[Sequence[Camera]] = None) -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
@@ -128,7 +131,9 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     primary edge samples (default: one per output pixel per backward sample);
     ``edge_sampling``: "importance" (primary: silhouettes by clipped film length, stratified;
     secondary: the edge hierarchy, with a second sample towards the lights) or "uniform" (every
-    edge by world length: the baseline, for comparison).
+    edge by world length: the baseline, for comparison). ``hide_emitters``: as Mitsuba's
+    integrators' ``hide_emitters``, area lights are transparent to camera rays and the
+    environment seen directly is black; seen after a bounce both stay (the gradient follows).
 
     Many views: with ``cameras`` (a list of ``Camera`` of one film size), renders the scene once
     per camera (``scene.camera`` is not used) and returns (V, H, W, 3), view k exactly the image
@@ -142,7 +147,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     environment or the camera change, the BVH is refitted when only vertices move, and rebuilt
     when the topology does (``Scene.build_counts`` counts them)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
     if cameras is not None:
         flat, views, view_params = _flatten_views(scene, cameras)
     else:
@@ -157,7 +162,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                   num_threads, sampling, primary_edges, secondary_edges,
-                                  edge_samples, edge_sampling)
+                                  edge_samples, edge_sampling, hide_emitters)
     slots = [slot for slot, _ in attached]
     if cameras is not None:
         return _RenderViewsFunction.apply(flat, views, options, grad_options, slots,
@@ -307,7 +312,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
                      num_threads: Optional[int] = None, sampling: str = "mis",
                      primary_edges: bool = True, secondary_edges: bool = True,
                      edge_samples: Optional[int] = None,
-                     edge_sampling: str = "importance") -> torch.Tensor:
+                     edge_sampling: str = "importance", hide_emitters: bool = False) -> torch.Tensor:
     """The derivative of the image along ``direction`` in the space of ``param`` (forward mode):
     (H, W, 3) float32, dI/dt of the image of the scene with ``param + t * direction``.
 
@@ -317,7 +322,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     code, per camera sample, with the same random numbers as ``render`` for the same seed, plus
     the edges' boundary terms (options as for ``render``)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
@@ -332,13 +337,13 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
 def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
                             eps: float = 1e-3, spp: int = 16, max_bounces: int = 1, seed: int = 0,
                             num_threads: Optional[int] = None,
-                            sampling: str = "mis") -> torch.Tensor:
+                            sampling: str = "mis", hide_emitters: bool = False) -> torch.Tensor:
     """Central finite difference (I(param + eps/2 direction) - I(param - eps/2 direction)) / eps,
     both images rendered with the same seed (the same random numbers), as Mitsuba's references
     are made. Compare it with ``derivative_image``. ``param`` must be a tensor the scene holds
     (to difference a tensor the scene is computed from, rebuild the scene at both values)."""
     return finite_difference_channels(scene, param, direction, ["radiance"], eps, spp, max_bounces,
-                                      seed, num_threads, sampling)["radiance"]
+                                      seed, num_threads, sampling, hide_emitters)["radiance"]
 
 
 # ---- output channels -------------------------------------------------------------------------
@@ -354,7 +359,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
                     backward_spp: Optional[int] = None, backward_seed: Optional[int] = None,
                     primary_edges: bool = True, secondary_edges: bool = True,
                     edge_samples: Optional[int] = None,
-                    edge_sampling: str = "importance") -> Dict[str, torch.Tensor]:
+                    edge_sampling: str = "importance", hide_emitters: bool = False) -> Dict[str, torch.Tensor]:
     """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
     (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
     the same options, bit for bit; "alpha", "depth", "position", "geometry_normal",
@@ -367,7 +372,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
     ...) and of the geometric normal's jumps between faces; ids have no gradient."""
     names = _channel_names(channels)
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
     flat = flatten_scene(scene)
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     continuous = [n for n in names if n not in ID_CHANNELS]
@@ -377,7 +382,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
         grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                       _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                       num_threads, sampling, primary_edges, secondary_edges,
-                                      edge_samples, edge_sampling)
+                                      edge_samples, edge_sampling, hide_emitters)
         slots = [slot for slot, _ in attached]
         values, ids = _ChannelsFunction.apply(flat, names, options, grad_options, slots,
                                               *[t for _, t in attached])
@@ -428,13 +433,13 @@ def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tens
                         num_threads: Optional[int] = None, sampling: str = "mis",
                         primary_edges: bool = True, secondary_edges: bool = True,
                         edge_samples: Optional[int] = None,
-                        edge_sampling: str = "importance") -> Dict[str, torch.Tensor]:
+                        edge_sampling: str = "importance", hide_emitters: bool = False) -> Dict[str, torch.Tensor]:
     """``derivative_image`` for output channels: {name: (H, W, C) float32} derivatives along
     ``direction`` of the continuous channels in ``channels`` (default: all of them; ids have
     no derivative and are refused), with the same random numbers as ``render_channels``."""
     names = _channel_names(channels, continuous_only=True)
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
@@ -450,7 +455,8 @@ def finite_difference_channels(scene: Scene, param: torch.Tensor, direction: tor
                                channels=None, eps: float = 1e-3, spp: int = 16,
                                max_bounces: int = 1, seed: int = 0,
                                num_threads: Optional[int] = None,
-                               sampling: str = "mis") -> Dict[str, torch.Tensor]:
+                               sampling: str = "mis",
+                               hide_emitters: bool = False) -> Dict[str, torch.Tensor]:
     """``finite_difference_image`` for output channels: central differences of the continuous
     channels in ``channels`` (default: all), both sides rendered with the same seed. Compare
     with ``derivative_channels``."""
@@ -463,7 +469,8 @@ def finite_difference_channels(scene: Scene, param: torch.Tensor, direction: tor
     with torch.no_grad():
         for sign in (0.5, -0.5):
             moved = _substitute(scene, param, (base + sign * eps * direction).to(param.dtype))
-            sides.append(render_channels(moved, names, spp, max_bounces, seed, num_threads, sampling))
+            sides.append(render_channels(moved, names, spp, max_bounces, seed, num_threads, sampling,
+                                         hide_emitters=hide_emitters))
     return {n: (sides[0][n] - sides[1][n]) / eps for n in names}
 
 
@@ -501,8 +508,9 @@ def _split_channels(names: List[str], values: torch.Tensor,
 
 def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis",
                    primary_edges=True, secondary_edges=True, edge_samples=None,
-                   edge_sampling="importance") -> RenderOptions:
+                   edge_sampling="importance", hide_emitters=False) -> RenderOptions:
     return RenderOptions(
+        hide_emitters=v.boolean(hide_emitters, "hide_emitters"),
         edge_sampling=v.choice(edge_sampling, "edge_sampling", EDGE_SAMPLING),
         primary_edges=v.boolean(primary_edges, "primary_edges"),
         secondary_edges=v.boolean(secondary_edges, "secondary_edges"),
@@ -627,6 +635,7 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         "width": width,
         "filter": v.choice(camera.pixel_filter, "camera.pixel_filter", PIXEL_FILTERS),
         "filter_stddev": v.number(camera.filter_stddev, "camera.filter_stddev"),
+        "filter_radius": v.number(getattr(camera, "filter_radius", 1.0), "camera.filter_radius"),
         "crop_window": None,
     }
     if camera.crop_window is not None:
@@ -677,8 +686,12 @@ def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict
         material = Material(diffuse=0.0 if emissive else 0.5)
     if not isinstance(material, Material):
         v.fail(f, f"expected an edgepath.Material, got {type(material).__name__}")
-    out = {"two_sided": v.boolean(material.two_sided, f + ".two_sided")}
-    for name, channels in (("diffuse", 3), ("specular", 3), ("roughness", 1)):
+    out = {"two_sided": v.boolean(material.two_sided, f + ".two_sided"),
+           "kind": v.choice(getattr(material, "kind", "standard"), f + ".kind", MATERIAL_KINDS)}
+    fields = (("diffuse", 3), ("specular", 3), ("roughness", 1))
+    if out["kind"] == MATERIAL_KINDS["dielectric"]:
+        fields += (("ior", 1),)
+    for name, channels in fields:
         value = v.texture(getattr(material, name), f"{f}.{name}", channels)
         out[name] = _param(flat, ("materials", i, name), value)
     return out
@@ -831,7 +844,7 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
         for mesh in scene.meshes:
             m = swap(mesh, ("vertices", "uvs", "normals", "emission"))
             if isinstance(mesh, Mesh):
-                m.material = swap(mesh.material, ("diffuse", "specular", "roughness"))
+                m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior"))
             meshes.append(m)
     envmap = swap(scene.envmap, ("values", "to_world", "scale"))
     if not found:

@@ -33,7 +33,8 @@ class Camera:
     (4x4 camera-to-world matrix, see ``frame_from_to_world``), not both. ``resolution`` is
     (height, width) of the full film. ``fov``: horizontal field of view in degrees;
     ``ortho_scale``: half the width of an orthographic view; both a float or a 0-d tensor.
-    ``pixel_filter``: "box" (one pixel) or "gaussian" (``filter_stddev`` pixels).
+    ``pixel_filter``: "box" (one pixel), "gaussian" (``filter_stddev`` pixels) or "tent"
+    (``filter_radius`` pixels, at least 0.5).
     ``crop_window``: None or (x, y, width, height) in full-film pixels; renders only that part.
     """
 
@@ -47,7 +48,8 @@ class Camera:
                  to_world: Optional[torch.Tensor] = None,
                  pixel_filter: str = "box",
                  filter_stddev: float = 0.5,
-                 crop_window: Optional[Tuple[int, int, int, int]] = None):
+                 crop_window: Optional[Tuple[int, int, int, int]] = None,
+                 filter_radius: float = 1.0):
         self.position = position
         self.look_at = look_at
         self.up = up
@@ -59,6 +61,7 @@ class Camera:
         self.pixel_filter = pixel_filter
         self.filter_stddev = filter_stddev
         self.crop_window = crop_window
+        self.filter_radius = filter_radius
 
     def frame(self) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(position, look_at, up), from ``to_world`` if it is set."""
@@ -73,21 +76,34 @@ class Camera:
 
 
 class Material:
-    """Diffuse (Lambert) plus a GGX specular lobe.
+    """A surface's BSDF, by ``kind``:
 
-    ``diffuse``/``specular``: constant (shape (3,) or (1,), or a float) or texture (H, W, 3);
+    "standard" (the default): diffuse (Lambert) plus a GGX specular lobe. ``diffuse`` /
+    ``specular``: constant (shape (3,) or (1,), or a float) or texture (H, W, 3);
     ``roughness``: GGX alpha, a float, shape (1,), or texture (H, W) / (H, W, 1).
-    ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs)."""
+
+    "conductor": a smooth mirror reflecting ``specular`` at normal incidence (Schlick's
+    Fresnel; 1.0 for a perfect mirror); ``diffuse`` and ``roughness`` are unused.
+
+    "dielectric": smooth glass, reflecting and refracting by the Fresnel equations with the
+    relative index of refraction ``ior`` (inside over outside; a float, shape (1,), or texture
+    (H, W)); two-sided; ``diffuse``, ``specular`` and ``roughness`` are unused.
+
+    ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs). Every tensor
+    is differentiable, ``ior`` included."""
 
     def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
-                 roughness: Constant = 0.5, two_sided: bool = False):
+                 roughness: Constant = 0.5, two_sided: bool = False,
+                 kind: str = "standard", ior: Constant = 1.5):
         self.diffuse = diffuse
         self.specular = specular
         self.roughness = roughness
         self.two_sided = two_sided
+        self.kind = kind
+        self.ior = ior
 
     def __repr__(self):
-        return f"Material(two_sided={self.two_sided})"
+        return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"
 
 
 class Mesh:

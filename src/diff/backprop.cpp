@@ -4,6 +4,7 @@
 #include "edges/secondary.h"
 #include "scene/bsdf_diff.h"
 #include "scene/geometry.h"
+#include "scene/specular.h"
 
 namespace edgepath {
 
@@ -132,7 +133,20 @@ namespace {
 
 TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp) {
     BsdfParams p = scene.bsdf_params(sp);
-    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided};
+    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta};
+}
+
+DeltaParams<float> delta_params(const TBsdfParams<float>& p) {
+    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided};
+}
+
+// The throughput factor T of vertex r's continuation (beta after = beta T), at the shading
+// normal ns: f / pdf, or a smooth material's weight.
+Vec3f continuation_weight(const TBsdfParams<float>& bp, const Vec3f& ns, const PathVertexRecord& r) {
+    if (!r.next_delta) return bsdf_eval_world(bp, ns, -r.dir, r.next_dir) * r.next_inv_pdf;
+    Vec3f dir, T;
+    if (!delta_scatter(delta_params(bp), ns, -r.dir, r.next_refract, r.next_inv_pdf, dir, T)) return Vec3f(0.f);
+    return T;
 }
 
 }  // namespace
@@ -143,7 +157,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
     const bool env_wanted = slots.envmap.wanted() || slots.envmap_rotation.wanted();
     if (rec.camera_missed) {
         // L = env(d0), d0 = the camera ray's direction.
-        if (!scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
+        if (rec.emitters_hidden || !scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
         Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y);
         Vec3f d_dir = d_envmap(scene.envmap, slots, r.dir, a, sink);
         if (slots.camera.wanted()) {
@@ -157,26 +171,29 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
     if (log && !log->replaying) log->start(size_t(K));
     Vec3f A_next(0.f);   // adjoint of the throughput after vertex k
     Vec3f dp_next(0.f);  // adjoint of vertex k's position from the ray that leaves it
+    Vec3f dd_next(0.f);  // adjoint of that ray's direction (used where vertex k is smooth)
     if (rec.escaped) {
         const PathVertexRecord& last = V[K - 1];
         Vec3f Le = scene.envmap.eval(last.next_dir);
         A_next = a * Le * rec.escape_weight;
-        if (env_wanted) {
+        if (env_wanted || last.next_delta) {
             // beta after the last vertex = beta_last * T_last
             VertexGeometry g(scene, last.hit, last.origin, last.dir);
-            Vec3f T = bsdf_eval_world(bsdf_params_world(scene, g.sp), bend_normal(g.sp.ns, g.sp.ng, -last.dir), -last.dir,
-                                      last.next_dir) *
-                      last.next_inv_pdf;
-            d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+            Vec3f T = continuation_weight(bsdf_params_world(scene, g.sp), bend_normal(g.sp.ns, g.sp.ng, -last.dir), last);
+            Vec3f d_dir = d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+            if (last.next_delta) dd_next = d_dir;
         }
     }
-    // Whether anything wanted moves vertex k: the camera, or a mesh the path met up to k.
+    // Whether anything wanted moves vertex k: the camera, a mesh the path met up to k, or the
+    // index of refraction of glass it passed.
     uint64_t moves = 0;
     if (secondary) {
         bool m = secondary->camera_wanted();
         for (int k = 0; k < K && k < 64; ++k) {
             m = m || secondary->mesh_wanted(V[k].hit.mesh);
             if (m) moves |= uint64_t(1) << k;
+            const int mat = scene.meshes[V[k].hit.mesh].material;
+            m = m || (V[k].next_delta && size_t(mat) < slots.materials.size() && slots.materials[mat].ior.wanted());
         }
     }
     for (int k = K - 1; k >= 0; --k) {
@@ -207,8 +224,10 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
 
         TBsdfParams<float> bp = bsdf_params_world(scene, sp);
+        const bool delta = bp.kind != MaterialKind::Standard;
         const Vec3f ns = bend_normal(sp.ns, sp.ng, wo);
         DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+        float d_eta = 0.f;
         // Next-event estimation: N = f(wo, w_l) Le_l scale, for the area light and the
         // environment samples.
         for (const NeeRecord* nr : {&r.nee_area, &r.nee_env}) {
@@ -239,9 +258,24 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         // Continuation: beta_next = beta T, T = f(wo, w_next) / pdf
         if (r.next && (k + 1 < K || rec.escaped)) {
-            Vec3f T = bsdf_eval_world(bp, ns, wo, r.next_dir) * r.next_inv_pdf;
-            A_k += T * A_next;
-            d_bsdf_eval_world(bp, ns, wo, r.next_dir, r.beta * A_next * r.next_inv_pdf, db);
+            if (r.next_delta) {
+                // (w_next, T) = delta_scatter(n, wo, eta): the next vertex moves with them.
+                Vec3f dir, T;
+                const DeltaParams<float> dp = delta_params(bp);
+                if (delta_scatter(dp, ns, wo, r.next_refract, r.next_inv_pdf, dir, T)) {
+                    A_k += T * A_next;
+                    DDelta<float> dd{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+                    d_delta_scatter(dp, ns, wo, r.next_refract, r.next_inv_pdf, dd_next, r.beta * A_next, dd);
+                    db.specular += dd.specular;
+                    db.n += dd.n;
+                    db.wo += dd.wo;
+                    d_eta += dd.eta;
+                }
+            } else {
+                Vec3f T = bsdf_eval_world(bp, ns, wo, r.next_dir) * r.next_inv_pdf;
+                A_k += T * A_next;
+                d_bsdf_eval_world(bp, ns, wo, r.next_dir, r.beta * A_next * r.next_inv_pdf, db);
+            }
         }
         // Material parameters at uv.
         {
@@ -251,11 +285,16 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_texture(mat.diffuse, mats ? mats->diffuse : kNoSlot, sp.uv, dd, sink, &ha.duv);
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
+            if (mat.kind == MaterialKind::Dielectric) {
+                float de[1] = {d_eta};
+                d_texture(mat.ior, mats ? mats->ior : kNoSlot, sp.uv, de, sink, &ha.duv);
+            }
         }
         d_bend_normal(sp.ns, sp.ng, wo, db.n, ha.dn, dwo);
         // Edges seen from this vertex (it scatters: k < max_bounces), with the vertex's own
         // random stream, the same for every call on this record.
-        if (secondary && k < secondary->max_bounces()) {
+        // A smooth vertex sees edges along one direction only: no boundary term of its own.
+        if (secondary && k < secondary->max_bounces() && !delta) {
             if (log && log->replaying) {
                 const size_t b = log->begin[size_t(k)];
                 ha.dp += secondary->replay(log->terms.data() + b, log->end[size_t(k)] - b, ab, sink);
@@ -274,11 +313,13 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
 
         Vec3f d_origin(0.f), d_dir(0.f);
         finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir);
+        // wo = -d: the adjoint of the direction of the ray that found this vertex.
+        d_dir -= dwo;
         dp_next = d_origin;
+        dd_next = d_dir;
         A_next = A_k;
         if (k == 0 && slots.camera.wanted()) {
-            // wo = -d0; the camera ray (origin, d0) comes from the camera parameters.
-            d_dir -= dwo;
+            // The camera ray (origin, d0) comes from the camera parameters.
             float cam[kCameraParams] = {};
             d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, d_origin, d_dir, cam);
             for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);

@@ -24,8 +24,9 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
                 ha.duv.y += a[1];
                 break;
             case Channel::Albedo: {
-                // albedo = diffuse(uv)
+                // albedo = diffuse(uv) (zero for a mirror or glass)
                 const int material = g.mesh->material;
+                if (scene.materials[size_t(material)].kind != MaterialKind::Standard) break;
                 const GradSlot none{};
                 const GradSlot& slot =
                     size_t(material) < slots.materials.size() ? slots.materials[size_t(material)].diffuse : none;

@@ -231,7 +231,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // Both sides: g > 0 (upper) and g < 0 (lower).
             const float sx = float(gx / glen * step), sy = float(gy / glen * step);
             const Ray ray_u = cam.generate_ray(x + sx, y + sy), ray_l = cam.generate_ray(x - sx, y - sy);
-            const FirstHit first_u = first_hit(scene, ray_u), first_l = first_hit(scene, ray_l);
+            const FirstHit first_u = first_hit(scene, ray_u, opt.hide_emitters),
+                           first_l = first_hit(scene, ray_l, opt.hide_emitters);
             // The same surface (or the sky) on both sides: the edge is hidden here.
             if (same_surface(first_u, first_l)) continue;
             // A crease (both faces turned the same way) separates its two faces: both sides must

@@ -33,7 +33,11 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         any = any || mesh_wanted(int(i));
         every = every && mesh_wanted(int(i));
     }
-    if (!any) return;
+    // A wanted index of refraction moves the shading points seen through glass.
+    bool ior = false;
+    for (const SceneGradients::MaterialSlots& m : slots.materials) ior = ior || m.ior.wanted();
+    if (!any && !ior) return;
+    if (!any) every = true;  // only shading points move: every edge alike
     uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
@@ -194,6 +198,7 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     if (same_surface(first_u, first_l)) return d_p;  // the edge is hidden from p
     RenderOptions rest = opt_;
     rest.max_bounces = bounces_left;
+    rest.hide_emitters = false;  // these paths start after a bounce
     RayCounters counters;
     Rng rng_u = rng, rng_l = rng;
     rng.next_u32();  // another stream for the next sample's paths

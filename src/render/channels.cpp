@@ -82,9 +82,12 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
                 values[o] = sp.uv.x;
                 values[o + 1] = sp.uv.y;
                 break;
-            case Channel::Albedo:
-                store(values, o, eval_texture3(scene.materials[size_t(scene.meshes[size_t(hit.mesh)].material)].diffuse, sp.uv));
+            case Channel::Albedo: {
+                // The Lambertian reflectance: none for a mirror or glass.
+                const Material& m = scene.materials[size_t(scene.meshes[size_t(hit.mesh)].material)];
+                store(values, o, m.kind == MaterialKind::Standard ? eval_texture3(m.diffuse, sp.uv) : Vec3f(0.f));
                 break;
+            }
             default: break;  // radiance and ids: elsewhere
         }
     }

@@ -17,16 +17,18 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
     if (record) {
         record->vertices.clear();
         record->camera_missed = record->escaped = false;
+        record->emitters_hidden = opt.hide_emitters;
     }
-    const bool found = first ? first->found : scene.intersect(ray, hit);
-    if (first) hit = first->hit;
+    const FirstHit f = first ? *first : first_hit(scene, ray, opt.hide_emitters);
+    const bool found = f.found;
+    hit = f.hit;
     if (!found) {
-        if (scene.has_envmap) L += scene.envmap.eval(ray.dir);
+        if (scene.has_envmap && !opt.hide_emitters) L += scene.envmap.eval(ray.dir);
         if (record) record->camera_missed = true;
         return L;
     }
     SurfacePoint sp = scene.surface_point(hit);
-    L += scene.emitted(sp, -ray.dir);
+    if (!opt.hide_emitters) L += scene.emitted(sp, -ray.dir);
     PathVertexRecord* rv = nullptr;
     auto push_vertex = [&](const Ray& r, float emission_weight) {
         if (!record) return;
@@ -38,7 +40,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         rv->beta = beta;
         rv->emission_weight = emission_weight;
     };
-    push_vertex(ray, 1.f);
+    push_vertex(ray, opt.hide_emitters ? 0.f : 1.f);
 
     for (int bounce = 0; bounce < opt.max_bounces; ++bounce) {
         BsdfParams bp = scene.bsdf_params(sp);
@@ -70,28 +72,36 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
                 nr->hit = ls.hit;
             }
         };
+        // A smooth material reflects light from one direction only: nothing to sample.
+        const bool nee_here = use_nee && !is_delta(bp);
         LightSample ls;
-        if (use_nee && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls, rv ? &rv->nee_area : nullptr);
-        if (use_nee && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
+        if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls, rv ? &rv->nee_area : nullptr);
+        if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
 
         // BSDF sampling.
         float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
         BsdfSample bs;
         if (!bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) break;
-        beta *= bsdf_eval(bp, wo, bs.wi) / bs.pdf;
+        beta *= bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf;
         if (is_black(beta)) break;
         Vec3f dir = frame.to_world(bs.wi);
         Vec3f prev_p = sp.p;
         if (rv) {
             rv->next = true;
+            rv->next_delta = bs.delta;
+            rv->next_refract = bs.refract;
             rv->next_dir = dir;
             rv->next_inv_pdf = 1.f / bs.pdf;
         }
+        // Light met after a smooth bounce could not have been sampled: full weight, whatever
+        // the sampling strategy.
+        const bool counted = use_hits || bs.delta;
+        const bool weighted = mis && use_nee && !bs.delta;
         ray = spawn_ray(sp, dir);
         ++counters.bounce;
         if (!scene.intersect(ray, hit)) {
-            if (scene.has_envmap && use_hits) {
-                float w = (mis && use_nee) ? mis_power(bs.pdf, scene.env_pdf(dir)) : 1.f;
+            if (scene.has_envmap && counted) {
+                float w = weighted ? mis_power(bs.pdf, scene.env_pdf(dir)) : 1.f;
                 L += beta * scene.envmap.eval(dir) * w;
                 if (record) {
                     record->escaped = true;
@@ -102,10 +112,10 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         }
         sp = scene.surface_point(hit);
         float emission_weight = 0.f;
-        if (use_hits) {
+        if (counted) {
             Vec3f Le = scene.emitted(sp, -dir);
             if (!is_black(Le)) {
-                emission_weight = (mis && use_nee) ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
+                emission_weight = weighted ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
                 L += beta * Le * emission_weight;
             }
         }

@@ -1,6 +1,8 @@
 // The path tracer: one camera sample's radiance, with next-event estimation on area lights and
 // the environment combined with BSDF sampling by multiple importance sampling.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include "sampling/rng.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
@@ -29,8 +31,11 @@ struct PathVertexRecord {
     // Next-event estimation at this vertex: one sample on the area lights, one on the
     // environment.
     NeeRecord nee_area, nee_env;
-    // Continuation by BSDF sampling.
+    // Continuation by BSDF sampling. A smooth material's (next_delta) direction is a function
+    // of the vertex, and next_inv_pdf the inverse probability of its lobe (next_refract: the
+    // dielectric's transmission).
     bool next = false;
+    bool next_delta = false, next_refract = false;
     Vec3f next_dir;
     float next_inv_pdf = 0.f;
 };
@@ -39,6 +44,7 @@ struct PathRecord {
     Vec2f film;
     uint64_t stream = 0;         // seeds the random numbers the gradient pass adds to this path
     bool camera_missed = false;  // the camera ray left the scene
+    bool emitters_hidden = false;  // RenderOptions::hide_emitters: the first hit's emission not counted
     bool escaped = false;        // the last continuation left the scene
     float escape_weight = 0.f;   // MIS weight of the environment seen by that continuation
     std::vector<PathVertexRecord> vertices;
@@ -50,9 +56,20 @@ struct FirstHit {
     Hit hit;
 };
 
-inline FirstHit first_hit(const Scene& scene, const Ray& ray) {
+// How far past a hidden emitter (relative to the distance along the ray) the camera ray
+// resumes: a surface closer behind it than this is skipped with it.
+constexpr float kHiddenEmitterSkip = 1e-5f;
+
+// With `hide_emitters`, area lights are transparent to the camera ray (Mitsuba's
+// hide_emitters skips them): the first intersection past them, its t along the same ray.
+inline FirstHit first_hit(const Scene& scene, const Ray& ray, bool hide_emitters = false) {
     FirstHit f;
     f.found = scene.intersect(ray, f.hit);
+    Ray past = ray;
+    while (hide_emitters && f.found && scene.meshes[size_t(f.hit.mesh)].is_emitter()) {
+        past.tmin = std::max(std::nextafter(f.hit.t, INFINITY), f.hit.t * (1.f + kHiddenEmitterSkip));
+        f.found = scene.intersect(past, f.hit);
+    }
     return f;
 }
 
@@ -64,7 +81,7 @@ inline bool same_surface(const FirstHit& a, const FirstHit& b) {
 
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
 // `record` is given, also records the path for the gradient pass; when `first` is given, it is
-// the ray's intersection (not traced again).
+// the ray's intersection (not traced again), found by first_hit with opt.hide_emitters.
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record = nullptr, const FirstHit* first = nullptr);
 

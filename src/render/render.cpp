@@ -74,7 +74,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                         const Ray ray = scene.camera.generate_ray(film.x, film.y);
                         FirstHit first;
                         if (hit_values) {
-                            first = first_hit(scene, ray);
+                            first = first_hit(scene, ray, opt.hide_emitters);
                             eval_hit_channels(scene, layout, ray, first.found, first.hit, v);
                         }
                         if (radiance) {
@@ -91,7 +91,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                 if (ni > 0) {
                     // The ray through the pixel centre.
                     const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
-                    const FirstHit first = first_hit(scene, ray);
+                    const FirstHit first = first_hit(scene, ray, opt.hide_emitters);
                     ++c.camera;
                     eval_hit_ids(layout, first.found, first.hit, ids + index * ni);
                 }

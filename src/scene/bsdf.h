@@ -2,10 +2,14 @@
 // Schlick Fresnel with `specular` as the reflectance at normal incidence). Directions are in the
 // local shading frame (z = shading normal), `wo` towards the viewer, `wi` towards the light.
 // One-sided unless `two_sided`: black when either direction is below the shading surface.
+// The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
+// are zero, and bsdf_sample returns their one direction with its weight.
 #pragma once
 #include <cmath>
 #include "math/vec.h"
 #include "sampling/warp.h"
+#include "scene/desc.h"
+#include "scene/specular.h"
 
 namespace edgepath {
 
@@ -17,11 +21,23 @@ struct BsdfParams {
     Vec3f specular;
     float alpha = 0.5f;
     bool two_sided = false;
+    MaterialKind kind = MaterialKind::Standard;
+    float eta = 1.5f;  // Dielectric: relative index of refraction
 };
+
+inline bool is_delta(const BsdfParams& p) { return p.kind != MaterialKind::Standard; }
+
+inline DeltaParams<float> delta_params(const BsdfParams& p) {
+    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided};
+}
 
 struct BsdfSample {
     Vec3f wi;
-    float pdf = 0.f;  // solid angle, of the whole mixture
+    float pdf = 0.f;  // solid angle, of the whole mixture; smooth materials: the lobe's probability
+    // Smooth materials: the direction is the only one (no density, no light sampling), with
+    // this weight (value over probability); `refract`: the dielectric's transmission.
+    bool delta = false, refract = false;
+    Vec3f weight;
 };
 
 inline float ggx_D(const Vec3f& h, float a) {
@@ -65,6 +81,7 @@ inline bool orient(const BsdfParams& p, Vec3f& wo, Vec3f& wi) {
 
 // f(wo, wi) * cos(theta_i).
 inline Vec3f bsdf_eval(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (is_delta(p)) return Vec3f(0.f);
     if (!orient(p, wo, wi)) return Vec3f(0.f);
     Vec3f result = p.diffuse * (wi.z * kInvPi);
     if (!is_black(p.specular)) {
@@ -86,6 +103,7 @@ inline float ggx_pdf(const Vec3f& wo, const Vec3f& wi, float a) {
 }
 
 inline float bsdf_pdf(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (is_delta(p)) return 0.f;
     if (!orient(p, wo, wi)) return 0.f;
     float ps = specular_lobe_probability(p);
     float pdf = (1.f - ps) * wi.z * kInvPi;
@@ -109,6 +127,20 @@ inline Vec3f ggx_sample_visible_normal(const Vec3f& wo, float a, float u1, float
 
 // Samples wi. Returns false when no direction could be produced (zero BSDF).
 inline bool bsdf_sample(const BsdfParams& p, Vec3f wo, float u_lobe, float u1, float u2, BsdfSample& out) {
+    if (is_delta(p)) {
+        const DeltaParams<float> d = delta_params(p);
+        const Vec3f n(0.f, 0.f, 1.f);
+        float prob = 1.f;
+        if (d.dielectric) {
+            const float F = dielectric_reflectance(d.eta, n, wo);
+            out.refract = u_lobe >= F;
+            prob = out.refract ? 1.f - F : F;
+        }
+        if (!(prob > 0.f) || !delta_scatter(d, n, wo, out.refract, 1.f / prob, out.wi, out.weight)) return false;
+        out.delta = true;
+        out.pdf = prob;
+        return true;
+    }
     bool flipped = p.two_sided && wo.z < 0.f;
     if (flipped) wo.z = -wo.z;
     if (wo.z <= 0.f) return false;

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include "math/vec.h"
+#include "scene/desc.h"
 
 namespace edgepath {
 
@@ -16,6 +17,8 @@ struct TBsdfParams {
     TVec3<T> diffuse, specular;
     T alpha = T(0.5);
     bool two_sided = false;
+    MaterialKind kind = MaterialKind::Standard;  // smooth kinds: zero here (scene/specular.h)
+    T eta = T(1.5);
 };
 
 template <class T>
@@ -125,6 +128,7 @@ void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, c
 // f(wo, wi) * cos(theta_i), world space; n unit shading normal, wo/wi unit.
 template <class T>
 TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi) {
+    if (p.kind != MaterialKind::Standard) return TVec3<T>(T(0));
     T co = dot(n, wo);
     if (p.two_sided && co < 0) {
         n = -n;
@@ -142,6 +146,7 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
 template <class T>
 void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi,
                        const TVec3<T>& dr, DBsdf<T>& d) {
+    if (p.kind != MaterialKind::Standard) return;
     T co = dot(n, wo);
     bool flipped = p.two_sided && co < 0;
     if (flipped) {

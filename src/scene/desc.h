@@ -20,10 +20,18 @@ struct TextureDesc {
     int64_t num_values() const { return data ? int64_t(height) * width * channels : 0; }
 };
 
+// Standard: the diffuse + GGX model. Conductor: a smooth mirror, reflectance `specular` at
+// normal incidence (Schlick); `diffuse` and `roughness` unused. Dielectric: smooth glass with
+// relative index of refraction `ior` (inside over outside), reflecting and refracting by the
+// Fresnel equations; `diffuse`, `specular` and `roughness` unused, always two-sided.
+enum class MaterialKind { Standard = 0, Conductor = 1, Dielectric = 2 };
+
 struct MaterialDesc {
     TextureDesc diffuse;    // 3 channels, Lambertian albedo
     TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
     TextureDesc roughness;  // 1 channel, GGX alpha
+    TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric only)
+    MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false; // false: black seen from the back (as Mitsuba's BSDFs)
 };
 
@@ -55,7 +63,7 @@ constexpr float kMaxRadiance = 1e16f;
 constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;
 
 enum class CameraType { Perspective = 0, Orthographic = 1 };
-enum class FilterType { Box = 0, Gaussian = 1 };
+enum class FilterType { Box = 0, Gaussian = 1, Tent = 2 };
 
 // Camera frame: forward = normalize(look_at - position), right = normalize(cross(forward, up)),
 // image up = cross(right, forward). Film point (px, py) in pixels of the full film (py downward)
@@ -74,6 +82,7 @@ struct CameraDesc {
     int crop_x = 0, crop_y = 0, crop_width = 0, crop_height = 0;
     FilterType filter = FilterType::Box;  // box: one pixel wide
     float filter_stddev = 0.5f;           // Gaussian: stddev (pixels); cut at 4 stddev
+    float filter_radius = 1.f;            // Tent: radius (pixels)
 };
 
 // Lat-long environment map, Mitsuba's convention: local direction d maps to
@@ -111,6 +120,11 @@ struct RenderOptions {
     bool secondary_edges = true;   // silhouettes seen from shading points
     int64_t edge_samples = 0;      // primary edge samples; 0: one per output pixel per spp
     EdgeSampling edge_sampling = EdgeSampling::Importance;
+    // Emitters seen directly by the camera are hidden, as by Mitsuba's hide_emitters: area
+    // lights are transparent to camera rays (which go on to what lies behind them) and the
+    // environment seen directly is black; seen after a bounce both stay. The gradient follows
+    // the image: no term for hidden emission, and the edges see what the image shows.
+    bool hide_emitters = false;
     // Optional: another thread sets it to stop the call. The loops stop taking work within a
     // sample and the call throws Cancelled; its outputs are then unspecified.
     const std::atomic<bool>* cancel = nullptr;

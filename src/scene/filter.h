@@ -2,7 +2,7 @@
 // one, the film point drawn from the filter around the pixel centre. The expected pixel value is
 // the filter-weighted mean of radiance (what a splatting film normalised by summed weights gives).
 // Box: one pixel wide. Gaussian: separable, stddev s, cut at 4 s and lowered by its value there
-// (Mitsuba's `gaussian`).
+// (Mitsuba's `gaussian`). Tent: separable, 1 - |x| / r within radius r (Mitsuba's `tent`).
 #pragma once
 #include <cmath>
 #include <vector>
@@ -13,14 +13,14 @@ namespace edgepath {
 
 class PixelFilter {
 public:
-    void build(FilterType type, float stddev) {
+    void build(FilterType type, float stddev, float tent_radius = 1.f) {
         type_ = type;
         if (type == FilterType::Box) {
             radius_ = 0.5f;
             return;
         }
         stddev_ = stddev;
-        radius_ = 4.f * stddev;
+        radius_ = type == FilterType::Tent ? tent_radius : 4.f * stddev;
         std::vector<double> w(kBins);
         norm_ = 0.0;
         for (int i = 0; i < kBins; ++i) {
@@ -52,6 +52,7 @@ private:
     static constexpr int kBins = 4096;
     double raw(double x) const {
         if (std::abs(x) >= radius_) return 0.0;
+        if (type_ == FilterType::Tent) return 1.0 - std::abs(x) / radius_;
         auto g = [&](double t) { return std::exp(-0.5 * t * t / (double(stddev_) * stddev_)); };
         return std::max(0.0, g(x) - g(radius_));
     }

@@ -24,7 +24,7 @@ struct SceneGradients {
         GradSlot vertices, uvs, normals, emission;
     };
     struct MaterialSlots {
-        GradSlot diffuse, specular, roughness;
+        GradSlot diffuse, specular, roughness, ior;
     };
     std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
     std::vector<MaterialSlots> materials; // one per material

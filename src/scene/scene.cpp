@@ -99,6 +99,8 @@ void validate_camera(const CameraDesc& c) {
                                        str(c.ortho_scale));
     if (c.filter == FilterType::Gaussian && !(c.filter_stddev > 0.f && c.filter_stddev < 100.f))
         fail("camera.filter_stddev", "must be positive, got " + str(c.filter_stddev));
+    if (c.filter == FilterType::Tent && !(c.filter_radius >= 0.5f && c.filter_radius < 100.f))
+        fail("camera.filter_radius", "must be in [0.5, 100) pixels, got " + str(c.filter_radius));
     const int64_t cw = c.crop_width ? c.crop_width : c.width, ch = c.crop_height ? c.crop_height : c.height;
     if (c.crop_x < 0 || c.crop_y < 0 || cw < 1 || ch < 1 || c.crop_x + cw > c.width || c.crop_y + ch > c.height)
         fail("camera.crop_window", "(" + str(c.crop_x) + ", " + str(c.crop_y) + ", " + str(cw) + ", " + str(ch) +
@@ -196,6 +198,16 @@ void validate(const SceneDesc& desc) {
         check_texture(desc.materials[i].diffuse, 3, f + ".diffuse", true);
         check_texture(desc.materials[i].specular, 3, f + ".specular", true);
         check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
+        const MaterialDesc& md = desc.materials[i];
+        if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Dielectric))
+            fail(f + ".kind", "unknown material kind " + str(int(md.kind)));
+        if (md.kind == MaterialKind::Dielectric) {
+            check_texture(md.ior, 1, f + ".ior", true);
+            for (int64_t k = 0; k < md.ior.num_values(); ++k)
+                if (!(md.ior.data[k] >= kMinIor && md.ior.data[k] <= kMaxIor))
+                    fail(f + ".ior", "value " + str(md.ior.data[k]) + " at flat index " + str(k) + " is outside [" +
+                                         str(kMinIor) + ", " + str(kMaxIor) + "]");
+        }
     }
     for (size_t i = 0; i < desc.meshes.size(); ++i) validate_mesh(desc.meshes[i], int(i), int(desc.materials.size()));
     if (desc.has_envmap) {
@@ -293,7 +305,7 @@ void Scene::set_camera(const CameraDesc& cd) {
     validate_camera(cd);
     camera = Camera::from_desc(cd);
     camera_params = TCameraParams<float>::from_desc(cd);
-    filter.build(cd.filter, cd.filter_stddev);
+    filter.build(cd.filter, cd.filter_stddev, cd.filter_radius);
     crop_x = cd.crop_x;
     crop_y = cd.crop_y;
     out_width = cd.crop_width ? cd.crop_width : cd.width;
@@ -308,7 +320,9 @@ void Scene::set_views(const SceneDesc& desc) {
         m.diffuse = Texture(md.diffuse);
         m.specular = Texture(md.specular);
         m.roughness = Texture(md.roughness);
-        m.two_sided = md.two_sided;
+        m.kind = md.kind;
+        if (md.kind == MaterialKind::Dielectric) m.ior = Texture(md.ior);
+        m.two_sided = md.two_sided || md.kind == MaterialKind::Dielectric;
         materials.push_back(m);
     }
 
@@ -476,6 +490,8 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     p.specular = eval_texture3(m.specular, sp.uv);
     p.alpha = std::max(eval_texture1(m.roughness, sp.uv), kMinRoughness);
     p.two_sided = m.two_sided;
+    p.kind = m.kind;
+    if (m.kind == MaterialKind::Dielectric) p.eta = eval_texture1(m.ior, sp.uv);
     return p;
 }
 

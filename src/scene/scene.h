@@ -79,6 +79,8 @@ struct Mesh {
 
 struct Material {
     Texture diffuse, specular, roughness;
+    Texture ior;  // Dielectric only
+    MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false;
 };
 

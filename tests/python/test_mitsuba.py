@@ -119,7 +119,14 @@ UNSUPPORTED = [
     ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
     ('<emitter type="point"><point name="position" value="0, 1, 0"/></emitter>',
      "unsupported emitter type 'point'"),
-    ('<shape type="rectangle"><bsdf type="dielectric"/></shape>', "unsupported bsdf type 'dielectric'"),
+    ('<shape type="rectangle"><bsdf type="roughdielectric"/></shape>',
+     "unsupported bsdf type 'roughdielectric'"),
+    ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',
+     "twosided cannot hold a dielectric"),
+    ('<shape type="rectangle"><bsdf type="dielectric"><float name="int_ior" value="20"/>'
+     '</bsdf></shape>', "must be in [0.1, 10]"),
+    ('<shape type="rectangle"><bsdf type="dielectric"><rgb name="specular_transmittance" '
+     'value="0.5"/></bsdf></shape>', "specular_transmittance other than 1 is not supported"),
     ('<shape type="rectangle"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/>'
      '</bsdf></shape>', "unsupported texture type 'checkerboard'"),
     ('<integrator type="volpath"/>', "unsupported integrator type 'volpath'"),
@@ -144,8 +151,8 @@ UNSUPPORTED = [
      "property 'x' of shape 'rectangle' is not supported"),
     ('<shape type="rectangle"><emitter type="area"><spectrum name="radiance" value="400:1"/>'
      '</emitter></shape>', "wavelength:value pairs are not supported"),
-    ('<integrator type="path"><boolean name="hide_emitters" value="true"/></integrator>',
-     "hide_emitters is not supported"),
+    ('<integrator type="direct"><integer name="max_depth" value="3"/></integrator>',
+     "the direct integrator has no max_depth"),
     ('<shape type="rectangle"><bsdf type="diffuse"><texture type="bitmap"/></bsdf></shape>',
      "a texture inside a <bsdf> needs a name"),
     ('<shape type="rectangle"><bsdf type="diffuse"><rgb name="reflectance" value="1, 2"/></bsdf></shape>',
@@ -166,7 +173,10 @@ def test_unsupported_elements_name_the_element_and_line(tmp_path, body, message)
 
 @pytest.mark.parametrize("sensor, message", [
     (SENSOR.replace('type="perspective"', 'type="thinlens"'), "unsupported sensor type 'thinlens'"),
-    (SENSOR.replace('type="box"', 'type="tent"'), "unsupported rfilter type 'tent'"),
+    (SENSOR.replace('type="box"/>', 'type="tent"><float name="radius" value="0.25"/></rfilter>'),
+     r"radius 0.25: must be in \[0.5, 100\) pixels"),
+    (SENSOR.replace('<float name="fov" value="40"/>', '<float name="fov" value="40"/>'
+                    '<float name="focus_distance" value="0"/>'), "focus_distance must be > 0"),
     (SENSOR.replace('<rfilter type="box"/>', '<integer name="banner" value="1"/>'),
      "property 'banner' of film 'hdrfilm' is not supported"),
     (SENSOR.replace('<lookat', '<scale x="-1"/><lookat'), "mirrors the image"),

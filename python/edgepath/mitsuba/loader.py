@@ -32,8 +32,9 @@ class MitsubaScene:
     ``scene``: the ``edgepath.Scene``; ``max_bounces``: the integrator's ``max_depth - 1``
     (None where the file leaves it unbounded: ``render`` and the command line then use
     ``UNBOUNDED_MAX_BOUNCES``, 2); ``spp`` and ``seed``: the sampler's
-    ``sample_count`` and ``seed``; ``shapes``: meshes by shape id (shapes without an id are
-    named ``shape_<i>``, in file order), ``shape_ids`` in the order of ``scene.meshes``;
+    ``sample_count`` and ``seed``; ``hide_emitters``: the integrator's; ``shapes``: meshes by
+    shape id (shapes without an id are named ``shape_<i>``, in file order), ``shape_ids`` in
+    the order of ``scene.meshes``;
     ``bsdfs``: materials by BSDF id; ``textures``: bitmap tensors by texture id. The tensors
     are the ones the scene holds: set ``requires_grad`` on them to optimise them."""
     scene: Scene
@@ -45,6 +46,7 @@ class MitsubaScene:
     bsdfs: Dict[str, Material] = field(default_factory=dict)
     textures: Dict[str, torch.Tensor] = field(default_factory=dict)
     path: str = ""
+    hide_emitters: bool = False  # the integrator's hide_emitters
     # Mitsuba's names of a material's fields (see parameters), by id() of the Material.
     bsdf_keys: Dict[int, Dict[str, str]] = field(default_factory=dict, repr=False)
 
@@ -56,7 +58,8 @@ class MitsubaScene:
         ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
         in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
         ``BSDF.specular`` (the GGX lobe's F0, which Mitsuba derives from eta/k or the IOR),
-        ``BSDF.diffuse`` of a conductor. ``BSDF``: the BSDF's id, or ``SHAPE.bsdf`` for one
+        ``BSDF.diffuse`` of a rough conductor; ``BSDF.eta`` is a dielectric's relative
+        index of refraction (int_ior / ext_ior, a 0-d tensor) as in Mitsuba. ``BSDF``: the BSDF's id, or ``SHAPE.bsdf`` for one
         without an id. A tensor shared by several shapes or BSDFs is listed under the first."""
         out: Dict[str, torch.Tensor] = {}
         listed = set()
@@ -79,10 +82,10 @@ class MitsubaScene:
             material = mesh.material
             prefix = bsdf_names.get(id(material), f"{sid}.bsdf")
             keys = self.bsdf_keys.get(id(material), DIFFUSE_KEYS)
-            for name in ("diffuse", "specular", "roughness"):
+            for name in ("diffuse", "specular", "roughness", "ior"):
                 mitsuba = keys.get(name)
                 put(f"{prefix}.{mitsuba or name}", getattr(material, name, None),
-                    texture_suffix=mitsuba is not None)
+                    texture_suffix=mitsuba is not None and name != "ior")
         if self.scene.envmap is not None:
             put("envmap.data", self.scene.envmap.values)
         return out
@@ -125,10 +128,10 @@ class MitsubaScene:
         return param, d.expand_as(param).clone() if param.dim() > 0 else d.reshape(())
 
     def render(self, **options) -> torch.Tensor:
-        """``ep.render`` of the scene with the file's spp, max_bounces and seed (keyword
-        arguments override them)."""
+        """``ep.render`` of the scene with the file's spp, max_bounces, seed and
+        hide_emitters (keyword arguments override them)."""
         from ..render import render
-        args = {"spp": self.spp, "seed": self.seed,
+        args = {"spp": self.spp, "seed": self.seed, "hide_emitters": self.hide_emitters,
                 "max_bounces": UNBOUNDED_MAX_BOUNCES if self.max_bounces is None else self.max_bounces}
         args.update(options)
         return render(self.scene, **args)

@@ -1,6 +1,6 @@
-"""BSDFs of Mitsuba scene files (diffuse, roughconductor, roughplastic, twosided), mapped onto
-edgepath's diffuse + GGX ``Material``, approximately where Mitsuba's model differs (see
-docs/scene-files.md)."""
+"""BSDFs of Mitsuba scene files (diffuse, conductor, roughconductor, roughplastic, dielectric,
+twosided), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
+approximately where Mitsuba's model differs (see docs/scene-files.md)."""
 
 from __future__ import annotations
 
@@ -45,7 +45,8 @@ NAMED_IOR = {
 DIFFUSE_KEYS = {"diffuse": "reflectance"}
 BSDF_KEYS = {"diffuse": DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
                                                        "roughness": "alpha"},
-             "roughconductor": {"roughness": "alpha"}}
+             "roughconductor": {"roughness": "alpha"}, "conductor": {},
+             "dielectric": {"ior": "eta"}}
 
 
 def load_bsdf(ctx: Reader, node: Node) -> Material:
@@ -59,10 +60,13 @@ def load_bsdf(ctx: Reader, node: Node) -> Material:
             ctx.fail(node, "twosided takes exactly one BSDF (different BSDFs per side are "
                            "not supported)")
         base = load_bsdf(ctx, ctx.deref(inner[0], ("bsdf",)))
+        if base.kind == "dielectric":
+            ctx.fail(node, "twosided cannot hold a dielectric (it transmits; Mitsuba refuses "
+                           "it too): a dielectric is two-sided already")
         props.pop(inner[0].attrs.get("name"), None)
         ctx.leftovers(node, props, "bsdf")
         material = Material(diffuse=base.diffuse, specular=base.specular,
-                            roughness=base.roughness, two_sided=True)
+                            roughness=base.roughness, two_sided=True, kind=base.kind)
         ctx.result.bsdf_keys[id(material)] = {
             k: "brdf_0." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
     else:
@@ -117,6 +121,30 @@ def ior_value(ctx: Reader, node: Node, props: Dict[str, Node], name: str,
     return ctx.float_value(p)
 
 
+def conductor_f0(ctx: Reader, node: Node, props: Dict[str, Node]) -> torch.Tensor:
+    """A conductor's reflectance at normal incidence (float32, (3,)): from eta and k, or its
+    named material ("none", a perfect mirror, by default), times specular_reflectance."""
+    if "material" in props and ("eta" in props or "k" in props):
+        ctx.fail(node, "give material or eta and k, not both")
+    if "eta" in props or "k" in props:
+        if "eta" not in props or "k" not in props:
+            ctx.fail(node, "give both eta and k")
+        eta, k = colour(ctx, props.pop("eta")), colour(ctx, props.pop("k"))
+        if eta.dim() != 1 or k.dim() != 1:
+            ctx.fail(node, "eta and k must be constants")
+        f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
+    else:
+        # Mitsuba's default: "none", a perfect white reflector (eta 0, k 1: F0 = 1)
+        name = ctx.string_value(props.pop("material")) if "material" in props else "none"
+        if name not in CONDUCTOR_F0:
+            ctx.fail(node, f"conductor material '{name}' is not supported (supported: "
+                           f"{', '.join(CONDUCTOR_F0)}; or give eta and k)")
+        f0 = torch.tensor(CONDUCTOR_F0[name])
+    if "specular_reflectance" in props:
+        f0 = f0 * colour(ctx, props.pop("specular_reflectance"))
+    return f0.to(torch.float32).contiguous()
+
+
 def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> Material:
     if "sample_visible" in props:  # a sampling choice: the same expected image
         ctx.bool_value(props.pop("sample_visible"))
@@ -125,29 +153,29 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
             torch.full((3,), 0.5)
         ctx.leftovers(node, props, "bsdf")
         return Material(diffuse=reflectance)
-    if kind == "roughconductor":
-        alpha = roughness_alpha(ctx, node, props)
-        if "material" in props and ("eta" in props or "k" in props):
-            ctx.fail(node, "give material or eta and k, not both")
-        if "eta" in props or "k" in props:
-            if "eta" not in props or "k" not in props:
-                ctx.fail(node, "give both eta and k")
-            eta, k = colour(ctx, props.pop("eta")), colour(ctx, props.pop("k"))
-            if eta.dim() != 1 or k.dim() != 1:
-                ctx.fail(node, "eta and k must be constants")
-            f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
-        else:
-            # Mitsuba's default: "none", a perfect white reflector (eta 0, k 1: F0 = 1)
-            name = ctx.string_value(props.pop("material")) if "material" in props else "none"
-            if name not in CONDUCTOR_F0:
-                ctx.fail(node, f"conductor material '{name}' is not supported (supported: "
-                               f"{', '.join(CONDUCTOR_F0)}; or give eta and k)")
-            f0 = torch.tensor(CONDUCTOR_F0[name])
-        if "specular_reflectance" in props:
-            f0 = f0 * colour(ctx, props.pop("specular_reflectance"))
+    if kind in ("conductor", "roughconductor"):
+        alpha = roughness_alpha(ctx, node, props) if kind == "roughconductor" else None
+        f0 = conductor_f0(ctx, node, props)
         ctx.leftovers(node, props, "bsdf")
-        return Material(diffuse=torch.zeros(3), specular=f0.to(torch.float32).contiguous(),
-                        roughness=alpha)
+        if kind == "conductor":
+            return Material(kind="conductor", specular=f0)
+        return Material(diffuse=torch.zeros(3), specular=f0, roughness=alpha)
+    if kind == "dielectric":
+        int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["bk7"])
+        ext_ior = ior_value(ctx, node, props, "ext_ior", NAMED_IOR["air"])
+        if not int_ior > 0 or not ext_ior > 0:
+            ctx.fail(node, "indices of refraction must be > 0")
+        eta = int_ior / ext_ior
+        if not 0.1 <= eta <= 10:
+            ctx.fail(node, f"int_ior / ext_ior = {eta:g}: must be in [0.1, 10]")
+        for name in ("specular_reflectance", "specular_transmittance"):
+            if name in props:
+                value = colour(ctx, props[name])
+                if value.dim() != 1 or not bool((value == 1).all()):
+                    ctx.fail(props[name], f"{name} other than 1 is not supported")
+                props.pop(name)
+        ctx.leftovers(node, props, "bsdf")
+        return Material(kind="dielectric", ior=torch.tensor(eta, dtype=torch.float32))
     if kind == "roughplastic":
         alpha = roughness_alpha(ctx, node, props)
         int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["polypropylene"])
@@ -166,5 +194,5 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
             specular = specular * colour(ctx, props.pop("specular_reflectance"))
         ctx.leftovers(node, props, "bsdf")
         return Material(diffuse=diffuse, specular=specular.contiguous(), roughness=alpha)
-    ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, roughconductor, "
-                   "roughplastic, twosided)")
+    ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, conductor, "
+                   "roughconductor, roughplastic, dielectric, twosided)")

@@ -21,10 +21,10 @@ def load_sensor(ctx: Reader, node: Node) -> Camera:
         ctx.fail(node, f"unsupported sensor type '{kind}' (supported: perspective, "
                        "orthographic)")
     props, nested = ctx.properties(node)
-    width, height, rfilter, stddev, crop = 768, 576, "gaussian", 0.5, None
+    width, height, rfilter, fparam, crop = 768, 576, "gaussian", 0.5, None
     for child in nested:
         if child.tag == "film":
-            width, height, rfilter, stddev, crop = load_film(ctx, child)
+            width, height, rfilter, fparam, crop = load_film(ctx, child)
         elif child.tag == "sampler":
             load_sampler(ctx, child)
         else:
@@ -37,9 +37,12 @@ def load_sensor(ctx: Reader, node: Node) -> Camera:
     for name in ("near_clip", "far_clip"):  # edgepath clips nothing
         if name in props:
             ctx.float_value(props.pop(name))
+    if kind == "perspective" and "focus_distance" in props:  # a pinhole: Mitsuba ignores it
+        if not ctx.float_value(props.pop("focus_distance")) > 0:
+            ctx.fail(node, "focus_distance must be > 0")
+    filter_args = {"filter_radius": fparam} if rfilter == "tent" else {"filter_stddev": fparam}
     camera = Camera(to_world=to_world.to(torch.float32), resolution=(height, width),
-                    camera_type=kind, pixel_filter=rfilter, filter_stddev=stddev,
-                    crop_window=crop)
+                    camera_type=kind, pixel_filter=rfilter, crop_window=crop, **filter_args)
     if kind == "perspective":
         fov = field_of_view(ctx, node, props, width / height)
         camera.fov = torch.tensor(fov, dtype=torch.float32)
@@ -90,11 +93,11 @@ def load_film(ctx: Reader, node: Node):
     height = ctx.int_value(props.pop("height")) if "height" in props else 576
     if width < 1 or height < 1:
         ctx.fail(node, f"film size {width}x{height}: must be positive")
-    rfilter, stddev = "gaussian", 0.5
+    rfilter, fparam = "gaussian", 0.5
     for child in nested:
         if child.tag != "rfilter":
             ctx.fail(child, "unexpected element inside <film> (supported: rfilter)")
-        rfilter, stddev = load_rfilter(ctx, child)
+        rfilter, fparam = load_rfilter(ctx, child)
     crop = None
     keys = ("crop_offset_x", "crop_offset_y", "crop_width", "crop_height")
     if any(k in props for k in keys):
@@ -111,10 +114,11 @@ def load_film(ctx: Reader, node: Node):
     if "sample_border" in props:
         ctx.bool_value(props.pop("sample_border"))
     ctx.leftovers(node, props, "film")
-    return width, height, rfilter, stddev, crop
+    return width, height, rfilter, fparam, crop
 
 
 def load_rfilter(ctx: Reader, node: Node):
+    """(type, parameter): the Gaussian's stddev, the tent's radius (box: 0.5)."""
     kind = node.attrs.get("type")
     props, nested = ctx.properties(node)
     if nested:
@@ -130,7 +134,13 @@ def load_rfilter(ctx: Reader, node: Node):
             ctx.fail(node, f"stddev {stddev}: must be > 0")
         ctx.leftovers(node, props, "rfilter")
         return "gaussian", stddev
-    ctx.fail(node, f"unsupported rfilter type '{kind}' (supported: box, gaussian)")
+    if kind == "tent":
+        radius = ctx.float_value(props.pop("radius")) if "radius" in props else 1.0
+        if not 0.5 <= radius < 100:
+            ctx.fail(node, f"radius {radius}: must be in [0.5, 100) pixels")
+        ctx.leftovers(node, props, "rfilter")
+        return "tent", radius
+    ctx.fail(node, f"unsupported rfilter type '{kind}' (supported: box, gaussian, tent)")
 
 
 def load_sampler(ctx: Reader, node: Node) -> None:
