@@ -165,7 +165,8 @@ def test_unsupported_elements_name_the_element_and_line(tmp_path, body, message)
 
 
 @pytest.mark.parametrize("sensor, message", [
-    (SENSOR.replace('type="perspective"', 'type="thinlens"'), "unsupported sensor type 'thinlens'"),
+    (SENSOR.replace('type="perspective"', 'type="pinhole"'), "unsupported sensor type 'pinhole'"),
+    (SENSOR.replace('type="perspective"', 'type="thinlens"'), "aperture_radius is required"),
     (SENSOR.replace('type="box"', 'type="tent"'), "unsupported rfilter type 'tent'"),
     (SENSOR.replace('<rfilter type="box"/>', '<integer name="banner" value="1"/>'),
      "property 'banner' of film 'hdrfilm' is not supported"),
@@ -306,6 +307,25 @@ def test_unbounded_depth_renders_with_the_command_lines_bounces(tmp_path):
     image = s.render(spp=2)
     assert torch.equal(image, ep.render(s.scene, spp=2, max_bounces=2, seed=s.seed))
     assert float(image.sum()) > float(ep.render(s.scene, spp=2, max_bounces=1, seed=s.seed).sum())
+
+
+def test_thin_lens_sensor(tmp_path):
+    lens = '<float name="aperture_radius" value="0.2"/><float name="focus_distance" value="3.5"/>'
+    sensor = SENSOR.replace('type="perspective">', 'type="thinlens">' + lens)
+    c = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor)).scene.camera
+    assert c.camera_type == "thinlens" and float(c.fov) == pytest.approx(40)
+    assert float(c.aperture_radius) == pytest.approx(0.2)
+    assert float(c.focus_distance) == pytest.approx(3.5)
+    # As Mitsuba: the focus distance defaults to the far clip distance.
+    sensor = SENSOR.replace('type="perspective">', 'type="thinlens"><float name="aperture_radius" '
+                            'value="0.1"/><float name="far_clip" value="50"/>')
+    c = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor,
+                                   name="b.xml")).scene.camera
+    assert float(c.focus_distance) == pytest.approx(50)
+    bad = SENSOR.replace('type="perspective">', 'type="thinlens"><float name="aperture_radius" '
+                         'value="0.1"/><float name="focus_distance" value="-1"/>')
+    with pytest.raises(ep.MitsubaError, match="focus_distance -1.0: must be > 0"):
+        ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=bad, name="c.xml"))
 
 
 def test_orthographic_sensor(tmp_path):
