@@ -312,8 +312,12 @@ def test_unbounded_depth_renders_with_the_command_lines_bounces(tmp_path):
 def test_thin_lens_sensor(tmp_path):
     lens = '<float name="aperture_radius" value="0.2"/><float name="focus_distance" value="3.5"/>'
     sensor = SENSOR.replace('type="perspective">', 'type="thinlens">' + lens)
-    c = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor)).scene.camera
+    loaded = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = loaded.scene.camera
     assert c.camera_type == "thinlens" and float(c.fov) == pytest.approx(40)
+    names = loaded.parameters()  # Mitsuba's names (mi.traverse)
+    assert names["sensor.aperture_radius"] is c.aperture_radius
+    assert names["sensor.focus_distance"] is c.focus_distance
     assert float(c.aperture_radius) == pytest.approx(0.2)
     assert float(c.focus_distance) == pytest.approx(3.5)
     # As Mitsuba: the focus distance defaults to the far clip distance.

@@ -51,7 +51,8 @@ class MitsubaScene:
     def parameters(self) -> Dict[str, torch.Tensor]:
         """The scene's differentiable tensors by name, each tensor once, named as Mitsuba 3's
         ``mi.traverse`` names them where Mitsuba has the same quantity: ``sensor.to_world``,
-        ``sensor.x_fov``, ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
+        ``sensor.x_fov``, ``sensor.aperture_radius`` and ``sensor.focus_distance`` (a thin
+        lens), ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
         (area lights), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
         ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
         in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
@@ -72,6 +73,8 @@ class MitsubaScene:
         camera = self.scene.camera
         put("sensor.to_world", camera.to_world)
         put("sensor.x_fov", camera.fov)
+        put("sensor.aperture_radius", camera.aperture_radius)  # a thin lens's
+        put("sensor.focus_distance", camera.focus_distance)
         bsdf_names = {id(m): name for name, m in self.bsdfs.items()}
         for sid, mesh in zip(self.shape_ids, self.scene.meshes):
             put(f"{sid}.vertex_positions", mesh.vertices)
@@ -93,8 +96,8 @@ class MitsubaScene:
         ``sensor.to_world``: 16 numbers (row-major), or ``sensor.position`` (a direction of
         ``sensor.to_world``): 3 numbers, a translation of the camera; colours (radiance,
         reflectance, ``specular``, ``envmap.data``): 1 number (every channel) or 3 (per
-        channel), added to every texel; scalars (``sensor.x_fov``, ``alpha``): 1 number
-        (every texel)."""
+        channel), added to every texel; scalars (``sensor.x_fov``, ``sensor.aperture_radius``,
+        ``sensor.focus_distance``, ``alpha``): 1 number (every texel)."""
         params = self.parameters()
         key = "sensor.to_world" if name == "sensor.position" else name
         if key not in params:
