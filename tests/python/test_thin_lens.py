@@ -12,6 +12,7 @@ import torch
 import conformance as C
 import edgepath as ep
 from edgepath import shapes
+from test_gradients import assert_autograd_equals_derivative_image
 
 REFERENCES = Path(__file__).resolve().parent / "references"
 
@@ -136,16 +137,8 @@ def test_autograd_equals_derivative_image(name):
     else:
         param = getattr(scene.camera, name)
         direction = torch.tensor([0.3, -0.2, 0.1]) if name == "position" else torch.ones_like(param)
-    options = dict(spp=4, max_bounces=1, seed=3)
-    d_image = ep.derivative_image(scene, param, direction, **options)
-    adjoint = torch.rand(d_image.shape, generator=torch.Generator().manual_seed(1)) - 0.2
-    expected = float((adjoint.double() * d_image.double()).sum())
-    param.requires_grad_(True)
-    image = ep.render(scene, backward_seed=options["seed"], **options)
-    (image * adjoint).sum().backward()
-    got = float((param.grad.double() * direction.double()).sum())
-    assert abs(expected) > 1e-2, f"{name}: the derivative vanishes, nothing is tested"
-    assert got == pytest.approx(expected, rel=2e-3, abs=1e-5), name
+    assert_autograd_equals_derivative_image(scene, param, direction, name, spp=4, max_bounces=1,
+                                            seed=3)
 
 
 def test_uniform_edge_sampling_agrees():
