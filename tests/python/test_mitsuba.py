@@ -332,6 +332,31 @@ def test_thin_lens_sensor(tmp_path):
         ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=bad, name="c.xml"))
 
 
+def test_directional_emitter(tmp_path):
+    body = """<shape type="rectangle" id="floor"><transform name="to_world"><scale value="2"/></transform></shape>
+    <emitter type="directional" id="sun"><vector name="direction" value="0, 0, -2"/>
+        <rgb name="irradiance" value="3, 2, 1"/><float name="angular_diameter" value="1"/></emitter>
+    <emitter type="directional"><transform name="to_world"><lookat origin="0 0 0" target="1 0 -1"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shape_ids == ["floor", "sun", "sun_1"]
+    image = s.render(spp=64, max_bounces=1)
+    # The floor (reflectance 0.5) faces the first sun (irradiance (3, 2, 1)) and receives the
+    # second's irradiance 1 at 45 degrees.
+    expected = 0.5 / math.pi * (torch.tensor([3.0, 2, 1]) + math.cos(math.pi / 4))
+    assert torch.allclose(image.mean((0, 1)), expected, rtol=2e-2)  # one light sampled of two
+    for bad, message in [
+        ('<vector name="direction" value="0 0 -1"/><transform name="to_world"><scale value="1"/></transform>',
+         "direction or to_world"),
+        ('<vector name="direction" value="0 0 0"/>', "the direction is zero"),
+        ('<float name="angular_diameter" value="0"/>', "angular_diameter 0.0"),
+        ('<float name="intensity" value="1"/>', "property 'intensity' of emitter"),
+    ]:
+        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="directional">{bad}</emitter>',
+                      name="bad.xml")
+        with pytest.raises(ep.MitsubaError, match=message):
+            ep.load_mitsuba(path)
+
+
 def test_orthographic_sensor(tmp_path):
     sensor = """<sensor type="orthographic">
         <transform name="to_world"><scale value="2.5"/><lookat origin="0 0 5" target="0 0 0" up="0 1 0"/></transform>

@@ -1,12 +1,16 @@
-"""Emitters of Mitsuba scene files: area lights inside a ``<shape>`` and the environment
-(``constant`` or ``envmap``) at the top level."""
+"""Emitters of Mitsuba scene files: area lights inside a ``<shape>``, the environment
+(``constant`` or ``envmap``) and ``directional`` suns at the top level."""
 
 from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import List
 
 import torch
 
 from ..io import _texture_rgb
-from ..scene import EnvironmentMap
+from ..lights import sun
+from ..scene import EnvironmentMap, Mesh
 from .textures import colour
 from .transforms import transform
 from .xml import Node, Reader
@@ -57,4 +61,60 @@ def load_environment(ctx: Reader, node: Node) -> EnvironmentMap:
         return EnvironmentMap(values=_texture_rgb(filename), to_world=to_world, scale=scale)
     if kind == "area":
         ctx.fail(node, "area emitters belong inside a <shape>")
-    ctx.fail(node, f"unsupported emitter type '{kind}' (supported: area, constant, envmap)")
+    ctx.fail(node, f"unsupported emitter type '{kind}' (supported: area, constant, envmap, "
+                   "directional)")
+
+
+@dataclass
+class Sun:
+    """A ``directional`` emitter, until the scene's bounds are known."""
+    sid: str
+    direction: torch.Tensor  # towards the sun
+    irradiance: torch.Tensor
+    angular_diameter: float
+
+
+def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
+    """Mitsuba's ``directional`` (``irradiance``, default 1; ``direction`` of travel or a
+    ``to_world`` whose z axis it is, default +z) with edgepath's ``angular_diameter`` (degrees,
+    default 0.5): edgepath has no delta lights."""
+    props, nested = ctx.properties(node)
+    for child in nested:
+        if child.attrs.get("name") != "irradiance":
+            ctx.fail(child, "unexpected element inside <emitter>")
+    if "direction" in props and "to_world" in props:
+        ctx.fail(node, "give direction or to_world, not both")
+    travel = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
+    if "direction" in props:
+        travel = torch.tensor(ctx.vector_value(props.pop("direction")), dtype=torch.float64)
+    elif "to_world" in props:
+        travel = transform(ctx, props.pop("to_world"))[:3, 2]
+    if not bool(torch.isfinite(travel).all()) or float(travel.norm()) == 0:
+        ctx.fail(node, "the direction is zero")
+    irradiance = colour(ctx, props.pop("irradiance")) if "irradiance" in props else torch.ones(3)
+    if irradiance.dim() != 1 or bool((irradiance < 0).any()):
+        ctx.fail(node, "a directional emitter's irradiance must be a constant >= 0")
+    diameter = ctx.float_value(props.pop("angular_diameter")) if "angular_diameter" in props \
+        else 0.5
+    if not 0 < diameter < 90:
+        ctx.fail(node, f"angular_diameter {diameter}: must be in (0, 90) degrees")
+    ctx.leftovers(node, props, "emitter")
+    sid = node.attrs.get("id", f"sun_{index}")
+    return Sun(sid, -travel / travel.norm(), irradiance, diameter)
+
+
+def place_suns(ctx: Reader, suns: List[Sun], meshes: List[Mesh]) -> List[Mesh]:
+    """The suns' meshes, placed for the bounds of ``meshes``."""
+    if not suns:
+        return []
+    points = torch.cat([m.vertices.detach().reshape(-1, 3).double() for m in meshes])
+    lo, hi = points.min(0).values, points.max(0).values
+    center, radius = (lo + hi) / 2, max(float((hi - lo).norm()) / 2, 1e-6)
+    out = []
+    for s in suns:
+        mesh = sun(s.direction, s.irradiance, s.angular_diameter, center=center.tolist(),
+                   scene_radius=radius)
+        ctx.result.shapes[s.sid] = mesh
+        ctx.result.shape_ids.append(s.sid)
+        out.append(mesh)
+    return out

@@ -10,7 +10,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 import torch
 
 from ..scene import Material, Mesh, Scene
-from .emitters import load_environment
+from .emitters import load_directional, load_environment, place_suns
 from .integrator import load_integrator
 from .materials import DIFFUSE_KEYS, load_bsdf
 from .sensors import load_sensor
@@ -165,6 +165,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
     sensor = None
     meshes: List[Mesh] = []
     envmap = None
+    suns = []
     for child in root.children:
         tag = child.tag
         if tag == "default":
@@ -181,6 +182,8 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
             load_bsdf(ctx, child)
         elif tag == "texture":
             load_bitmap(ctx, child, 3)
+        elif tag == "emitter" and child.attrs.get("type") == "directional":
+            suns.append(load_directional(ctx, child, len(suns)))
         elif tag == "emitter":
             if envmap is not None:
                 ctx.fail(child, "only one environment emitter (constant or envmap) is supported")
@@ -192,6 +195,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
         raise MitsubaError(f"{ctx.path}: no <sensor> (edgepath needs a camera)")
     if not meshes:
         raise MitsubaError(f"{ctx.path}: no <shape>")
+    meshes += place_suns(ctx, suns, meshes)
     ctx.result.scene = Scene(camera=sensor, meshes=meshes, envmap=envmap)
     return ctx.result
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import mitsuba as mi
 
 HERE = Path(__file__).resolve().parent
-SCENES = ["thinlens"]
+SCENES = ["thinlens", "sun"]
 
 
 def main():
