@@ -117,8 +117,8 @@ def _line_of(path, text):
 
 UNSUPPORTED = [
     ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
-    ('<emitter type="point"><point name="position" value="0, 1, 0"/></emitter>',
-     "unsupported emitter type 'point'"),
+    ('<emitter type="spot"><point name="position" value="0, 1, 0"/></emitter>',
+     "unsupported emitter type 'spot'"),
     ('<shape type="rectangle"><bsdf type="dielectric"/></shape>', "unsupported bsdf type 'dielectric'"),
     ('<shape type="rectangle"><bsdf type="diffuse"><texture type="checkerboard" name="reflectance"/>'
      '</bsdf></shape>', "unsupported texture type 'checkerboard'"),
@@ -352,6 +352,43 @@ def test_directional_emitter(tmp_path):
         ('<float name="intensity" value="1"/>', "property 'intensity' of emitter"),
     ]:
         path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="directional">{bad}</emitter>',
+                      name="bad.xml")
+        with pytest.raises(ep.MitsubaError, match=message):
+            ep.load_mitsuba(path)
+
+
+def test_point_emitter(tmp_path):
+    body = """<shape type="rectangle" id="floor"/>
+    <emitter type="point" id="bulb"><point name="position" value="0, 0, 2"/>
+        <rgb name="intensity" value="8, 4, 2"/><float name="radius" value="0.05"/></emitter>
+    <emitter type="point"><transform name="to_world"><translate z="3"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shape_ids == ["floor", "bulb", "point_1"]
+    bulb, default = s.shapes["bulb"], s.shapes["point_1"]
+    box_centre = (bulb.vertices.min(0).values + bulb.vertices.max(0).values) / 2
+    assert torch.allclose(box_centre, torch.tensor([0.0, 0, 2]), atol=1e-6)
+    assert float((bulb.vertices - torch.tensor([0.0, 0, 2])).norm(dim=1).max()) == pytest.approx(0.05, rel=1e-5)
+    # The default radius: 1e-3 of the shapes' bounds (the unit square: radius sqrt(2)).
+    radius = float((default.vertices - torch.tensor([0.0, 0, 3])).norm(dim=1).max())
+    assert radius == pytest.approx(1e-3 * math.sqrt(2), rel=1e-3)
+    # Pixels (1..2, 3..4) see the floor (reflectance 0.5; 12 x 8 pixels, fov 40, from z = 5);
+    # each light gives a floor point E = I h / d^3 at height h, distance d.
+    image = s.render(spp=1024, max_bounces=1)
+    t = math.tan(math.radians(20))
+    expected = torch.zeros(3)
+    for row in (1, 2):
+        for col in (3, 4):
+            x, y = 5 * (2 * (col + 0.5) / 12 - 1) * t, 5 * (1 - 2 * (row + 0.5) / 8) * t * 8 / 12
+            for h, intensity in ((2.0, torch.tensor([8.0, 4, 2])), (3.0, torch.ones(3))):
+                expected += 0.5 / math.pi * intensity * h / (x * x + y * y + h * h) ** 1.5 / 4
+    assert torch.allclose(image[1:3, 3:5].mean((0, 1)), expected, rtol=0.03)
+    for bad, message in [
+        ('<point name="position" value="0 0 1"/><transform name="to_world"><scale value="1"/></transform>',
+         "position or to_world"),
+        ('<float name="radius" value="0"/>', "radius 0.0: must be positive"),
+        ('<rgb name="intensity" value="-1"/>', "intensity must be a constant >= 0"),
+    ]:
+        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="point">{bad}</emitter>',
                       name="bad.xml")
         with pytest.raises(ep.MitsubaError, match=message):
             ep.load_mitsuba(path)

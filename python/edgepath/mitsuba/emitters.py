@@ -1,15 +1,16 @@
 """Emitters of Mitsuba scene files: area lights inside a ``<shape>``, the environment
-(``constant`` or ``envmap``) and ``directional`` suns at the top level."""
+(``constant`` or ``envmap``), ``directional`` suns and ``point`` lights at the top level."""
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional, Union
 
 import torch
 
 from ..io import _texture_rgb
-from ..lights import sun
+from ..lights import sphere_light, sun
 from ..scene import EnvironmentMap, Mesh
 from .textures import colour
 from .transforms import transform
@@ -62,7 +63,7 @@ def load_environment(ctx: Reader, node: Node) -> EnvironmentMap:
     if kind == "area":
         ctx.fail(node, "area emitters belong inside a <shape>")
     ctx.fail(node, f"unsupported emitter type '{kind}' (supported: area, constant, envmap, "
-                   "directional)")
+                   "directional, point)")
 
 
 @dataclass
@@ -72,6 +73,44 @@ class Sun:
     direction: torch.Tensor  # towards the sun
     irradiance: torch.Tensor
     angular_diameter: float
+
+
+@dataclass
+class PointLight:
+    """A ``point`` emitter, until the scene's bounds are known (for a default radius)."""
+    sid: str
+    position: torch.Tensor
+    intensity: torch.Tensor
+    radius: Optional[float]
+
+
+# A point light's radius where the file gives none, in units of the scene's radius.
+POINT_RADIUS = 1e-3
+
+
+def load_point(ctx: Reader, node: Node, index: int) -> PointLight:
+    """Mitsuba's ``point`` (``intensity``, default 1; ``position`` or the translation of a
+    ``to_world``) with edgepath's ``radius`` (default ``POINT_RADIUS`` times the scene's)."""
+    props, nested = ctx.properties(node)
+    for child in nested:
+        if child.attrs.get("name") != "intensity":
+            ctx.fail(child, "unexpected element inside <emitter>")
+    if "position" in props and "to_world" in props:
+        ctx.fail(node, "give position or to_world, not both")
+    position = torch.zeros(3, dtype=torch.float64)
+    if "position" in props:
+        position = torch.tensor(ctx.vector_value(props.pop("position")), dtype=torch.float64)
+    elif "to_world" in props:
+        position = transform(ctx, props.pop("to_world"))[:3, 3]
+    intensity = colour(ctx, props.pop("intensity")) if "intensity" in props else torch.ones(3)
+    if intensity.dim() != 1 or bool((intensity < 0).any()):
+        ctx.fail(node, "a point emitter's intensity must be a constant >= 0")
+    radius = ctx.float_value(props.pop("radius")) if "radius" in props else None
+    if radius is not None and not 0 < radius < math.inf:
+        ctx.fail(node, f"radius {radius}: must be positive (edgepath has no point lights of "
+                       "radius 0)")
+    ctx.leftovers(node, props, "emitter")
+    return PointLight(node.attrs.get("id", f"point_{index}"), position, intensity, radius)
 
 
 def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
@@ -103,17 +142,21 @@ def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
     return Sun(sid, -travel / travel.norm(), irradiance, diameter)
 
 
-def place_suns(ctx: Reader, suns: List[Sun], meshes: List[Mesh]) -> List[Mesh]:
-    """The suns' meshes, placed for the bounds of ``meshes``."""
-    if not suns:
+def place_lights(ctx: Reader, lights: List[Union[Sun, PointLight]], meshes: List[Mesh]) -> List[Mesh]:
+    """The meshes of suns and point lights, placed and sized for the bounds of ``meshes``."""
+    if not lights:
         return []
     points = torch.cat([m.vertices.detach().reshape(-1, 3).double() for m in meshes])
     lo, hi = points.min(0).values, points.max(0).values
     center, radius = (lo + hi) / 2, max(float((hi - lo).norm()) / 2, 1e-6)
     out = []
-    for s in suns:
-        mesh = sun(s.direction, s.irradiance, s.angular_diameter, center=center.tolist(),
-                   scene_radius=radius)
+    for s in lights:
+        if isinstance(s, Sun):
+            mesh = sun(s.direction, s.irradiance, s.angular_diameter, center=center.tolist(),
+                       scene_radius=radius)
+        else:
+            mesh = sphere_light(s.position, s.intensity,
+                                s.radius if s.radius is not None else POINT_RADIUS * radius)
         ctx.result.shapes[s.sid] = mesh
         ctx.result.shape_ids.append(s.sid)
         out.append(mesh)

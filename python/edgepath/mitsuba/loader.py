@@ -10,7 +10,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 import torch
 
 from ..scene import Material, Mesh, Scene
-from .emitters import load_directional, load_environment, place_suns
+from .emitters import load_directional, load_environment, load_point, place_lights
 from .integrator import load_integrator
 from .materials import DIFFUSE_KEYS, load_bsdf
 from .sensors import load_sensor
@@ -165,7 +165,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
     sensor = None
     meshes: List[Mesh] = []
     envmap = None
-    suns = []
+    lights = []  # suns and point lights, placed once the shapes' bounds are known
     for child in root.children:
         tag = child.tag
         if tag == "default":
@@ -183,7 +183,9 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
         elif tag == "texture":
             load_bitmap(ctx, child, 3)
         elif tag == "emitter" and child.attrs.get("type") == "directional":
-            suns.append(load_directional(ctx, child, len(suns)))
+            lights.append(load_directional(ctx, child, len(lights)))
+        elif tag == "emitter" and child.attrs.get("type") == "point":
+            lights.append(load_point(ctx, child, len(lights)))
         elif tag == "emitter":
             if envmap is not None:
                 ctx.fail(child, "only one environment emitter (constant or envmap) is supported")
@@ -195,7 +197,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
         raise MitsubaError(f"{ctx.path}: no <sensor> (edgepath needs a camera)")
     if not meshes:
         raise MitsubaError(f"{ctx.path}: no <shape>")
-    meshes += place_suns(ctx, suns, meshes)
+    meshes += place_lights(ctx, lights, meshes)
     ctx.result.scene = Scene(camera=sensor, meshes=meshes, envmap=envmap)
     return ctx.result
 
