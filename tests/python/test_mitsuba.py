@@ -344,14 +344,19 @@ def test_directional_emitter(tmp_path):
     # second's irradiance 1 at 45 degrees.
     expected = 0.5 / math.pi * (torch.tensor([3.0, 2, 1]) + math.cos(math.pi / 4))
     assert torch.allclose(image.mean((0, 1)), expected, rtol=2e-2)  # one light sampled of two
-    for bad, message in [
+    _assert_emitter_errors(tmp_path, "directional", [
         ('<vector name="direction" value="0 0 -1"/><transform name="to_world"><scale value="1"/></transform>',
          "direction or to_world"),
         ('<vector name="direction" value="0 0 0"/>', "the direction is zero"),
         ('<float name="angular_diameter" value="0"/>', "angular_diameter 0.0"),
         ('<float name="intensity" value="1"/>', "property 'intensity' of emitter"),
-    ]:
-        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="directional">{bad}</emitter>',
+    ])
+
+
+def _assert_emitter_errors(tmp_path, kind, cases):
+    """Each (body, message): an emitter of ``kind`` with that body raises the message."""
+    for bad, message in cases:
+        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="{kind}">{bad}</emitter>',
                       name="bad.xml")
         with pytest.raises(ep.MitsubaError, match=message):
             ep.load_mitsuba(path)
@@ -382,16 +387,12 @@ def test_point_emitter(tmp_path):
             for h, intensity in ((2.0, torch.tensor([8.0, 4, 2])), (3.0, torch.ones(3))):
                 expected += 0.5 / math.pi * intensity * h / (x * x + y * y + h * h) ** 1.5 / 4
     assert torch.allclose(image[1:3, 3:5].mean((0, 1)), expected, rtol=0.03)
-    for bad, message in [
+    _assert_emitter_errors(tmp_path, "point", [
         ('<point name="position" value="0 0 1"/><transform name="to_world"><scale value="1"/></transform>',
          "position or to_world"),
         ('<float name="radius" value="0"/>', "radius 0.0: must be positive"),
         ('<rgb name="intensity" value="-1"/>', "intensity must be a constant >= 0"),
-    ]:
-        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="point">{bad}</emitter>',
-                      name="bad.xml")
-        with pytest.raises(ep.MitsubaError, match=message):
-            ep.load_mitsuba(path)
+    ])
 
 
 def test_orthographic_sensor(tmp_path):

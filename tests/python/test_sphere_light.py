@@ -12,7 +12,7 @@ import torch
 
 import edgepath as ep
 from edgepath import shapes
-from test_sun import finite_difference, relative_l1
+from test_sun import assert_occluder_derivative_matches, finite_difference, relative_l1
 
 
 def light_scene(position=(0.3, 2.0, 0.0), intensity=4.0, radius=0.1, occluder=(0.0, 0.0, 0.0),
@@ -52,21 +52,9 @@ def test_intensity_derivative_matches_finite_differences():
 
 
 def test_occluder_derivative_matches_finite_differences():
-    """The penumbra moves with the square: the boundary term of secondary edges."""
-    shift = torch.tensor(0.0, dtype=torch.float64, requires_grad=True)
-
-    def make(x):
-        return light_scene(occluder=torch.stack([x, torch.zeros_like(x), torch.zeros_like(x)])
-                           if isinstance(x, torch.Tensor) else (x, 0.0, 0.0))
-    scene = make(shift)
-    d_image = ep.derivative_image(scene, shift, torch.ones_like(shift), spp=512, seed=1)
-    interior = ep.derivative_image(scene, shift, torch.ones_like(shift), spp=128, seed=1,
-                                   secondary_edges=False)
-    fd_image = finite_difference(make, 0.0, 0.05, 512, 2)
-    error, interior_error = relative_l1(d_image, fd_image), relative_l1(interior, fd_image)
-    print(f"relative L1 {error:.3f}; interior term alone {interior_error:.3f}")
-    assert error < 0.25
-    assert interior_error > 0.5
+    """The penumbra moves with the square: the boundary term of secondary edges. Measured at
+    512 spp: relative L1 0.15; 1.0 without the term."""
+    assert_occluder_derivative_matches(light_scene, 0.05, 512, 0.25, 0.5)
 
 
 def test_height_derivative_matches_finite_differences_in_sum():

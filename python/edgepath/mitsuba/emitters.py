@@ -84,6 +84,27 @@ class PointLight:
     radius: Optional[float]
 
 
+def _placed_emitter(ctx: Reader, node: Node, vector: str, column: int, power: str):
+    """(the other properties, the vector property ``vector`` or column ``column`` of a
+    ``to_world`` (default: +z, or the origin for column 3), the constant colour ``power``
+    (default 1)) of a point or directional emitter."""
+    props, nested = ctx.properties(node)
+    for child in nested:
+        if child.attrs.get("name") != power:
+            ctx.fail(child, "unexpected element inside <emitter>")
+    if vector in props and "to_world" in props:
+        ctx.fail(node, f"give {vector} or to_world, not both")
+    value = torch.tensor([0.0, 0.0, 0.0 if column == 3 else 1.0], dtype=torch.float64)
+    if vector in props:
+        value = torch.tensor(ctx.vector_value(props.pop(vector)), dtype=torch.float64)
+    elif "to_world" in props:
+        value = transform(ctx, props.pop("to_world"))[:3, column]
+    colour_value = colour(ctx, props.pop(power)) if power in props else torch.ones(3)
+    if colour_value.dim() != 1 or bool((colour_value < 0).any()):
+        ctx.fail(node, f"a {node.attrs.get('type')} emitter's {power} must be a constant >= 0")
+    return props, value, colour_value
+
+
 # A point light's radius where the file gives none, in units of the scene's radius.
 POINT_RADIUS = 1e-3
 
@@ -91,20 +112,7 @@ POINT_RADIUS = 1e-3
 def load_point(ctx: Reader, node: Node, index: int) -> PointLight:
     """Mitsuba's ``point`` (``intensity``, default 1; ``position`` or the translation of a
     ``to_world``) with edgepath's ``radius`` (default ``POINT_RADIUS`` times the scene's)."""
-    props, nested = ctx.properties(node)
-    for child in nested:
-        if child.attrs.get("name") != "intensity":
-            ctx.fail(child, "unexpected element inside <emitter>")
-    if "position" in props and "to_world" in props:
-        ctx.fail(node, "give position or to_world, not both")
-    position = torch.zeros(3, dtype=torch.float64)
-    if "position" in props:
-        position = torch.tensor(ctx.vector_value(props.pop("position")), dtype=torch.float64)
-    elif "to_world" in props:
-        position = transform(ctx, props.pop("to_world"))[:3, 3]
-    intensity = colour(ctx, props.pop("intensity")) if "intensity" in props else torch.ones(3)
-    if intensity.dim() != 1 or bool((intensity < 0).any()):
-        ctx.fail(node, "a point emitter's intensity must be a constant >= 0")
+    props, position, intensity = _placed_emitter(ctx, node, "position", 3, "intensity")
     radius = ctx.float_value(props.pop("radius")) if "radius" in props else None
     if radius is not None and not 0 < radius < math.inf:
         ctx.fail(node, f"radius {radius}: must be positive (edgepath has no point lights of "
@@ -117,22 +125,9 @@ def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
     """Mitsuba's ``directional`` (``irradiance``, default 1; ``direction`` of travel or a
     ``to_world`` whose z axis it is, default +z) with edgepath's ``angular_diameter`` (degrees,
     default 0.5): edgepath has no delta lights."""
-    props, nested = ctx.properties(node)
-    for child in nested:
-        if child.attrs.get("name") != "irradiance":
-            ctx.fail(child, "unexpected element inside <emitter>")
-    if "direction" in props and "to_world" in props:
-        ctx.fail(node, "give direction or to_world, not both")
-    travel = torch.tensor([0.0, 0.0, 1.0], dtype=torch.float64)
-    if "direction" in props:
-        travel = torch.tensor(ctx.vector_value(props.pop("direction")), dtype=torch.float64)
-    elif "to_world" in props:
-        travel = transform(ctx, props.pop("to_world"))[:3, 2]
+    props, travel, irradiance = _placed_emitter(ctx, node, "direction", 2, "irradiance")
     if not bool(torch.isfinite(travel).all()) or float(travel.norm()) == 0:
         ctx.fail(node, "the direction is zero")
-    irradiance = colour(ctx, props.pop("irradiance")) if "irradiance" in props else torch.ones(3)
-    if irradiance.dim() != 1 or bool((irradiance < 0).any()):
-        ctx.fail(node, "a directional emitter's irradiance must be a constant >= 0")
     diameter = ctx.float_value(props.pop("angular_diameter")) if "angular_diameter" in props \
         else 0.5
     if not 0 < diameter < 90:
