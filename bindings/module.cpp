@@ -110,6 +110,8 @@ edgepath::CameraDesc camera_desc(const nb::dict& d) {
     vec3(d, "up", f, c.up);
     c.fov = scalar<float>(d, "fov", f);
     c.ortho_scale = scalar<float>(d, "ortho_scale", f);
+    c.aperture_radius = scalar<float>(d, "aperture_radius", f);
+    c.focus_distance = scalar<float>(d, "focus_distance", f);
     c.type = static_cast<edgepath::CameraType>(scalar<int>(d, "type", f));
     c.height = scalar<int>(d, "height", f);
     c.width = scalar<int>(d, "width", f);

@@ -7,7 +7,7 @@
     ep.imwrite(image, "out.png")
 """
 
-from . import shapes
+from . import lights, shapes
 from .io import Picture, imread, imwrite, load_obj, load_ply, save_obj, show, to_srgb
 from .mitsuba import MitsubaError, MitsubaScene, load_mitsuba
 from .render import (CHANNELS, ID_CHANNELS, derivative_channels, derivative_image,
@@ -20,5 +20,5 @@ __version__ = "0.1.0"
 __all__ = ["CHANNELS", "ID_CHANNELS", "Camera", "EnvironmentMap", "Material", "Mesh", "Scene",
            "render", "render_channels", "derivative_image", "derivative_channels",
            "finite_difference_image", "finite_difference_channels", "imread", "imwrite", "load_obj",
-           "load_ply", "save_obj", "to_srgb", "show", "Picture", "shapes", "load_mitsuba",
+           "load_ply", "save_obj", "to_srgb", "show", "Picture", "shapes", "lights", "load_mitsuba",
            "MitsubaScene", "MitsubaError", "__version__"]

@@ -235,8 +235,11 @@ def _cmd_info(args) -> None:
         else "constant"
     print(f"lights: {area_lights} area, environment: {env}")
     print(f"bounds: min {_fmt(lo)}, max {_fmt(hi)}")
-    view = f"fov {float(c.fov):.4g} deg" if c.camera_type == "perspective" else \
-        f"ortho_scale {float(c.ortho_scale):.4g}"
+    view = f"ortho_scale {float(c.ortho_scale):.4g}" if c.camera_type == "orthographic" else \
+        f"fov {float(c.fov):.4g} deg"
+    if c.camera_type == "thinlens":
+        view += (f", aperture_radius {float(c.aperture_radius):.4g}, "
+                 f"focus_distance {float(c.focus_distance):.4g}")
     height, width = c.resolution
     crop = f", crop {tuple(c.crop_window)}" if c.crop_window is not None else ""
     print(f"camera: {c.camera_type}, position {_fmt(position)}, look_at {_fmt(look_at)}, "

@@ -27,7 +27,7 @@ from .scene import Camera, EnvironmentMap, Material, Mesh, Scene, frame_from_to_
 
 SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
-CAMERA_TYPES = {"perspective": 0, "orthographic": 1}
+CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
 MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
@@ -600,7 +600,7 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         if any(x is not None for x in (camera.position, camera.look_at, camera.up)):
             v.fail(f, "give either to_world or position/look_at/up, not both")
         m = v.float_tensor(camera.to_world, "camera.to_world", (4, 4))
-        _check_camera_to_world(m.detach(), camera.camera_type == "perspective")
+        _check_camera_to_world(m.detach(), camera.camera_type != "orthographic")
         position, look_at, up = frame_from_to_world(m)
     else:
         if camera.position is None:
@@ -613,7 +613,9 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         up = v.float_tensor(up, "camera.up", (3,))
 
     params = torch.cat([position, look_at, up, v.scalar_tensor(camera.fov, "camera.fov"),
-                        v.scalar_tensor(camera.ortho_scale, "camera.ortho_scale")])
+                        v.scalar_tensor(camera.ortho_scale, "camera.ortho_scale"),
+                        v.scalar_tensor(camera.aperture_radius, "camera.aperture_radius"),
+                        v.scalar_tensor(camera.focus_distance, "camera.focus_distance")])
     values = [float(x) for x in _param(flat, ("camera",), params).tolist()]
 
     resolution = camera.resolution
@@ -630,6 +632,8 @@ def _flatten_camera(camera, flat: FlatScene) -> None:
         "up": values[6:9],
         "fov": values[9],
         "ortho_scale": values[10],
+        "aperture_radius": values[11],
+        "focus_distance": values[12],
         "type": v.choice(camera.camera_type, "camera.camera_type", CAMERA_TYPES),
         "height": height,
         "width": width,
@@ -837,7 +841,8 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
 
     if not isinstance(scene, Scene):
         v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
-    camera = swap(scene.camera, ("position", "look_at", "up", "fov", "ortho_scale", "to_world"))
+    camera = swap(scene.camera, ("position", "look_at", "up", "fov", "ortho_scale", "to_world",
+                                 "aperture_radius", "focus_distance"))
     meshes = scene.meshes
     if isinstance(meshes, (list, tuple)):
         meshes = []

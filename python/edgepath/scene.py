@@ -27,12 +27,16 @@ def frame_from_to_world(to_world: torch.Tensor) -> Tuple[torch.Tensor, torch.Ten
 
 
 class Camera:
-    """A pinhole (``camera_type="perspective"``) or orthographic camera.
+    """A pinhole (``camera_type="perspective"``), thin lens (``"thinlens"``) or orthographic camera.
 
     Place it with ``position``/``look_at``/``up`` (tensors of shape (3,)), or with ``to_world``
     (4x4 camera-to-world matrix, see ``frame_from_to_world``), not both. ``resolution`` is
     (height, width) of the full film. ``fov``: horizontal field of view in degrees;
     ``ortho_scale``: half the width of an orthographic view; both a float or a 0-d tensor.
+    ``aperture_radius`` and ``focus_distance`` (a float or a 0-d tensor each, both
+    differentiable): a thin lens's aperture (a disk around ``position``, 0 = a pinhole) and the
+    distance along the viewing direction of the plane it keeps in focus (Mitsuba's ``thinlens``);
+    the other cameras ignore them.
     ``pixel_filter``: "box" (one pixel), "gaussian" (``filter_stddev`` pixels) or "tent"
     (``filter_radius`` pixels, at least 0.5).
     ``crop_window``: None or (x, y, width, height) in full-film pixels; renders only that part.
@@ -49,7 +53,9 @@ class Camera:
                  pixel_filter: str = "box",
                  filter_stddev: float = 0.5,
                  crop_window: Optional[Tuple[int, int, int, int]] = None,
-                 filter_radius: float = 1.0):
+                 filter_radius: float = 1.0,
+                 aperture_radius: Constant = 0.0,
+                 focus_distance: Constant = 1.0):
         self.position = position
         self.look_at = look_at
         self.up = up
@@ -62,6 +68,8 @@ class Camera:
         self.filter_stddev = filter_stddev
         self.crop_window = crop_window
         self.filter_radius = filter_radius
+        self.aperture_radius = aperture_radius
+        self.focus_distance = focus_distance
 
     def frame(self) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """(position, look_at, up), from ``to_world`` if it is set."""

@@ -158,11 +158,11 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
     if (rec.camera_missed) {
         // L = env(d0), d0 = the camera ray's direction.
         if (rec.emitters_hidden || !scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
-        Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y);
+        Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
         Vec3f d_dir = d_envmap(scene.envmap, slots, r.dir, a, sink);
         if (slots.camera.wanted()) {
             float cam[kCameraParams] = {};
-            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, Vec3f(0.f), d_dir, cam);
+            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, Vec3f(0.f), d_dir, cam);
             for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
         }
         return;
@@ -321,7 +321,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         if (k == 0 && slots.camera.wanted()) {
             // The camera ray (origin, d0) comes from the camera parameters.
             float cam[kCameraParams] = {};
-            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, d_origin, d_dir, cam);
+            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, d_origin, d_dir, cam);
             for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
         }
     }

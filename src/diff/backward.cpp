@@ -57,7 +57,7 @@ void channel_gradients(const Scene& scene, const RenderOptions& opt, const Chann
                 Ray ray;
                 ray.origin = v.origin;
                 ray.dir = v.dir;
-                if (any) d_hit_channels(scene, layout, grads, rec.film, ray, v.hit, ah, sinks.local());
+                if (any) d_hit_channels(scene, layout, grads, rec.film, rec.lens, ray, v.hit, ah, sinks.local());
             }
         },
         [&] { sinks.local().flush(); });
@@ -106,7 +106,7 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
                 for (int j = 0; j < nv; ++j) {
                     if (radiance && j >= ro && j < ro + 3) continue;
                     e[j] = inv_spp;
-                    d_hit_channels(scene, layout, dirs, rec.film, ray, v.hit, e, sink);
+                    d_hit_channels(scene, layout, dirs, rec.film, rec.lens, ray, v.hit, e, sink);
                     e[j] = 0.f;
                     o[j] += float(sink.take_projection());
                 }

@@ -7,7 +7,7 @@
 namespace edgepath {
 
 void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots, const Vec2f& film,
-                    const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink) {
+                    const Vec2f& lens, const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink) {
     const VertexGeometry g(scene, hit, ray.origin, ray.dir);
     HitAdjoint ha;
     for (Channel c : layout.channels) {
@@ -40,7 +40,7 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
     finish_hit(g, ha, mesh_slots(slots, hit.mesh), sink, ray.origin, ray.dir, d_origin, d_dir);
     if (slots.camera.wanted()) {
         float cam[kCameraParams] = {};
-        d_camera_ray(scene.camera_params, film.x, film.y, d_origin, d_dir, cam);
+        d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, d_origin, d_dir, cam);
         for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
     }
 }

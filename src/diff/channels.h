@@ -13,8 +13,9 @@ struct Hit;
 
 // Adjoint of eval_hit_channels: `adjoint` holds d loss / d value at the same offsets; the
 // derivatives go into the mesh and material slots, and (through the ray) into the camera's,
-// for the camera ray of film point `film`. Alpha and the ids have no interior derivative.
+// for the camera ray of film point `film` and lens sample `lens`. Alpha and the ids have no
+// interior derivative.
 void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots, const Vec2f& film,
-                    const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink);
+                    const Vec2f& lens, const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink);
 
 }  // namespace edgepath

@@ -13,19 +13,57 @@ namespace {
 // A silhouette edge's part on the film: the mesh vertices that receive its gradient and the
 // clipped segment (full-film pixels).
 struct FilmEdge {
+    size_t edge;  // in Scene::edges()
     int32_t mesh, v0, v1;
     int64_t f0, f1;  // adjacent faces (f1 = -1 on a boundary)
     bool fold;       // a boundary, or one face turned to the camera and the other away
     double ax, ay, bx, by;
 };
 
-// Whether the camera sees the edge as a fold: a boundary, or one face turned to the camera and
-// the other away (the outline of the surface can run along it).
-bool camera_fold(const Camera& cam, const Mesh& m, const Edge& e) {
+// Where one camera sample's rays start: the camera's position, or a thin lens's point of the
+// aperture. Seen from a lens point, the camera is a pinhole at that point whose film is shifted
+// by (shift_x, shift_y) in screen offsets: a world point q (camera axes, from the lens point) is at
+// screen offset q.xy / q.z + shift, shift = the lens point's (right, up) offsets / focus distance.
+struct Eye {
+    Vec3f position;
+    double shift_x = 0.0, shift_y = 0.0;
+    float lu = kLensCentre, lv = kLensCentre;  // the lens sample
+};
+
+Eye lens_eye(const Camera& cam, float lu, float lv) {
+    Eye eye;
+    const Vec3f a = cam.lens_offset(lu, lv);
+    eye.position = cam.position + a;
+    eye.shift_x = double(dot(a, cam.right)) / cam.focus;
+    eye.shift_y = double(dot(a, cam.up)) / cam.focus;
+    eye.lu = lu;
+    eye.lv = lv;
+    return eye;
+}
+
+// Whether the camera sees the edge as a fold from `eye`: a boundary, or one face turned to the
+// eye and the other away (the outline of the surface can run along it).
+bool camera_fold(const Camera& cam, const Vec3f& eye, const Mesh& m, const Edge& e) {
     if (e.kind == EdgeKind::Boundary) return true;
     const Vec3f n0 = m.face_normal(e.f0), n1 = m.face_normal(e.f1);
     if (cam.type == CameraType::Orthographic) return (dot(cam.forward, n0) < 0.f) != (dot(cam.forward, n1) < 0.f);
-    return is_silhouette(cam.position, m.vertex(e.v0), n0, n1, e.kind);
+    return is_silhouette(eye, m.vertex(e.v0), n0, n1, e.kind);
+}
+
+// Whether the edge is a fold seen from some point of a thin lens's aperture: each face's plane
+// may have the aperture's points on both sides.
+bool lens_may_fold(const Camera& cam, const Mesh& m, const Edge& e) {
+    if (e.kind == EdgeKind::Boundary || cam.type != CameraType::ThinLens) return camera_fold(cam, cam.position, m, e);
+    if (is_silhouette(cam.position, m.vertex(e.v0), m.face_normal(e.f0), m.face_normal(e.f1), e.kind)) return true;
+    bool front[2], back[2];
+    for (int i = 0; i < 2; ++i) {
+        const Vec3f n = m.face_normal(i == 0 ? e.f0 : e.f1);
+        const float s = dot(n, cam.position - m.vertex(e.v0));
+        const float reach = cam.aperture * length(n - cam.forward * dot(n, cam.forward));
+        front[i] = s + reach > 0.f;
+        back[i] = s - reach < 0.f;
+    }
+    return (front[0] && back[1]) || (back[0] && front[1]);
 }
 
 // Clips the segment p(t) = a + t (b - a), t in [t0, t1], to lo <= p <= hi along one axis.
@@ -50,12 +88,15 @@ double film_scale(const Camera& cam) { return cam.width / (2.0 * cam.tx); }
 double film_x(const Camera& cam, double sx) { return (sx + cam.tx) * film_scale(cam); }
 double film_y(const Camera& cam, double sy) { return cam.height * 0.5 - sy * film_scale(cam); }
 
-// Projects the edge (p0, p1) onto the film and clips it to the window [x0, x1] x [y0, y1]
-// (full-film pixels). False when nothing is left.
+// Projects the edge (p0, p1) onto the film from the camera's position and clips it to the window
+// [x0, x1] x [y0, y1] (full-film pixels). False when nothing is left. A thin lens's other eyes
+// see a point at depth z shifted on the film by at most aperture |1 / focus - 1 / z| in screen
+// offsets: the window is widened by that much over the edge's depths, so that every part some
+// lens point sees in the window is kept.
 bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0, double y0, double x1, double y1,
                   FilmEdge& fe) {
     Vec3d q0 = camera_axes(cam, p0 - cam.position), q1 = camera_axes(cam, p1 - cam.position);
-    if (cam.type == CameraType::Perspective) {
+    if (has_eye(cam.type)) {
         // Keep the part in front of the camera.
         const double near = 1e-5 * std::max(length(q0), length(q1));
         if (q0.z < near && q1.z < near) return false;
@@ -65,6 +106,15 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
         q0.y /= q0.z;
         q1.x /= q1.z;
         q1.y /= q1.z;
+        if (cam.type == CameraType::ThinLens) {
+            const double inv_focus = 1.0 / cam.focus;
+            const double reach = cam.aperture * film_scale(cam) *
+                                 std::max(std::abs(inv_focus - 1.0 / q0.z), std::abs(inv_focus - 1.0 / q1.z));
+            x0 -= reach;
+            y0 -= reach;
+            x1 += reach;
+            y1 += reach;
+        }
     }
     const double ax = film_x(cam, q0.x), ay = film_y(cam, q0.y), bx = film_x(cam, q1.x), by = film_y(cam, q1.y);
     double t0 = 0.0, t1 = 1.0;
@@ -76,15 +126,16 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
     return std::isfinite(fe.ax) && std::isfinite(fe.ay) && std::isfinite(fe.bx) && std::isfinite(fe.by);
 }
 
-// Film point of world point p and the film length per unit world length along direction `dir`
-// (unit). False behind the camera.
-bool film_point(const Camera& cam, const Vec3f& p, const Vec3f& dir, double& x, double& y, double& jacobian) {
-    const Vec3d q = camera_axes(cam, p - cam.position), dq = camera_axes(cam, dir);
+// Film point of world point p seen from `eye` and the film length per unit world length along
+// direction `dir` (unit). False behind the camera.
+bool film_point(const Camera& cam, const Eye& eye, const Vec3f& p, const Vec3f& dir, double& x, double& y,
+                double& jacobian) {
+    const Vec3d q = camera_axes(cam, p - eye.position), dq = camera_axes(cam, dir);
     double sx = q.x, sy = q.y, dsx = dq.x, dsy = dq.y;
-    if (cam.type == CameraType::Perspective) {
+    if (has_eye(cam.type)) {
         if (!(q.z > 0.0)) return false;
-        sx = q.x / q.z;
-        sy = q.y / q.z;
+        sx = q.x / q.z + eye.shift_x;
+        sy = q.y / q.z + eye.shift_y;
         dsx = (dq.x * q.z - q.x * dq.z) / (q.z * q.z);
         dsy = (dq.y * q.z - q.y * dq.z) / (q.z * q.z);
     }
@@ -142,7 +193,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
         const Mesh& m = scene.meshes[size_t(e.mesh)];
         FilmEdge fe;
-        fe.fold = camera_fold(cam, m, e);
+        fe.fold = lens_may_fold(cam, m, e);
         double len;
         if (uniform) {
             len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
@@ -153,6 +204,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
             len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
         }
+        fe.edge = size_t(&e - scene.edges().data());
         fe.mesh = e.mesh;
         fe.v0 = e.v0;
         fe.v1 = e.v1;
@@ -179,6 +231,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     const double px_scale = 2.0 * cam.tx / cam.width;  // d(screen offset) / d(film pixel)
 
     const float radius = scene.filter.radius();
+    const bool thin_lens = cam.type == CameraType::ThinLens;
+    Eye centre;
+    centre.position = cam.position;
     const uint64_t seed = mix64(opt.seed ^ 0x70726d6564676573ull);
     tbb::enumerable_thread_specific<GradSink> sinks([&] { return GradSink(adjoint == nullptr); });
     for_each_chunk(opt, n, 4096, [&](int64_t begin, int64_t end) {
@@ -196,9 +251,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Vec3f p0 = m.vertex(fe.v0), p1 = m.vertex(fe.v1);
             float x, y;
             double point_weight = sample_weight;
+            // A thin lens: this sample's lens point, the eye the sample sees the edge from.
+            const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
             if (uniform) {
                 double fx, fy, jacobian;
-                if (!film_point(cam, p0 + (p1 - p0) * float(t), normalize(p1 - p0), fx, fy, jacobian)) continue;
+                if (!film_point(cam, eye, p0 + (p1 - p0) * float(t), normalize(p1 - p0), fx, fy, jacobian)) continue;
                 if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
                 x = float(fx);
                 y = float(fy);
@@ -206,21 +263,41 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             } else {
                 x = float(fe.ax + (fe.bx - fe.ax) * t);
                 y = float(fe.ay + (fe.by - fe.ay) * t);
+                if (thin_lens) {
+                    // The edge point the camera's position sees there, seen from the lens point:
+                    // drawn with density 1 / total per unit film length from the position, it
+                    // has density (jacobian_centre / jacobian_lens) / total per unit film length
+                    // from the lens point.
+                    const Vec2f sc = cam.screen(x, y);
+                    const Vec3f dir = normalize(p1 - p0);
+                    const Vec3f p = closest_on_segment(p0, p1, cam.position,
+                                                       normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
+                    double fx, fy, j_lens, cx, cy, j_centre;
+                    if (!film_point(cam, eye, p, dir, fx, fy, j_lens) || !film_point(cam, centre, p, dir, cx, cy, j_centre))
+                        continue;
+                    if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1 || !(j_centre > 0.0)) continue;
+                    x = float(fx);
+                    y = float(fy);
+                    point_weight *= j_lens / j_centre;
+                }
             }
+            const bool fold = thin_lens ? camera_fold(cam, eye.position, m, scene.edges()[fe.edge]) : fe.fold;
 
             // The side function at the sample and its film-space gradient.
             Vec3f o, d;
-            camera_ray(scene.camera_params, x, y, o, d);
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             const EdgeSideGradient g = edge_side_gradient(p0, p1, o, d);
             double gx, gy;
-            if (cam.type == CameraType::Perspective) {
-                // d = normalize(w), w = forward + sx right + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
+            if (has_eye(cam.type)) {
+                // d = normalize(D), D = focus w - a (a pinhole: focus 1, a = 0), w = forward + sx right
+                // + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
                 const Vec2f sc = cam.screen(x, y);
-                const Vec3f w = cam.forward + cam.right * sc.x + cam.up * sc.y;
-                const double inv_w = 1.0 / length(w);
+                const float focus = thin_lens ? cam.focus : 1.f;
+                const Vec3f D = (cam.forward + cam.right * sc.x + cam.up * sc.y) * focus - (eye.position - cam.position);
+                const double scale = focus / length(D);
                 const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
-                gx = dot(g.d_d, dr) * px_scale * inv_w;
-                gy = -dot(g.d_d, du) * px_scale * inv_w;
+                gx = dot(g.d_d, dr) * px_scale * scale;
+                gy = -dot(g.d_d, du) * px_scale * scale;
             } else {
                 gx = dot(g.d_o, cam.right) * px_scale;
                 gy = -dot(g.d_o, cam.up) * px_scale;
@@ -230,7 +307,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
 
             // Both sides: g > 0 (upper) and g < 0 (lower).
             const float sx = float(gx / glen * step), sy = float(gy / glen * step);
-            const Ray ray_u = cam.generate_ray(x + sx, y + sy), ray_l = cam.generate_ray(x - sx, y - sy);
+            const Ray ray_u = cam.generate_ray(x + sx, y + sy, eye.lu, eye.lv);
+            const Ray ray_l = cam.generate_ray(x - sx, y - sy, eye.lu, eye.lv);
             const FirstHit first_u = first_hit(scene, ray_u, opt.hide_emitters),
                            first_l = first_hit(scene, ray_l, opt.hide_emitters);
             // The same surface (or the sky) on both sides: the edge is hidden here.
@@ -240,7 +318,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // sphere's pole fan seen edge-on) the step can leap over a whole face, and the crease
             // must not take what lies beyond (the sky past the outline) for its other side. A
             // fold's outer side sees whatever lies behind, by definition: no such test.
-            if (!fe.fold) {
+            if (!fold) {
                 const Vec3f on_edge = closest_on_segment(p0, p1, o, d);
                 const float tolerance = 1e-3f * std::max(length(on_edge - o), length(p1 - p0));
                 auto at_edge = [&](const FirstHit& f, const Ray& r) {
@@ -293,7 +371,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 }
                 if (camera_wanted) {
                     float cg[kCameraParams] = {};
-                    d_camera_ray(scene.camera_params, x, y, g.d_o * s, g.d_d * s, cg);
+                    d_camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, g.d_o * s, g.d_d * s, cg);
                     for (int k = 0; k < kCameraParams; ++k) sink.add(slots.camera, k, cg[k]);
                 }
             };

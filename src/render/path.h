@@ -42,6 +42,7 @@ struct PathVertexRecord {
 
 struct PathRecord {
     Vec2f film;
+    Vec2f lens{kLensCentre, kLensCentre};  // the thin lens's sample
     uint64_t stream = 0;         // seeds the random numbers the gradient pass adds to this path
     bool camera_missed = false;  // the camera ray left the scene
     bool emitters_hidden = false;  // RenderOptions::hide_emitters: the first hit's emission not counted
@@ -90,6 +91,14 @@ inline Vec2f sample_film_point(const Scene& scene, int x, int y, Rng& rng) {
     float fx = scene.filter.sample(rng.next_float());
     float fy = scene.filter.sample(rng.next_float());
     return {float(x) + 0.5f + fx, float(y) + 0.5f + fy};
+}
+
+// A thin lens camera's lens sample, the next two numbers of `rng`; the aperture's centre (and no
+// numbers drawn) for the other cameras.
+inline Vec2f sample_lens_point(const Scene& scene, Rng& rng) {
+    if (scene.camera.type != CameraType::ThinLens) return {kLensCentre, kLensCentre};
+    const float u = rng.next_float();
+    return {u, rng.next_float()};
 }
 
 }  // namespace edgepath

@@ -39,7 +39,8 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
                     if (opt.cancelled()) return;
                     Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                     Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                    Vec3f L = trace_path(scene, opt, scene.camera.generate_ray(film.x, film.y), rng, c);
+                    Vec2f lens = sample_lens_point(scene, rng);
+                    Vec3f L = trace_path(scene, opt, scene.camera.generate_ray(film.x, film.y, lens.x, lens.y), rng, c);
                     for (int k = 0; k < 3; ++k) sum[k] += L[k];
                 }
                 float* out = image + (int64_t(y) * scene.out_width + x) * 3;
@@ -71,7 +72,8 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                         if (opt.cancelled()) return;
                         Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                         const Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                        const Ray ray = scene.camera.generate_ray(film.x, film.y);
+                        const Vec2f lens = sample_lens_point(scene, rng);
+                        const Ray ray = scene.camera.generate_ray(film.x, film.y, lens.x, lens.y);
                         FirstHit first;
                         if (hit_values) {
                             first = first_hit(scene, ray, opt.hide_emitters);

@@ -114,7 +114,8 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
                     Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
                     rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (pixel * uint64_t(opt.spp) + uint64_t(s)));
                     rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                    const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y);
+                    rec.lens = sample_lens_point(scene, rng);
+                    const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
                     if (full_paths) {
                         trace_path(scene, opt, ray, rng, c, &rec);
                     } else {

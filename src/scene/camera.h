@@ -1,17 +1,26 @@
-// The camera: perspective (horizontal fov) or orthographic, given by position / look_at / up.
+// The camera: perspective (horizontal fov), thin lens (a perspective camera whose rays start on
+// a disk and meet on the plane of focus) or orthographic, given by position / look_at / up.
 // See scene/desc.h for the mapping from film points to rays.
 #pragma once
 #include <cmath>
 #include "math/ray.h"
 #include "math/vec_diff.h"
+#include "sampling/warp.h"
 #include "scene/desc.h"
 
 namespace edgepath {
 
+// Whether rays leave from an eye (perspective and thin lens: film points are directions).
+inline bool has_eye(CameraType t) { return t != CameraType::Orthographic; }
+
+// The lens sample of a pinhole: the centre of the aperture.
+constexpr float kLensCentre = 0.5f;
+
 struct Camera {
     Vec3f position, forward, right, up;
-    float tx = 1.f;  // tan(fov / 2) for perspective, half view width for orthographic
+    float tx = 1.f;  // tan(fov / 2) for perspective and thin lens, half view width for orthographic
     CameraType type = CameraType::Perspective;
+    float aperture = 0.f, focus = 1.f;  // thin lens: aperture radius, focus distance
     int width = 0, height = 0;  // full film
 
     static Camera from_desc(const CameraDesc& d) {
@@ -21,7 +30,9 @@ struct Camera {
         c.right = normalize(cross(c.forward, Vec3f::load(d.up)));
         c.up = cross(c.right, c.forward);
         c.type = d.type;
-        c.tx = d.type == CameraType::Perspective ? std::tan(d.fov * 0.5f * 3.14159265358979f / 180.f) : d.ortho_scale;
+        c.tx = has_eye(d.type) ? std::tan(d.fov * 0.5f * 3.14159265358979f / 180.f) : d.ortho_scale;
+        c.aperture = d.aperture_radius;
+        c.focus = d.focus_distance;
         c.width = d.width;
         c.height = d.height;
         return c;
@@ -34,12 +45,26 @@ struct Camera {
         return {sx, sy};
     }
 
-    Ray generate_ray(float px, float py) const {
+    // The offset of lens sample (lu, lv) (the unit square) from the camera's position: a point of
+    // the aperture's disk in the plane of right and up. Zero for the other cameras.
+    Vec3f lens_offset(float lu, float lv) const {
+        if (type != CameraType::ThinLens) return Vec3f(0.f);
+        const Vec2f l = square_to_disk(lu, lv);
+        return (right * l.x + up * l.y) * aperture;
+    }
+
+    // The ray of film point (px, py) and lens sample (lu, lv) (used by the thin lens only).
+    Ray generate_ray(float px, float py, float lu = kLensCentre, float lv = kLensCentre) const {
         Vec2f s = screen(px, py);
         Ray r;
         if (type == CameraType::Perspective) {
             r.origin = position;
             r.dir = normalize(forward + right * s.x + up * s.y);
+        } else if (type == CameraType::ThinLens) {
+            // From the lens point towards the film point's point on the plane of focus.
+            const Vec3f a = lens_offset(lu, lv);
+            r.origin = position + a;
+            r.dir = normalize((forward + right * s.x + up * s.y) * focus - a);
         } else {
             r.origin = position + right * s.x + up * s.y;
             r.dir = forward;
@@ -49,11 +74,12 @@ struct Camera {
 };
 
 
-// The camera as a differentiable function of its parameters (pose, fov or orthographic scale).
+// The camera as a differentiable function of its parameters (pose, fov or orthographic scale,
+// aperture radius and focus distance).
 template <class T>
 struct TCameraParams {
     TVec3<T> position, look_at, up;
-    T fov = 45, ortho_scale = 1;
+    T fov = 45, ortho_scale = 1, aperture_radius = 0, focus_distance = 1;
     CameraType type = CameraType::Perspective;
     int width = 1, height = 1;
 
@@ -64,6 +90,8 @@ struct TCameraParams {
         c.up = TVec3<T>(TVec3<float>::load(d.up));
         c.fov = T(d.fov);
         c.ortho_scale = T(d.ortho_scale);
+        c.aperture_radius = T(d.aperture_radius);
+        c.focus_distance = T(d.focus_distance);
         c.type = d.type;
         c.width = d.width;
         c.height = d.height;
@@ -71,41 +99,71 @@ struct TCameraParams {
     }
 };
 
-// Gradient slots of the camera, in this order: position[3], look_at[3], up[3], fov, ortho_scale.
-constexpr int kCameraParams = 11;
+// Gradient slots of the camera, in this order: position[3], look_at[3], up[3], fov, ortho_scale,
+// aperture_radius, focus_distance.
+constexpr int kCameraParams = 13;
 
+// The ray of film point (px, py) and lens sample (lu, lv) (the thin lens's; a constant of the
+// sample, as the film point is). The same as Camera::generate_ray.
 template <class T>
-void camera_ray(const TCameraParams<T>& c, T px, T py, TVec3<T>& o, TVec3<T>& d) {
+void camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, TVec3<T>& o, TVec3<T>& d) {
     TVec3<T> f = normalize(c.look_at - c.position);
     TVec3<T> r = normalize(cross(f, c.up));
     TVec3<T> u = cross(r, f);
-    T tx = c.type == CameraType::Perspective ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
+    T tx = has_eye(c.type) ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
     T sx = (2 * px / T(c.width) - 1) * tx;
     T sy = (1 - 2 * py / T(c.height)) * tx * T(c.height) / T(c.width);
     if (c.type == CameraType::Perspective) {
         o = c.position;
         d = normalize(f + r * sx + u * sy);
+    } else if (c.type == CameraType::ThinLens) {
+        const Vec2f l = square_to_disk(lu, lv);
+        TVec3<T> a = (r * T(l.x) + u * T(l.y)) * c.aperture_radius;
+        o = c.position + a;
+        d = normalize((f + r * sx + u * sy) * c.focus_distance - a);
     } else {
         o = c.position + r * sx + u * sy;
         d = f;
     }
 }
 
+template <class T>
+void camera_ray(const TCameraParams<T>& c, T px, T py, TVec3<T>& o, TVec3<T>& d) {
+    camera_ray(c, px, py, kLensCentre, kLensCentre, o, d);
+}
+
 // Adds the adjoint of camera_ray for output adjoints (d_o, d_d) to grad[kCameraParams].
 template <class T>
-void d_camera_ray(const TCameraParams<T>& c, T px, T py, const TVec3<T>& d_o, const TVec3<T>& d_d, T* grad) {
+void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, const TVec3<T>& d_o,
+                  const TVec3<T>& d_d, T* grad) {
     TVec3<T> F = c.look_at - c.position;
     TVec3<T> f = normalize(F);
     TVec3<T> R = cross(f, c.up);
     TVec3<T> r = normalize(R);
     TVec3<T> u = cross(r, f);
-    bool persp = c.type == CameraType::Perspective;
+    const bool persp = has_eye(c.type);
     T tx = persp ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
     T ax = 2 * px / T(c.width) - 1, ay = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
     T sx = ax * tx, sy = ay * tx;
     TVec3<T> dposition(T(0)), df(T(0)), dr(T(0)), du(T(0));
     T dsx, dsy;
-    if (persp) {
+    if (c.type == CameraType::ThinLens) {
+        // a = (r lx + u ly) aperture_radius; o = position + a; w = f + r sx + u sy;
+        // d = normalize(w focus_distance - a)
+        const Vec2f l = square_to_disk(lu, lv);
+        const TVec3<T> lens = r * T(l.x) + u * T(l.y);
+        const TVec3<T> a = lens * c.aperture_radius, w = f + r * sx + u * sy;
+        const TVec3<T> dD = d_normalize(w * c.focus_distance - a, d_d);
+        const TVec3<T> dw = dD * c.focus_distance, da = d_o - dD;
+        grad[12] += dot(dD, w);
+        grad[11] += dot(da, lens);
+        dposition += d_o;
+        dr += da * (c.aperture_radius * T(l.x)) + dw * sx;
+        du += da * (c.aperture_radius * T(l.y)) + dw * sy;
+        df += dw;
+        dsx = dot(dw, r);
+        dsy = dot(dw, u);
+    } else if (persp) {
         // o = position; d = normalize(f + r sx + u sy)
         dposition += d_o;
         TVec3<T> dD = d_normalize(f + r * sx + u * sy, d_d);
@@ -143,6 +201,11 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, const TVec3<T>& d_o, co
         grad[3 + k] += dF[k];
         grad[6 + k] += dup[k];
     }
+}
+
+template <class T>
+void d_camera_ray(const TCameraParams<T>& c, T px, T py, const TVec3<T>& d_o, const TVec3<T>& d_d, T* grad) {
+    d_camera_ray(c, px, py, kLensCentre, kLensCentre, d_o, d_d, grad);
 }
 
 }  // namespace edgepath

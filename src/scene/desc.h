@@ -62,20 +62,26 @@ constexpr float kMaxRadiance = 1e16f;
 // edge samples (pixels times spp) in int64.
 constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;
 
-enum class CameraType { Perspective = 0, Orthographic = 1 };
+enum class CameraType { Perspective = 0, Orthographic = 1, ThinLens = 2 };
 enum class FilterType { Box = 0, Gaussian = 1, Tent = 2 };
 
 // Camera frame: forward = normalize(look_at - position), right = normalize(cross(forward, up)),
 // image up = cross(right, forward). Film point (px, py) in pixels of the full film (py downward)
 // maps to the direction forward + (2 px / W - 1) tx right + (1 - 2 py / H) tx (H / W) up,
 // tx = tan(fov / 2) (horizontal fov). Orthographic: origin shifted by the same offsets with
-// tx replaced by `ortho_scale` (half the width of the view), direction = forward.
+// tx replaced by `ortho_scale` (half the width of the view), direction = forward. Thin lens: the
+// perspective camera's film, with rays from a point a of the aperture (a disk of radius
+// `aperture_radius` around the position in the plane of right and up, drawn per camera sample)
+// through the film point's point on the plane of focus at depth `focus_distance` (along
+// forward): direction focus_distance (forward + sx right + sy up) - a (Mitsuba's thinlens).
 struct CameraDesc {
     float position[3] = {0, 0, 0};
     float look_at[3] = {0, 0, 1};
     float up[3] = {0, 1, 0};
     float fov = 45.f;          // degrees, horizontal
     float ortho_scale = 1.f;
+    float aperture_radius = 0.f;  // thin lens
+    float focus_distance = 1.f;   // thin lens
     CameraType type = CameraType::Perspective;
     int width = 0, height = 0; // full film, pixels
     // Crop window in pixels of the full film; width/height 0 means the whole film.

@@ -90,8 +90,16 @@ void validate_camera(const CameraDesc& c) {
     if (!(length(f) > 0.f)) fail("camera.look_at", "equals camera.position");
     Vec3f r = cross(normalize(f), Vec3f::load(c.up));
     if (!(length(r) > 1e-6f)) fail("camera.up", "is zero or parallel to the viewing direction");
-    if (c.type == CameraType::Perspective && !(c.fov > 0.f && c.fov < 180.f))
+    if (has_eye(c.type) && !(c.fov > 0.f && c.fov < 180.f))
         fail("camera.fov", "must be in (0, 180) degrees, got " + str(c.fov));
+    if (c.type == CameraType::ThinLens) {
+        if (!(c.aperture_radius >= 0.f && c.aperture_radius <= kMaxCoordinate))
+            fail("camera.aperture_radius", "must be at least 0 and at most " + str(kMaxCoordinate) + ", got " +
+                                               str(c.aperture_radius));
+        if (!(c.focus_distance > 0.f && c.focus_distance <= kMaxCoordinate))
+            fail("camera.focus_distance", "must be positive and at most " + str(kMaxCoordinate) + ", got " +
+                                              str(c.focus_distance));
+    }
     if (c.type == CameraType::Orthographic &&
         !(c.ortho_scale > 0.f && c.ortho_scale <= kMaxCoordinate &&
           double(c.ortho_scale) * c.height / c.width <= kMaxCoordinate))

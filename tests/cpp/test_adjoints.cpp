@@ -181,9 +181,10 @@ TEST(Adjoint, IntersectTriangle) {
     check_adjoint(f, adj, x, "intersect_triangle");
 }
 
-void camera_case(CameraType type) {
-    // Inputs: position, look_at, up, fov, ortho_scale; outputs: origin, direction.
-    std::vector<double> x = {0.3, 0.5, -4, 0.1, -0.2, 0.3, 0.1, 1, 0.2, 40, 1.5};
+void camera_case(CameraType type, float lu = kLensCentre, float lv = kLensCentre) {
+    // Inputs: position, look_at, up, fov, ortho_scale, aperture_radius, focus_distance; outputs:
+    // origin, direction.
+    std::vector<double> x = {0.3, 0.5, -4, 0.1, -0.2, 0.3, 0.1, 1, 0.2, 40, 1.5, 0.3, 2.5};
     const double px = 13.3, py = 40.7;
     auto unpack = [type](const std::vector<double>& x) {
         TCameraParams<double> c;
@@ -192,6 +193,8 @@ void camera_case(CameraType type) {
         c.up = v3(x, 6);
         c.fov = x[9];
         c.ortho_scale = x[10];
+        c.aperture_radius = x[11];
+        c.focus_distance = x[12];
         c.type = type;
         c.width = 64;
         c.height = 48;
@@ -199,20 +202,25 @@ void camera_case(CameraType type) {
     };
     Fn f = [&](const std::vector<double>& x) {
         Vec3d o, d;
-        camera_ray(unpack(x), px, py, o, d);
+        camera_ray(unpack(x), px, py, lu, lv, o, d);
         return std::vector<double>{o.x, o.y, o.z, d.x, d.y, d.z};
     };
     auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
         std::vector<double> g(kCameraParams, 0.0);
-        d_camera_ray(unpack(x), px, py, v3(yb, 0), v3(yb, 3), g.data());
+        d_camera_ray(unpack(x), px, py, lu, lv, v3(yb, 0), v3(yb, 3), g.data());
         return g;
     };
-    check_adjoint(f, adj, x, type == CameraType::Perspective ? "perspective" : "orthographic");
+    const char* names[] = {"perspective", "orthographic", "thin lens"};
+    check_adjoint(f, adj, x, names[int(type)]);
 }
 
 TEST(Adjoint, CameraRay) {
     camera_case(CameraType::Perspective);
     camera_case(CameraType::Orthographic);
+    // Lens samples off the centre, in each quadrant of the concentric map.
+    camera_case(CameraType::ThinLens, 0.8f, 0.35f);
+    camera_case(CameraType::ThinLens, 0.1f, 0.7f);
+    camera_case(CameraType::ThinLens, 0.3f, 0.05f);
 }
 
 TEST(Adjoint, CameraRayMatchesRenderCamera) {
@@ -231,6 +239,24 @@ TEST(Adjoint, CameraRayMatchesRenderCamera) {
         EXPECT_NEAR(r.origin[k], o[k], 1e-5);
         EXPECT_NEAR(r.dir[k], dir[k], 1e-5);
     }
+    // A thin lens: a ray from the aperture through the film point's point in focus.
+    d.type = CameraType::ThinLens;
+    d.aperture_radius = 0.25f;
+    d.focus_distance = 3.f;
+    const Camera cam = Camera::from_desc(d);
+    r = cam.generate_ray(13.3f, 40.7f, 0.9f, 0.2f);
+    camera_ray(TCameraParams<double>::from_desc(d), 13.3, 40.7, 0.9f, 0.2f, o, dir);
+    for (int k = 0; k < 3; ++k) {
+        EXPECT_NEAR(r.origin[k], o[k], 1e-5);
+        EXPECT_NEAR(r.dir[k], dir[k], 1e-5);
+    }
+    EXPECT_GT(length(r.origin - cam.position), 0.1f);  // off the centre
+    EXPECT_LE(length(r.origin - cam.position), 0.25f + 1e-6f);
+    // Every lens point's ray through a film point meets the pinhole's on the plane of focus.
+    const Ray pin = cam.generate_ray(13.3f, 40.7f);
+    const float t_pin = 3.f / dot(pin.dir, cam.forward), t_lens = dot(pin.origin + pin.dir * t_pin - r.origin, cam.forward) / dot(r.dir, cam.forward);
+    const Vec3f gap = (pin.origin + pin.dir * t_pin) - (r.origin + r.dir * t_lens);
+    EXPECT_LT(length(gap), 1e-5f);
 }
 
 TEST(Adjoint, TextureFootprintUvDerivative) {

@@ -213,7 +213,7 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     for (int j = 0; j < layout.num_values; ++j) {
         float e[kMaxChannelValues] = {};
         e[j] = 1.f;
-        d_hit_channels(*scene, layout, dirs, Vec2f(film_x, film_y), ray, first.hit, e, sink);
+        d_hit_channels(*scene, layout, dirs, Vec2f(film_x, film_y), Vec2f(kLensCentre, kLensCentre), ray, first.hit, e, sink);
         const double got = sink.take_projection(), fd = (double(plus[j]) - minus[j]) / (2.0 * eps);
         EXPECT_NEAR(got, fd, 2e-3 + 5e-3 * std::abs(fd)) << "value " << j;
         if (j == layout.offset[int(Channel::Alpha)]) {

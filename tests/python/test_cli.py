@@ -171,6 +171,16 @@ def test_info(scene_file, capsys):
     assert text.count("(4, 4)") == 1 and "sensor.position  (--direction only)" in text
 
 
+def test_info_thin_lens(capsys):
+    scene = Path(__file__).resolve().parent / "references" / "thinlens.xml"
+    code, text, err = _run(["info", scene], capsys)
+    assert code == 0, err
+    assert ("camera: thinlens, position (0, 0, 5)" in text and
+            "fov 40 deg, aperture_radius 0.3, focus_distance 5, 48x32" in text)
+    for name in ("sensor.aperture_radius", "sensor.focus_distance"):
+        assert f"  {name}  ()  1 number" in text
+
+
 def test_errors_name_the_line(tmp_path, capsys):
     bad = tmp_path / "bad.xml"
     bad.write_text(SCENE.replace('<shape type="rectangle" id="card">', '<shape type="cylinder" id="card">'))

@@ -95,8 +95,13 @@ def test_autograd_equals_derivative_image(name):
     scene = floor_scene()
     getter, _ = PARAMS[name]
     param = getter(scene)
-    direction = direction_for(name, param)
-    options = dict(spp=2, max_bounces=2, seed=3)
+    assert_autograd_equals_derivative_image(scene, param, direction_for(name, param), name,
+                                            spp=2, max_bounces=2, seed=3)
+
+
+def assert_autograd_equals_derivative_image(scene, param, direction, name, **options):
+    """Reverse mode (``param.grad`` from a random adjoint image) equals forward mode (the
+    derivative image) for the same random numbers (``options`` include the seed)."""
     d_image = ep.derivative_image(scene, param, direction, **options)
     adjoint = torch.rand(d_image.shape, generator=torch.Generator().manual_seed(1)) - 0.2
     expected = float((adjoint.double() * d_image.double()).sum())

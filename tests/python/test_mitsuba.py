@@ -117,8 +117,8 @@ def _line_of(path, text):
 
 UNSUPPORTED = [
     ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
-    ('<emitter type="point"><point name="position" value="0, 1, 0"/></emitter>',
-     "unsupported emitter type 'point'"),
+    ('<emitter type="spot"><point name="position" value="0, 1, 0"/></emitter>',
+     "unsupported emitter type 'spot'"),
     ('<shape type="rectangle"><bsdf type="roughdielectric"/></shape>',
      "unsupported bsdf type 'roughdielectric'"),
     ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',
@@ -172,7 +172,8 @@ def test_unsupported_elements_name_the_element_and_line(tmp_path, body, message)
 
 
 @pytest.mark.parametrize("sensor, message", [
-    (SENSOR.replace('type="perspective"', 'type="thinlens"'), "unsupported sensor type 'thinlens'"),
+    (SENSOR.replace('type="perspective"', 'type="pinhole"'), "unsupported sensor type 'pinhole'"),
+    (SENSOR.replace('type="perspective"', 'type="thinlens"'), "aperture_radius is required"),
     (SENSOR.replace('type="box"/>', 'type="tent"><float name="radius" value="0.25"/></rfilter>'),
      r"radius 0.25: must be in \[0.5, 100\) pixels"),
     (SENSOR.replace('<float name="fov" value="40"/>', '<float name="fov" value="40"/>'
@@ -316,6 +317,92 @@ def test_unbounded_depth_renders_with_the_command_lines_bounces(tmp_path):
     image = s.render(spp=2)
     assert torch.equal(image, ep.render(s.scene, spp=2, max_bounces=2, seed=s.seed))
     assert float(image.sum()) > float(ep.render(s.scene, spp=2, max_bounces=1, seed=s.seed).sum())
+
+
+def test_thin_lens_sensor(tmp_path):
+    lens = '<float name="aperture_radius" value="0.2"/><float name="focus_distance" value="3.5"/>'
+    sensor = SENSOR.replace('type="perspective">', 'type="thinlens">' + lens)
+    loaded = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor))
+    c = loaded.scene.camera
+    assert c.camera_type == "thinlens" and float(c.fov) == pytest.approx(40)
+    names = loaded.parameters()  # Mitsuba's names (mi.traverse)
+    assert names["sensor.aperture_radius"] is c.aperture_radius
+    assert names["sensor.focus_distance"] is c.focus_distance
+    assert float(c.aperture_radius) == pytest.approx(0.2)
+    assert float(c.focus_distance) == pytest.approx(3.5)
+    # As Mitsuba: the focus distance defaults to the far clip distance.
+    sensor = SENSOR.replace('type="perspective">', 'type="thinlens"><float name="aperture_radius" '
+                            'value="0.1"/><float name="far_clip" value="50"/>')
+    c = ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=sensor,
+                                   name="b.xml")).scene.camera
+    assert float(c.focus_distance) == pytest.approx(50)
+    bad = SENSOR.replace('type="perspective">', 'type="thinlens"><float name="aperture_radius" '
+                         'value="0.1"/><float name="focus_distance" value="-1"/>')
+    with pytest.raises(ep.MitsubaError, match="focus_distance -1.0: must be > 0"):
+        ep.load_mitsuba(_write(tmp_path, '<shape type="rectangle"/>', sensor=bad, name="c.xml"))
+
+
+def test_directional_emitter(tmp_path):
+    body = """<shape type="rectangle" id="floor"><transform name="to_world"><scale value="2"/></transform></shape>
+    <emitter type="directional" id="sun"><vector name="direction" value="0, 0, -2"/>
+        <rgb name="irradiance" value="3, 2, 1"/><float name="angular_diameter" value="1"/></emitter>
+    <emitter type="directional"><transform name="to_world"><lookat origin="0 0 0" target="1 0 -1"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shape_ids == ["floor", "sun", "sun_1"]
+    image = s.render(spp=64, max_bounces=1)
+    # The floor (reflectance 0.5) faces the first sun (irradiance (3, 2, 1)) and receives the
+    # second's irradiance 1 at 45 degrees.
+    expected = 0.5 / math.pi * (torch.tensor([3.0, 2, 1]) + math.cos(math.pi / 4))
+    assert torch.allclose(image.mean((0, 1)), expected, rtol=2e-2)  # one light sampled of two
+    _assert_emitter_errors(tmp_path, "directional", [
+        ('<vector name="direction" value="0 0 -1"/><transform name="to_world"><scale value="1"/></transform>',
+         "direction or to_world"),
+        ('<vector name="direction" value="0 0 0"/>', "the direction is zero"),
+        ('<float name="angular_diameter" value="0"/>', "angular_diameter 0.0"),
+        ('<float name="intensity" value="1"/>', "property 'intensity' of emitter"),
+    ])
+
+
+def _assert_emitter_errors(tmp_path, kind, cases):
+    """Each (body, message): an emitter of ``kind`` with that body raises the message."""
+    for bad, message in cases:
+        path = _write(tmp_path, f'<shape type="rectangle"/><emitter type="{kind}">{bad}</emitter>',
+                      name="bad.xml")
+        with pytest.raises(ep.MitsubaError, match=message):
+            ep.load_mitsuba(path)
+
+
+def test_point_emitter(tmp_path):
+    body = """<shape type="rectangle" id="floor"/>
+    <emitter type="point" id="bulb"><point name="position" value="0, 0, 2"/>
+        <rgb name="intensity" value="8, 4, 2"/><float name="radius" value="0.05"/></emitter>
+    <emitter type="point"><transform name="to_world"><translate z="3"/></transform></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shape_ids == ["floor", "bulb", "point_1"]
+    bulb, default = s.shapes["bulb"], s.shapes["point_1"]
+    box_centre = (bulb.vertices.min(0).values + bulb.vertices.max(0).values) / 2
+    assert torch.allclose(box_centre, torch.tensor([0.0, 0, 2]), atol=1e-6)
+    assert float((bulb.vertices - torch.tensor([0.0, 0, 2])).norm(dim=1).max()) == pytest.approx(0.05, rel=1e-5)
+    # The default radius: 1e-3 of the shapes' bounds (the unit square: radius sqrt(2)).
+    radius = float((default.vertices - torch.tensor([0.0, 0, 3])).norm(dim=1).max())
+    assert radius == pytest.approx(1e-3 * math.sqrt(2), rel=1e-3)
+    # Pixels (1..2, 3..4) see the floor (reflectance 0.5; 12 x 8 pixels, fov 40, from z = 5);
+    # each light gives a floor point E = I h / d^3 at height h, distance d.
+    image = s.render(spp=1024, max_bounces=1)
+    t = math.tan(math.radians(20))
+    expected = torch.zeros(3)
+    for row in (1, 2):
+        for col in (3, 4):
+            x, y = 5 * (2 * (col + 0.5) / 12 - 1) * t, 5 * (1 - 2 * (row + 0.5) / 8) * t * 8 / 12
+            for h, intensity in ((2.0, torch.tensor([8.0, 4, 2])), (3.0, torch.ones(3))):
+                expected += 0.5 / math.pi * intensity * h / (x * x + y * y + h * h) ** 1.5 / 4
+    assert torch.allclose(image[1:3, 3:5].mean((0, 1)), expected, rtol=0.03)
+    _assert_emitter_errors(tmp_path, "point", [
+        ('<point name="position" value="0 0 1"/><transform name="to_world"><scale value="1"/></transform>',
+         "position or to_world"),
+        ('<float name="radius" value="0"/>', "radius 0.0: must be positive"),
+        ('<rgb name="intensity" value="-1"/>', "intensity must be a constant >= 0"),
+    ])
 
 
 def test_orthographic_sensor(tmp_path):

@@ -10,7 +10,7 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 import torch
 
 from ..scene import Material, Mesh, Scene
-from .emitters import load_environment
+from .emitters import load_directional, load_environment, load_point, place_lights
 from .integrator import load_integrator
 from .materials import DIFFUSE_KEYS, load_bsdf
 from .sensors import load_sensor
@@ -53,7 +53,8 @@ class MitsubaScene:
     def parameters(self) -> Dict[str, torch.Tensor]:
         """The scene's differentiable tensors by name, each tensor once, named as Mitsuba 3's
         ``mi.traverse`` names them where Mitsuba has the same quantity: ``sensor.to_world``,
-        ``sensor.x_fov``, ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
+        ``sensor.x_fov``, ``sensor.aperture_radius`` and ``sensor.focus_distance`` (a thin
+        lens), ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
         (area lights), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
         ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
         in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
@@ -75,6 +76,8 @@ class MitsubaScene:
         camera = self.scene.camera
         put("sensor.to_world", camera.to_world)
         put("sensor.x_fov", camera.fov)
+        put("sensor.aperture_radius", camera.aperture_radius)  # a thin lens's
+        put("sensor.focus_distance", camera.focus_distance)
         bsdf_names = {id(m): name for name, m in self.bsdfs.items()}
         for sid, mesh in zip(self.shape_ids, self.scene.meshes):
             put(f"{sid}.vertex_positions", mesh.vertices)
@@ -96,8 +99,8 @@ class MitsubaScene:
         ``sensor.to_world``: 16 numbers (row-major), or ``sensor.position`` (a direction of
         ``sensor.to_world``): 3 numbers, a translation of the camera; colours (radiance,
         reflectance, ``specular``, ``envmap.data``): 1 number (every channel) or 3 (per
-        channel), added to every texel; scalars (``sensor.x_fov``, ``alpha``): 1 number
-        (every texel)."""
+        channel), added to every texel; scalars (``sensor.x_fov``, ``sensor.aperture_radius``,
+        ``sensor.focus_distance``, ``alpha``): 1 number (every texel)."""
         params = self.parameters()
         key = "sensor.to_world" if name == "sensor.position" else name
         if key not in params:
@@ -165,6 +168,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
     sensor = None
     meshes: List[Mesh] = []
     envmap = None
+    lights = []  # suns and point lights, placed once the shapes' bounds are known
     for child in root.children:
         tag = child.tag
         if tag == "default":
@@ -181,6 +185,10 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
             load_bsdf(ctx, child)
         elif tag == "texture":
             load_bitmap(ctx, child, 3)
+        elif tag == "emitter" and child.attrs.get("type") == "directional":
+            lights.append(load_directional(ctx, child, len(lights)))
+        elif tag == "emitter" and child.attrs.get("type") == "point":
+            lights.append(load_point(ctx, child, len(lights)))
         elif tag == "emitter":
             if envmap is not None:
                 ctx.fail(child, "only one environment emitter (constant or envmap) is supported")
@@ -192,6 +200,7 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
         raise MitsubaError(f"{ctx.path}: no <sensor> (edgepath needs a camera)")
     if not meshes:
         raise MitsubaError(f"{ctx.path}: no <shape>")
+    meshes += place_lights(ctx, lights, meshes)
     ctx.result.scene = Scene(camera=sensor, meshes=meshes, envmap=envmap)
     return ctx.result
 

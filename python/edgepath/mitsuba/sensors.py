@@ -1,5 +1,5 @@
-"""Sensors of Mitsuba scene files: the ``<sensor>`` (perspective or orthographic camera, its
-field of view) with its ``<film>`` (size, crop window), ``<rfilter>`` (pixel filter) and
+"""Sensors of Mitsuba scene files: the ``<sensor>`` (perspective, thin lens or orthographic
+camera, its field of view, a thin lens's aperture and focus) with its ``<film>`` (size, crop window), ``<rfilter>`` (pixel filter) and
 ``<sampler>`` (sample count and seed)."""
 
 from __future__ import annotations
@@ -17,8 +17,8 @@ from .xml import Node, Reader
 
 def load_sensor(ctx: Reader, node: Node) -> Camera:
     kind = node.attrs.get("type")
-    if kind not in ("perspective", "orthographic"):
-        ctx.fail(node, f"unsupported sensor type '{kind}' (supported: perspective, "
+    if kind not in ("perspective", "thinlens", "orthographic"):
+        ctx.fail(node, f"unsupported sensor type '{kind}' (supported: perspective, thinlens, "
                        "orthographic)")
     props, nested = ctx.properties(node)
     width, height, rfilter, fparam, crop = 768, 576, "gaussian", 0.5, None
@@ -34,6 +34,8 @@ def load_sensor(ctx: Reader, node: Node) -> Camera:
     if float(torch.linalg.det(to_world[:3, :3])) <= 0:
         ctx.fail(node, "to_world mirrors the image (negative determinant, e.g. a negative "
                        "scale): not supported")
+    if kind == "thinlens":
+        lens = load_thin_lens(ctx, node, props)
     for name in ("near_clip", "far_clip"):  # edgepath clips nothing
         if name in props:
             ctx.float_value(props.pop(name))
@@ -43,9 +45,11 @@ def load_sensor(ctx: Reader, node: Node) -> Camera:
     filter_args = {"filter_radius": fparam} if rfilter == "tent" else {"filter_stddev": fparam}
     camera = Camera(to_world=to_world.to(torch.float32), resolution=(height, width),
                     camera_type=kind, pixel_filter=rfilter, crop_window=crop, **filter_args)
-    if kind == "perspective":
+    if kind in ("perspective", "thinlens"):
         fov = field_of_view(ctx, node, props, width / height)
         camera.fov = torch.tensor(fov, dtype=torch.float32)
+    if kind == "thinlens":
+        camera.aperture_radius, camera.focus_distance = lens
     else:
         sx, sy = (float(to_world[:3, i].norm()) for i in (0, 1))
         if abs(sx - sy) > 1e-6 * max(sx, sy):
@@ -54,6 +58,21 @@ def load_sensor(ctx: Reader, node: Node) -> Camera:
         camera.ortho_scale = sx
     ctx.leftovers(node, props, "sensor")
     return camera
+
+
+def load_thin_lens(ctx: Reader, node: Node, props: Dict[str, Node]):
+    """(aperture_radius, focus_distance) of a ``thinlens`` sensor, as 0-d float32 tensors. As
+    Mitsuba: the aperture radius is required; the focus distance defaults to ``far_clip``."""
+    if "aperture_radius" not in props:
+        ctx.fail(node, "thinlens: aperture_radius is required")
+    radius = ctx.float_value(props.pop("aperture_radius"))
+    if not 0 <= radius < math.inf:
+        ctx.fail(node, f"aperture_radius {radius}: must be >= 0")
+    far_clip = ctx.float_value(props["far_clip"]) if "far_clip" in props else 1e4
+    focus = ctx.float_value(props.pop("focus_distance")) if "focus_distance" in props else far_clip
+    if not 0 < focus < math.inf:
+        ctx.fail(node, f"focus_distance {focus}: must be > 0")
+    return (torch.tensor(radius, dtype=torch.float32), torch.tensor(focus, dtype=torch.float32))
 
 
 def field_of_view(ctx: Reader, node: Node, props: Dict[str, Node], aspect: float) -> float:
