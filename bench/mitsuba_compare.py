@@ -33,7 +33,10 @@ import sys
 import tempfile
 import time
 
-import numpy as np
+try:
+    import numpy as np
+except ImportError:  # not the project's environment: main() says so
+    np = None
 
 LLVM_GLOBS = ["/usr/lib/x86_64-linux-gnu/libLLVM-1[6-9]*.so*", "/usr/lib/x86_64-linux-gnu/libLLVM-[2-9][0-9]*.so*",
               "/usr/lib/llvm-1[6-9]/lib/libLLVM*.so*", "/usr/lib/llvm-[2-9][0-9]/lib/libLLVM*.so*",
@@ -352,6 +355,9 @@ def main(argv=None):
     parser.add_argument("--no-gradient", action="store_true")
     args = parser.parse_args(argv)
 
+    if np is None:
+        print(f"Mitsuba comparison skipped: numpy is not installed in {sys.executable} (run it in the project's environment)")
+        return 0
     mi, why = import_mitsuba()
     if mi is None:
         print(f"Mitsuba comparison skipped: {why}")
