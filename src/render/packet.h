@@ -23,9 +23,14 @@ namespace edgepath {
 constexpr int kPacketSize = 8;
 
 // Intersects rays[0..n) (n <= kPacketSize) as one coherent packet; first[i] is what
-// Scene::intersect(rays[i]) finds (bit for bit: Embree's packet and single-ray tests share the
-// triangle test).
+// Scene::intersect(rays[i]) finds, bit for bit (Render.PacketsMatchSingleRays checks it).
 void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* first);
+
+// Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
+// renders the same samples as the full image.
+inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
+    return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
+}
 
 // One camera sample of a pass.
 struct CameraSample {
@@ -58,10 +63,9 @@ bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0
             c.s = int(k - p * spp);
             c.x = x0 + int(p % width);
             c.y = y0 + int(p / width);
-            const int fx = c.x + scene.crop_x, fy = c.y + scene.crop_y;
-            c.pixel = uint64_t(fy) * uint64_t(scene.camera.width) + uint64_t(fx);
+            c.pixel = film_pixel_index(scene, c.x, c.y);
             c.rng = Rng::for_sample(opt.seed, c.pixel, uint64_t(c.s));
-            c.film = sample_film_point(scene, fx, fy, c.rng);
+            c.film = sample_film_point(scene, c.x + scene.crop_x, c.y + scene.crop_y, c.rng);
             c.ray = rays[i] = scene.camera.generate_ray(c.film.x, c.film.y);
         }
         intersect_packet(scene, rays, n, first);

@@ -89,12 +89,6 @@ void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&
     throw_if_cancelled(opt);
 }
 
-// Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
-// renders the same samples as the full image.
-inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
-    return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
-}
-
 // Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
 // the random numbers of render() for the same options; tile_end() after each tile, on the thread
 // that ran it. With `full_paths` the whole path is traced and recorded (the radiance's gradient);
