@@ -18,11 +18,12 @@
 //
 //   edgepath_bench [--runs N] [--spp N] [--size N] [--threads N] [--bounces 1,3]
 //                  [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv] [--render-only]
+//                  [--forward-only]
 //   edgepath_bench --backward-memory [--size N] [--spp N]
 //   edgepath_bench --secondary-only [--size N] [--spp N] [--seeds N] [--threads N]
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
-// the renderer alone.
+// the renderer alone. --forward-only stops after the forward tables (A/B runs of two builds).
 //
 // Output: machine and scene information, then one table per measurement family. Each number
 // is also kept as a (section, config, metric, value, unit) record, written by --csv, so new
@@ -55,6 +56,7 @@
 #include "edges/hierarchy.h"
 #include "io/image.h"
 #include "math/frame.h"
+#include "render/packet.h"
 #include "render/path.h"
 #include "sampling/rng.h"
 #include "sampling/warp.h"
@@ -84,6 +86,7 @@ struct Options {
     bool backward_memory = false;  // only: peak RSS of one backward pass (--size, --spp)
     bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
     bool backward_only = false;    // only: the backward-pass timings (for profilers)
+    bool forward_only = false;     // only: the forward-pass tables (for A/B runs of two builds)
     int seeds = 8;                 // --secondary-only: renders per sampler
     int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
 };
@@ -94,7 +97,7 @@ struct Options {
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
                  "                      [--secondary-only [--seeds N] [--case 0-3]]  (alone: secondary-edge samplers' MSE)\n"
-                 "                      [--render-only] [--backward-only]\n",
+                 "                      [--render-only] [--backward-only] [--forward-only]\n",
                  msg);
     std::exit(status);
 }
@@ -127,6 +130,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--backward-memory") o.backward_memory = true;
         else if (a == "--secondary-only") o.secondary_only = true;
         else if (a == "--backward-only") o.backward_only = true;
+        else if (a == "--forward-only") o.forward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
         else if (a == "--image") o.image_path = value();
@@ -235,6 +239,18 @@ double time_ms(int runs, const std::function<void()>& f) {
     std::vector<double> t;
     for (int i = 0; i < runs; ++i) t.push_back(time_once(f));
     return median(t);
+}
+
+// Runs f once to warm up, then `runs` times; returns the median wall and process CPU times.
+Timing time_ms_cpu(int runs, const std::function<void()>& f) {
+    f();
+    std::vector<double> w, c;
+    for (int i = 0; i < runs; ++i) {
+        const Timing t = time_once_cpu(f);
+        w.push_back(t.wall_ms);
+        c.push_back(t.cpu_ms);
+    }
+    return {median(w), median(c)};
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -500,6 +516,29 @@ uint64_t trace_rays(RTCScene rtc, const std::vector<Ray>& rays, bool occlusion, 
     return hits;
 }
 
+// The camera rays again, in packets of kPacketSize as the renderer traces them
+// (intersect_packet). Returns the number of hits.
+uint64_t trace_camera_packets(const Scene& scene, const std::vector<Ray>& rays, tbb::task_arena& arena, size_t chunk) {
+    std::atomic<uint64_t> hits{0};
+    const size_t n_chunks = (rays.size() + chunk - 1) / chunk;
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n_chunks, 1), [&](const tbb::blocked_range<size_t>& range) {
+            uint64_t local = 0;
+            FirstHit first[kPacketSize];
+            for (size_t c = range.begin(); c < range.end(); ++c) {
+                const size_t end = std::min(rays.size(), (c + 1) * chunk);
+                for (size_t i = c * chunk; i < end; i += kPacketSize) {
+                    const int n = int(std::min<size_t>(kPacketSize, end - i));
+                    intersect_packet(scene, rays.data() + i, n, first);
+                    for (int k = 0; k < n; ++k) local += first[k].found;
+                }
+            }
+            hits += local;
+        });
+    });
+    return hits;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 struct ForwardResult {
@@ -509,6 +548,7 @@ struct ForwardResult {
     double render_ms;
     RenderStats stats;
     double embree_ms, embree_camera_ms, embree_shadow_ms, embree_bounce_ms;
+    double embree_packets_ms;  // the camera rays in packets
     double fraction;  // median over runs of (Embree-only time / renderer time)
     double render_cpu_ms, embree_cpu_ms, fraction_cpu;  // the same in process CPU time
     uint64_t embree_hits;
@@ -595,6 +635,7 @@ struct BackwardResult {
     std::string scene;
     int bounces;
     double forward_ms, backward_ms, interior_ms, no_secondary_ms;  // primary edges off; secondary off
+    double forward_cpu_ms, backward_cpu_ms;                        // process CPU time
 };
 
 // Median forward and backward (every parameter wanted, adjoint = 1) times.
@@ -609,9 +650,13 @@ BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int
     ro.max_bounces = bounces;
     ro.num_threads = threads;
     ro.seed = 3;
-    BackwardResult r{name, bounces, 0, 0, 0, 0};
-    r.forward_ms = time_ms(runs, [&] { render(*scene, ro, image.data()); });
-    r.backward_ms = time_ms(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
+    BackwardResult r{name, bounces, 0, 0, 0, 0, 0, 0};
+    const Timing forward = time_ms_cpu(runs, [&] { render(*scene, ro, image.data()); });
+    const Timing backward = time_ms_cpu(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
+    r.forward_ms = forward.wall_ms;
+    r.forward_cpu_ms = forward.cpu_ms;
+    r.backward_ms = backward.wall_ms;
+    r.backward_cpu_ms = backward.cpu_ms;
     ro.secondary_edges = false;
     r.no_secondary_ms = time_ms(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
     ro.primary_edges = false;
@@ -860,7 +905,8 @@ void backward_section(const Options& o, BenchScene& bs,
                                                const std::string&)>& record) {
     // Backward: the gradient pass with every parameter wanted, against the forward pass.
     Table backward({"scene", "threads", "bounces", "forward ms", "backward ms", "backward/forward",
-                    "no secondary ms", "secondary share", "interior only ms"});
+                    "no secondary ms", "secondary share", "interior only ms", "forward cpu ms", "backward cpu ms",
+                    "(cpu) backward/forward"});
     std::vector<BackwardResult> back;
     for (int bounces : o.bounces)
         back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
@@ -871,13 +917,16 @@ void backward_section(const Options& o, BenchScene& bs,
         record("backward", config, "forward_ms", r.forward_ms, "ms");
         record("backward", config, "backward_ms", r.backward_ms, "ms");
         record("backward", config, "backward_over_forward", r.backward_ms / r.forward_ms, "");
+        record("backward", config, "forward_cpu_ms", r.forward_cpu_ms, "ms");
+        record("backward", config, "backward_cpu_ms", r.backward_cpu_ms, "ms");
         record("backward", config, "backward_interior_only_ms", r.interior_ms, "ms");
         record("backward", config, "backward_no_secondary_ms", r.no_secondary_ms, "ms");
         const double share = (r.backward_ms - r.no_secondary_ms) / r.backward_ms;
         record("backward", config, "secondary_share", share, "");
         backward.add({r.scene, std::to_string(o.threads), std::to_string(r.bounces), fmt(r.forward_ms, 1),
                       fmt(r.backward_ms, 1), fmt(r.backward_ms / r.forward_ms, 2), fmt(r.no_secondary_ms, 1),
-                      fmt(100.0 * share, 0) + "%", fmt(r.interior_ms, 1)});
+                      fmt(100.0 * share, 0) + "%", fmt(r.interior_ms, 1), fmt(r.forward_cpu_ms, 1),
+                      fmt(r.backward_cpu_ms, 1), fmt(r.backward_cpu_ms / r.forward_cpu_ms, 2)});
     }
     backward.print("Backward pass (interior term, primary edges (one edge sample per pixel per spp) and secondary "
                    "edges (one hierarchy descent, up to four edges, per scattering vertex); every parameter wanted, adjoint 1), " + std::to_string(o.spp) +
@@ -903,6 +952,14 @@ int main(int argc, char** argv) {
     std::vector<Record> records;
     auto record = [&](const std::string& section, const std::string& config, const std::string& metric, double v,
                       const std::string& unit) { records.push_back({section, config, metric, v, unit}); };
+
+    auto write_csv = [&] {
+        if (o.csv_path.empty()) return;
+        std::ofstream f(o.csv_path);
+        f << "section,config,metric,value,unit\n";
+        for (const Record& r : records) f << r.section << ',' << r.config << ',' << r.metric << ',' << r.value << ',' << r.unit << '\n';
+        if (!f) throw std::runtime_error(o.csv_path + ": could not write");
+    };
 
     try {
         const int all_cores = tbb::info::default_concurrency();
@@ -973,16 +1030,18 @@ int main(int argc, char** argv) {
                 tbb::task_arena arena(r.threads);
                 const size_t chunk = size_t(kRenderTile) * kRenderTile * size_t(o.spp);
                 RTCScene rtc = scene->rtc_scene();
-                std::vector<double> t_render, t_camera, t_shadow, t_bounce, fractions, cpu_render, cpu_embree,
+                std::vector<double> t_render, t_camera, t_packets, t_shadow, t_bounce, fractions, cpu_render, cpu_embree,
                     cpu_fractions;
                 for (int run = 0; run <= o.runs; ++run) {  // run 0 warms up
                     Timing tr = time_once_cpu([&] { r.stats = render(*scene, ro, image.data()); });
                     Timing tc = time_once_cpu([&] { r.embree_hits = trace_rays(rtc, rays.camera, false, arena, chunk); });
+                    Timing tp = time_once_cpu([&] { trace_camera_packets(*scene, rays.camera, arena, chunk); });
                     Timing ts = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.shadow, true, arena, chunk); });
                     Timing tb = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.bounce, false, arena, chunk); });
                     if (run == 0) continue;
                     t_render.push_back(tr.wall_ms);
                     t_camera.push_back(tc.wall_ms);
+                    t_packets.push_back(tp.wall_ms);
                     t_shadow.push_back(ts.wall_ms);
                     t_bounce.push_back(tb.wall_ms);
                     fractions.push_back((tc.wall_ms + ts.wall_ms + tb.wall_ms) / tr.wall_ms);
@@ -993,6 +1052,7 @@ int main(int argc, char** argv) {
                 }
                 r.render_ms = median(t_render);
                 r.embree_camera_ms = median(t_camera);
+                r.embree_packets_ms = median(t_packets);
                 r.embree_shadow_ms = median(t_shadow);
                 r.embree_bounce_ms = median(t_bounce);
                 r.embree_ms = r.embree_camera_ms + r.embree_shadow_ms + r.embree_bounce_ms;
@@ -1015,7 +1075,7 @@ int main(int argc, char** argv) {
 
         Table forward({"threads", "bounces", "render ms", "camera rays", "shadow rays", "bounce rays", "Mrays/s",
                        "embree ms", "embree Mrays/s", "embree/render", "(cpu time)"});
-        Table split({"threads", "bounces", "camera ms", "shadow ms", "bounce ms", "embree ms", "render ms",
+        Table split({"threads", "bounces", "camera ms", "camera ms, packets", "shadow ms", "bounce ms", "embree ms", "render ms",
                      "non-embree ms", "ns/ray outside embree"});
         for (const ForwardResult& r : results) {
             const uint64_t rays = r.stats.camera_rays + r.stats.shadow_rays + r.stats.bounce_rays;
@@ -1040,10 +1100,12 @@ int main(int argc, char** argv) {
                          grouped(r.stats.shadow_rays), grouped(r.stats.bounce_rays), fmt(rays / r.render_ms * 1e-3, 2),
                          fmt(r.embree_ms, 1), fmt(rays / r.embree_ms * 1e-3, 2), fmt(fraction, 2),
                          fmt(r.fraction_cpu, 2)});
-            split.add({threads, std::to_string(r.bounces), fmt(r.embree_camera_ms, 1), fmt(r.embree_shadow_ms, 1),
+            split.add({threads, std::to_string(r.bounces), fmt(r.embree_camera_ms, 1), fmt(r.embree_packets_ms, 1),
+                       fmt(r.embree_shadow_ms, 1),
                        fmt(r.embree_bounce_ms, 1), fmt(r.embree_ms, 1), fmt(r.render_ms, 1), fmt(outside, 1),
                        fmt(outside * 1e6 / double(rays) * r.threads, 0)});
             record("embree_only", config, "camera_ms", r.embree_camera_ms, "ms");
+            record("embree_only", config, "camera_packets_ms", r.embree_packets_ms, "ms");
             record("embree_only", config, "shadow_ms", r.embree_shadow_ms, "ms");
             record("embree_only", config, "bounce_ms", r.embree_bounce_ms, "ms");
             record("embree_only", config, "total_ms", r.embree_ms, "ms");
@@ -1057,7 +1119,13 @@ int main(int argc, char** argv) {
                       std::to_string(H) + " (embree/render: Embree-only time over renderer time, wall and CPU; "
                       "target >= 0.5)");
         if (!o.render_only)
-            split.print("Embree-only time by ray kind, and the renderer's time outside Embree (per ray, per thread)");
+            split.print("Embree-only time by ray kind (camera rays one by one, and in packets of " +
+                        std::to_string(kPacketSize) + " as the renderer traces them; the total counts them one by one), "
+                        "and the renderer's time outside Embree (per ray, per thread)");
+        if (o.forward_only) {
+            write_csv();
+            return 0;
+        }
 
         TriangleScene tri(256);
         backward_section(o, bs, record);
@@ -1110,12 +1178,7 @@ int main(int argc, char** argv) {
             return 1;
         }
 
-        if (!o.csv_path.empty()) {
-            std::ofstream f(o.csv_path);
-            f << "section,config,metric,value,unit\n";
-            for (const Record& r : records) f << r.section << ',' << r.config << ',' << r.metric << ',' << r.value << ',' << r.unit << '\n';
-            if (!f) throw std::runtime_error(o.csv_path + ": could not write");
-        }
+        write_csv();
     } catch (const std::exception& e) {
         std::fprintf(stderr, "error: %s\n", e.what());
         return 1;

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the benchmark (forward and backward passes), then the kept scene and many-views
-# measurement (bench/persist.py), the backward-pass memory measurement and the secondary-edge
-# samplers' equal-time comparison.
+# measurement (bench/persist.py), the backward-pass memory measurement, the secondary-edge
+# samplers' equal-time comparison and, when the mitsuba package is installed
+# (pip install -e '.[bench]'), the comparison with Mitsuba 3 (bench/mitsuba_compare.py).
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
 # Without a path, looks for the binary in the usual build folders. Options go to the binary
 # (edgepath_bench --help lists them), e.g.  bench/run.sh --runs 9 --csv bench.csv
@@ -37,3 +38,7 @@ fi
 "$bin" --backward-memory --size 1024 --spp 16
 # Secondary edges: the edge hierarchy against uniform sampling at equal time (a minute or two).
 "$bin" --secondary-only --size 32 --spp 8 --seeds 48
+# Side by side with Mitsuba 3, in the project's Python (make bench puts its venv first on PATH);
+# without mitsuba it says so in one line.
+python="$(command -v python || command -v python3)"
+"$python" "$root/bench/mitsuba_compare.py"

@@ -1,5 +1,7 @@
 #include "diff/backprop.h"
 
+#include <algorithm>
+
 #include "math/vec_diff.h"
 #include "edges/secondary.h"
 #include "scene/bsdf_diff.h"
@@ -292,20 +294,28 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         d_bend_normal(sp.ns, sp.ng, wo, db.n, ha.dn, dwo);
         // Edges seen from this vertex (it scatters: k < max_bounces), with the vertex's own
-        // random stream, the same for every call on this record.
+        // random stream, the same for every call on this record. Russian roulette by the
+        // throughput: the term is sampled with probability q = min(1, max component of beta)
+        // and weighted 1 / q, so that its weight a beta / q stays within the pixel's adjoint
+        // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint,
+        // so the sweeps that replay the terms (one per colour) keep the first sweep's draw.
         // A smooth vertex sees edges along one direction only: no boundary term of its own.
-        if (secondary && k < secondary->max_bounces() && !delta) {
+        const float q = std::min(1.f, std::max(r.beta.x, std::max(r.beta.y, r.beta.z)));
+        if (secondary && k < secondary->max_bounces() && !delta && q > 0.f) {
+            const Vec3f ab_q = ab / q;
             if (log && log->replaying) {
                 const size_t b = log->begin[size_t(k)];
-                ha.dp += secondary->replay(log->terms.data() + b, log->end[size_t(k)] - b, ab, sink);
+                ha.dp += secondary->replay(log->terms.data() + b, log->end[size_t(k)] - b, ab_q, sink);
             } else {
-                SurfacePoint bent = sp;
-                bent.ns = ns;
                 if (log) log->begin[size_t(k)] = uint32_t(log->terms.size());
-                ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab,
-                                        k >= 64 || ((moves >> k) & 1) != 0,
-                                        Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0), sink,
-                                        log ? &log->terms : nullptr);
+                Rng rng = Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0);
+                if (q >= 1.f || rng.next_float() < q) {
+                    SurfacePoint bent = sp;
+                    bent.ns = ns;
+                    ha.dp += secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, ab_q,
+                                            k >= 64 || ((moves >> k) & 1) != 0, rng, sink,
+                                            log ? &log->terms : nullptr);
+                }
                 if (log) log->end[size_t(k)] = uint32_t(log->terms.size());
             }
         }

@@ -2,6 +2,7 @@
 
 #include <atomic>
 
+#include "render/packet.h"
 #include "render/path.h"
 #include "render/tiles.h"
 
@@ -31,21 +32,17 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
     RayTally tally;
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
-        for (int y = y0; y < y1; ++y)
-            for (int x = x0; x < x1; ++x) {
-                uint64_t pixel = film_pixel_index(scene, x, y);
-                double sum[3] = {0, 0, 0};
-                for (int s = 0; s < opt.spp; ++s) {
-                    if (opt.cancelled()) return;
-                    Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
-                    Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                    Vec2f lens = sample_lens_point(scene, rng);
-                    Vec3f L = trace_path(scene, opt, scene.camera.generate_ray(film.x, film.y, lens.x, lens.y), rng, c);
-                    for (int k = 0; k < 3; ++k) sum[k] += L[k];
-                }
-                float* out = image + (int64_t(y) * scene.out_width + x) * 3;
-                for (int k = 0; k < 3; ++k) out[k] = float(sum[k] / opt.spp);
+        double sum[3] = {0, 0, 0};
+        for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
+            const Vec3f L = trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
+            for (int k = 0; k < 3; ++k) sum[k] += L[k];
+            if (cs.s + 1 < opt.spp) return;
+            float* out = image + (int64_t(cs.y) * scene.out_width + cs.x) * 3;
+            for (int k = 0; k < 3; ++k) {
+                out[k] = float(sum[k] / opt.spp);
+                sum[k] = 0.0;
             }
+        });
         tally.add(c);
     });
     return tally.stats();
@@ -62,41 +59,31 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         float v[kMaxChannelValues];
-        for (int y = y0; y < y1; ++y)
-            for (int x = x0; x < x1; ++x) {
-                const uint64_t pixel = film_pixel_index(scene, x, y);
-                const int64_t index = int64_t(y) * scene.out_width + x;
-                if (nv > 0) {
-                    double sum[kMaxChannelValues] = {};
-                    for (int s = 0; s < opt.spp; ++s) {
-                        if (opt.cancelled()) return;
-                        Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
-                        const Vec2f film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                        const Vec2f lens = sample_lens_point(scene, rng);
-                        const Ray ray = scene.camera.generate_ray(film.x, film.y, lens.x, lens.y);
-                        FirstHit first;
-                        if (hit_values) {
-                            first = first_hit(scene, ray, opt.hide_emitters);
-                            eval_hit_channels(scene, layout, ray, first.found, first.hit, v);
-                        }
-                        if (radiance) {
-                            const Vec3f L = trace_path(scene, opt, ray, rng, c, nullptr, hit_values ? &first : nullptr);
-                            for (int k = 0; k < 3; ++k) v[ro + k] = L[k];
-                        } else {
-                            ++c.camera;
-                        }
-                        for (int k = 0; k < nv; ++k) sum[k] += v[k];
-                    }
-                    float* out = values + index * nv;
-                    for (int k = 0; k < nv; ++k) out[k] = float(sum[k] / opt.spp);
-                }
-                if (ni > 0) {
-                    // The ray through the pixel centre.
-                    const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
-                    const FirstHit first = first_hit(scene, ray, opt.hide_emitters);
+        double sum[kMaxChannelValues] = {};
+        if (nv > 0)
+            for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
+                if (hit_values) eval_hit_channels(scene, layout, cs.ray, cs.first.found, cs.first.hit, v);
+                if (radiance) {
+                    const Vec3f L = trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
+                    for (int k = 0; k < 3; ++k) v[ro + k] = L[k];
+                } else {
                     ++c.camera;
-                    eval_hit_ids(layout, first.found, first.hit, ids + index * ni);
                 }
+                for (int k = 0; k < nv; ++k) sum[k] += v[k];
+                if (cs.s + 1 < opt.spp) return;
+                float* out = values + (int64_t(cs.y) * scene.out_width + cs.x) * nv;
+                for (int k = 0; k < nv; ++k) {
+                    out[k] = float(sum[k] / opt.spp);
+                    sum[k] = 0.0;
+                }
+            });
+        // Ids: of the ray through each pixel's centre.
+        for (int y = y0; y < y1 && ni > 0; ++y)
+            for (int x = x0; x < x1; ++x) {
+                const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
+                const FirstHit first = first_hit(scene, ray, opt.hide_emitters);
+                ++c.camera;
+                eval_hit_ids(layout, first.found, first.hit, ids + (int64_t(y) * scene.out_width + x) * ni);
             }
         tally.add(c);
     });

@@ -11,6 +11,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "render/packet.h"
 #include "render/path.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
@@ -88,12 +89,6 @@ void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&
     throw_if_cancelled(opt);
 }
 
-// Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
-// renders the same samples as the full image.
-inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
-    return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
-}
-
 // Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
 // the random numbers of render() for the same options; tile_end() after each tile, on the thread
 // that ran it. With `full_paths` the whole path is traced and recorded (the radiance's gradient);
@@ -106,33 +101,26 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
         PathRecord rec;
         // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
         rec.vertices.reserve(size_t(std::min(opt.max_bounces, 63)) + 1);
-        for (int y = y0; y < y1; ++y)
-            for (int x = x0; x < x1; ++x) {
-                uint64_t pixel = film_pixel_index(scene, x, y);
-                for (int s = 0; s < opt.spp; ++s) {
-                    if (opt.cancelled()) return;
-                    Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
-                    rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (pixel * uint64_t(opt.spp) + uint64_t(s)));
-                    rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-                    rec.lens = sample_lens_point(scene, rng);
-                    const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
-                    if (full_paths) {
-                        trace_path(scene, opt, ray, rng, c, &rec);
-                    } else {
-                        rec.vertices.clear();
-                        rec.escaped = false;
-                        Hit hit;
-                        rec.camera_missed = !scene.intersect(ray, hit);
-                        if (!rec.camera_missed) {
-                            rec.vertices.emplace_back();
-                            rec.vertices.back().hit = hit;
-                            rec.vertices.back().origin = ray.origin;
-                            rec.vertices.back().dir = ray.dir;
-                        }
-                    }
-                    fn(x, y, rec);
+        const bool done = for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
+            rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (cs.pixel * uint64_t(opt.spp) + uint64_t(cs.s)));
+            rec.film = cs.film;
+            rec.lens = cs.lens;
+            if (full_paths) {
+                trace_path(scene, opt, cs.ray, cs.rng, c, &rec, &cs.first);
+            } else {
+                rec.vertices.clear();
+                rec.escaped = false;
+                rec.camera_missed = !cs.first.found;
+                if (!rec.camera_missed) {
+                    rec.vertices.emplace_back();
+                    rec.vertices.back().hit = cs.first.hit;
+                    rec.vertices.back().origin = cs.ray.origin;
+                    rec.vertices.back().dir = cs.ray.dir;
                 }
             }
+            fn(cs.x, cs.y, rec);
+        });
+        if (!done) return;
         tile_end();
     });
 }

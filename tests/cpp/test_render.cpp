@@ -5,6 +5,7 @@
 #include <vector>
 
 #include "edgepath.h"
+#include "render/packet.h"
 #include "render/path.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
@@ -400,6 +401,86 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     // A description that fails validation throws and names the field.
     d.meshes[0].material = 7;
     EXPECT_THROW(update_scene(*scene, d), std::invalid_argument);
+// Camera rays are traced in packets (render/packet.h): each hit is the one a single-ray query
+// finds, and the image is, bit for bit, the mean of trace_path over each pixel's samples traced
+// one by one with their own streams, whatever the packets' grouping (spp 3: packets straddle
+// pixels; 21 x 19 with a crop: tiles and the last packet of a tile are partial) and the thread
+// count.
+TEST(Render, PacketsMatchSingleRays) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.2f, -0.3f, 0.3f), 0.7f, 12, 24);
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.5f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), ks({0.2f, 0.2f, 0.2f}), r({0.3f}), black({0, 0, 0}), le({4.f, 4.f, 4.f});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.5f, 5), Vec3f(0, -0.3f, 0), 25, 23, 60);  // sees past the floor too
+    d.camera.crop_x = 3;
+    d.camera.crop_y = 2;
+    d.camera.crop_width = 21;
+    d.camera.crop_height = 19;
+    d.materials.push_back(material(kd, ks, r));
+    d.materials.push_back(material(black, black, r));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(0));
+    d.meshes.push_back(lamp.desc(1));
+    d.meshes[2].emission = le.desc();
+    auto scene = build_scene(d);
+    const int W = image_width(*scene), H = image_height(*scene);
+    ASSERT_EQ(W, 21);
+    ASSERT_EQ(H, 19);
+
+    // Every packet size from 1 to kPacketSize, hits and misses alike.
+    std::vector<Ray> rays;
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) rays.push_back(scene->camera.generate_ray(float(x) + 0.3f, float(y) + 0.6f));
+    int misses = 0;
+    for (int n = 1; n <= kPacketSize; ++n)
+        for (size_t begin = 0; begin + size_t(n) <= rays.size(); begin += size_t(n)) {
+            FirstHit packet[kPacketSize];
+            intersect_packet(*scene, rays.data() + begin, n, packet);
+            for (int i = 0; i < n; ++i) {
+                const FirstHit single = first_hit(*scene, rays[begin + size_t(i)]);
+                ASSERT_EQ(packet[i].found, single.found) << "ray " << begin + size_t(i);
+                misses += !single.found;
+                if (!single.found) continue;
+                EXPECT_EQ(packet[i].hit.mesh, single.hit.mesh);
+                EXPECT_EQ(packet[i].hit.prim, single.hit.prim);
+                EXPECT_EQ(packet[i].hit.b1, single.hit.b1);
+                EXPECT_EQ(packet[i].hit.b2, single.hit.b2);
+                EXPECT_EQ(packet[i].hit.t, single.hit.t);
+            }
+        }
+    EXPECT_GT(misses, 0);
+
+    RenderOptions opt;
+    opt.spp = 3;
+    opt.max_bounces = 2;
+    opt.seed = 11;
+    std::vector<float> reference(size_t(W) * H * 3);
+    RayCounters counters;
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            const int fx = x + scene->crop_x, fy = y + scene->crop_y;
+            const uint64_t pixel = uint64_t(fy) * uint64_t(scene->camera.width) + uint64_t(fx);
+            double sum[3] = {0, 0, 0};
+            for (int s = 0; s < opt.spp; ++s) {
+                Rng rng = Rng::for_sample(opt.seed, pixel, uint64_t(s));
+                const Vec2f film = sample_film_point(*scene, fx, fy, rng);
+                const Vec3f L = trace_path(*scene, opt, scene->camera.generate_ray(film.x, film.y), rng, counters);
+                for (int k = 0; k < 3; ++k) sum[k] += L[k];
+            }
+            for (int k = 0; k < 3; ++k) reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
+        }
+    double total = 0;
+    for (float v : reference) total += v;
+    EXPECT_GT(total, 0.0);
+    for (int threads : {1, 2}) {
+        opt.num_threads = threads;
+        std::vector<float> image(reference.size());
+        render(*scene, opt, image.data());
+        int differing = 0;
+        for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
+        EXPECT_EQ(differing, 0) << threads << " threads";
+    }
 }
 
 }  // namespace

@@ -1,0 +1,85 @@
+// Camera rays traced in Embree packets. The camera samples of a tile are generated in the order
+// the passes visit them (row by row, pixel by pixel, sample by sample), kPacketSize at a time;
+// their first intersections are found by one packet query (rays of neighbouring pixels travel
+// together through the BVH, so the nodes they visit are loaded once for all), and each sample
+// is then handed on, in that order, with its random stream, its film point, its ray and its
+// first hit. The rest of the path is traced one ray at a time (render/path.h).
+//
+// Each sample keeps its own random stream, drawn before the packet is traced exactly as a single
+// sample would draw it, so an image does not depend on how the samples are grouped or on the
+// thread count.
+#pragma once
+#include <algorithm>
+
+#include "render/path.h"
+#include "sampling/rng.h"
+#include "scene/desc.h"
+#include "scene/scene.h"
+
+namespace edgepath {
+
+// Rays per packet: 8 is the width of Embree's native packets with AVX2 (on AVX-512 it runs 16
+// natively; wider packets are traced as several of the native width).
+constexpr int kPacketSize = 8;
+
+// Intersects rays[0..n) (n <= kPacketSize) as one coherent packet; first[i] is what
+// Scene::intersect(rays[i]) finds, bit for bit (Render.PacketsMatchSingleRays checks it).
+void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* first);
+
+// Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
+// renders the same samples as the full image.
+inline uint64_t film_pixel_index(const Scene& scene, int x, int y) {
+    return uint64_t(y + scene.crop_y) * uint64_t(scene.camera.width) + uint64_t(x + scene.crop_x);
+}
+
+// One camera sample of a pass.
+struct CameraSample {
+    int x = 0, y = 0;  // output pixel
+    int s = 0;         // sample index in the pixel
+    uint64_t pixel = 0;  // film pixel index (seeds the sample's streams)
+    Rng rng;           // the sample's stream, past the film point
+    Vec2f film;
+    Vec2f lens;        // the lens sample (thin lens; otherwise the lens centre)
+    Ray ray;
+    FirstHit first;
+};
+
+// Calls fn(sample) for every camera sample of the output pixels [x0, x1) x [y0, y1), in order
+// (rows, pixels, samples), with the random numbers of Rng::for_sample(opt.seed, pixel, s) and the
+// first hits traced in packets (with opt.hide_emitters, past the emitters, as first_hit
+// finds them). Stops (returns false) once opt is cancelled.
+template <class SampleFn>
+bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0, int y0, int x1, int y1,
+                            SampleFn&& fn) {
+    CameraSample batch[kPacketSize];
+    Ray rays[kPacketSize];
+    FirstHit first[kPacketSize];
+    const int width = x1 - x0, spp = opt.spp;
+    const int64_t count = int64_t(width) * (y1 - y0) * spp;
+    for (int64_t begin = 0; begin < count; begin += kPacketSize) {
+        if (opt.cancelled()) return false;
+        const int n = int(std::min<int64_t>(kPacketSize, count - begin));
+        for (int i = 0; i < n; ++i) {
+            const int64_t k = begin + i, p = k / spp;
+            CameraSample& c = batch[i];
+            c.s = int(k - p * spp);
+            c.x = x0 + int(p % width);
+            c.y = y0 + int(p / width);
+            c.pixel = film_pixel_index(scene, c.x, c.y);
+            c.rng = Rng::for_sample(opt.seed, c.pixel, uint64_t(c.s));
+            c.film = sample_film_point(scene, c.x + scene.crop_x, c.y + scene.crop_y, c.rng);
+            c.lens = sample_lens_point(scene, c.rng);
+            c.ray = rays[i] = scene.camera.generate_ray(c.film.x, c.film.y, c.lens.x, c.lens.y);
+        }
+        intersect_packet(scene, rays, n, first);
+        for (int i = 0; i < n; ++i) {
+            batch[i].first = first[i];
+            if (opt.hide_emitters && first[i].found && scene.meshes[size_t(first[i].hit.mesh)].is_emitter())
+                batch[i].first = first_hit(scene, rays[i], true);
+            fn(batch[i]);
+        }
+    }
+    return true;
+}
+
+}  // namespace edgepath

@@ -1,0 +1,66 @@
+"""bench/mitsuba_compare.py without Mitsuba: the scene files it writes load into edgepath with
+welded meshes (the fairness of the comparison rests on it), and without the mitsuba package it
+says so in one line and exits 0."""
+
+import importlib.util
+import pathlib
+import subprocess
+import sys
+
+import torch
+
+import edgepath as ep
+
+SCRIPT = pathlib.Path(__file__).resolve().parents[2] / "bench" / "mitsuba_compare.py"
+
+
+def load_script():
+    spec = importlib.util.spec_from_file_location("mitsuba_compare", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def write(tmp_path, xml):
+    path = tmp_path / "scene.xml"
+    path.write_text(xml)
+    return ep.load_mitsuba(path)
+
+
+def closed_and_welded(mesh):
+    """Every edge of the mesh is shared by exactly two triangles, in opposite directions."""
+    f = mesh.indices.long()
+    directed = torch.cat([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    keys = set(map(tuple, directed.tolist()))
+    return len(keys) == len(directed) and all((b, a) in keys for a, b in keys)
+
+
+def test_scenes_load_welded(tmp_path):
+    mc = load_script()
+    xml, triangles = mc.make_cornell(str(tmp_path), 16, 1, 2)
+    loaded = write(tmp_path, xml)
+    assert sum(int(m.indices.shape[0]) for m in loaded.scene.meshes) == triangles > 30000
+    sphere = loaded.scene.meshes[6]
+    assert closed_and_welded(sphere) and closed_and_welded(loaded.scene.meshes[5])  # sphere, box
+    assert loaded.scene.meshes[5].vertices.shape == (8, 3)
+
+    xml = mc.make_shadow(str(tmp_path), 16, 1, 2)
+    loaded = write(tmp_path, xml)
+    cube = loaded.shapes["shape0"]
+    assert cube.vertices.shape == (8, 3) and closed_and_welded(cube)
+    image = ep.render(loaded.scene, spp=2, max_bounces=1)
+    assert image.mean() > 0  # the floor is lit, the light faces it
+
+    xml, triangles = mc.make_scan(str(tmp_path), 16, 1, 2)
+    loaded = write(tmp_path, xml)
+    assert loaded.shapes["shape0"].indices.shape[0] > 99000  # the same sphere() as above, bumped
+
+
+def test_skipped_without_mitsuba(tmp_path):
+    # The script run with the mitsuba package hidden.
+    code = ("import runpy, sys; sys.modules['mitsuba'] = None; sys.argv = ['mitsuba_compare.py']; "
+            f"runpy.run_path({str(SCRIPT)!r}, run_name='__main__')")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120, cwd=tmp_path)
+    assert done.returncode == 0, done.stderr
+    lines = done.stdout.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("Mitsuba comparison skipped: the mitsuba package is not installed")
