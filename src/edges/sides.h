@@ -16,6 +16,11 @@
 //     depth grows least as the ray moves to that side);
 //   - a side on which none lies (the outer side of a fold or of a boundary) sees what the ray
 //     meets beyond x, leaving out the edge's own faces, however close behind x it is.
+//   - where what lies beyond touches the edge (a wall standing on a floor: the floor passes
+//     through the wall's lower edge), the limit is the surface seen there but not its value at
+//     x itself: rays leaving x graze the edge's faces (a shadow ray from the floor at the foot
+//     of the wall slips under it). That side is evaluated on the same surface a small angle
+//     away from x, off the edge, on the ray aimed there (EdgeSide::ray).
 // Which side a face lies on is the sign of the side function at its third vertex; none of this
 // depends on the faces' winding.
 #pragma once
@@ -31,6 +36,16 @@ struct EdgeEye {
     Vec3f origin;
     bool parallel = false;
     Vec3f dir;  // the parallel rays' direction
+    // How far off the edge a side touching it is evaluated: this fraction of the distance (plus
+    // the coordinates' magnitude, for a parallel eye).
+    float step = 1e-5f;
+};
+
+// What one side of an edge sample sees, and the ray its path continues from: the eye's ray
+// through the edge point, or, where the surface on that side touches the edge, the ray aimed a
+// small step off the edge on that surface.
+struct EdgeSide : FirstHit {
+    Ray ray;
 };
 
 // The side of the plane through the eye and the edge (e0, e1) that point c lies on: the sign of
@@ -47,6 +62,6 @@ bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e);
 // the point x = v0 + s (v1 - v0) of the edge, at distance t_x along it. False when x is hidden
 // (or no face of the edge can be told to lie on either side: seen edge-on).
 bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray& ray, float s, float t_x,
-                FirstHit& upper, FirstHit& lower);
+                EdgeSide& upper, EdgeSide& lower);
 
 }  // namespace edgepath

@@ -74,7 +74,7 @@ TEST(EdgeSides, FoldSeesItsNearFaceAndWhatLiesJustBeyond) {
         EdgeEye eye;
         float t_x;
         const Ray ray = ray_to_edge(0.3f, t_x);
-        FirstHit upper, lower;
+        EdgeSide upper, lower;
         ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.3f, t_x, upper, lower));
         // Both faces lie on the upper side; face 0 (at depth 2) hides face 1 (going deeper).
         ASSERT_TRUE(upper.found);
@@ -91,7 +91,7 @@ TEST(EdgeSides, FoldSeesItsNearFaceAndWhatLiesJustBeyond) {
     SidesScene s(true, -50.f);
     EdgeEye eye;
     float t_x;
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     const Ray ray = ray_to_edge(0.6f, t_x);
     ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.6f, t_x, upper, lower));
     EXPECT_TRUE(upper.found);
@@ -102,7 +102,7 @@ TEST(EdgeSides, ThinOccluderHidesTheEdgePoint) {
     SidesScene s(true, 1.5f);  // the sliver in front of the edge
     EdgeEye eye;
     float t_x;
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     const Ray through_sliver = ray_to_edge(0.5f, t_x);
     EXPECT_FALSE(edge_sides(*s.scene, eye, s.edge(), through_sliver, 0.5f, t_x, upper, lower));
     // Off the sliver (it narrows to a point at y = +-1): visible again.
@@ -115,7 +115,7 @@ TEST(EdgeSides, CreaseSeesOneFaceOnEachSideWhateverTheWinding) {
         SidesScene s(false, 50.f, flip);
         EdgeEye eye;
         float t_x;
-        FirstHit upper, lower;
+        EdgeSide upper, lower;
         const Ray ray = ray_to_edge(0.7f, t_x);
         ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.7f, t_x, upper, lower));
         EXPECT_EQ(upper.hit.prim, 0);
@@ -140,7 +140,7 @@ TEST(EdgeSides, PointBehindTheEyeIsDropped) {
     Ray ray;
     ray.origin = Vec3f(0, 0, 3);  // past the edge, looking on along +z
     ray.dir = Vec3f(0, 0, 1);
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     EXPECT_FALSE(edge_sides(*s.scene, eye, s.edge(), ray, 0.5f, -1.f, upper, lower));
 }
 

@@ -2,9 +2,10 @@
 central finite differences.
 
 Along the zig-zag outline of a scanned mesh the faces next to a fold edge are far thinner, as
-seen from the camera, than any fixed offset: an edge sample whose two sides are traced a small
-step either side of the edge leaps over them and credits the jump to an edge that is hidden or
-has another neighbour (and counts it again at the neighbour's edge). Two meshes: the Stanford
+seen from the camera, than any fixed offset: an edge sample whose two sides were traced a small
+step either side of the edge leapt over them and credited the jump to an edge that is hidden or
+has another neighbour (and counted it again at the neighbour's edge): +19% on the bunny, +9% on
+the sphere. Both sides are now found in the limit at the edge point (edges/sides.h). Two meshes: the Stanford
 bunny (shared/data) and a sphere of about 100k triangles whose welded vertices are moved
 radially at random by 0.05% (roughness of the order of those offsets, where the bias peaked).
 Both are in front of an emitting backdrop and lit by a small key light; the derivative is that
@@ -20,14 +21,6 @@ import edgepath as ep
 from edgepath import shapes
 
 SHARED = Path(__file__).resolve().parents[3] / "shared"
-
-
-KNOWN_BIAS = pytest.mark.xfail(
-    strict=True,
-    reason="both edge samplers still trace side rays a fixed step either side of the edge, which "
-           "leap over the slivers of a rough outline (bias +9% to +19%); the limit construction "
-           "(edges/sides.h) that passes this test is not yet wired in, since on primary edges it "
-           "put translate_self_shadowing_right_angle 7% off Mitsuba (docs/gradients.md)")
 
 
 def outline_check(scene, param, direction, seeds, spp, fd_spp, eps):
@@ -53,7 +46,6 @@ def assert_agrees(d, d_se, f, f_se):
 # against FD 8 x 1024 spp, step 1e-3: 17,030 +- 151 against 17,423 +- 167 (0.977); side rays a
 # fixed step either side of the edge gave 20,748 +- 150 (1.19).
 @pytest.mark.slow
-@KNOWN_BIAS
 def test_bunny_outline_derivative_matches_finite_differences():
     path = SHARED / "data" / "bunny_silhouette.xml"
     if not path.exists():
@@ -95,7 +87,6 @@ def rough_sphere_scene(vertices, indices):
 # 101,760 triangles, roughness 0.05%, seed 7; 6 seeds x 256 spp against FD 6 x 1024 spp, step
 # 2e-3: 9,832 +- 32 against 9,908 +- 28 (0.992); the side rays gave 10,759 +- 37 (1.086).
 @pytest.mark.slow
-@KNOWN_BIAS
 def test_rough_sphere_outline_derivative_matches_finite_differences():
     vertices, indices = rough_sphere(160, 320, 5e-4, seed=7)
     assert indices.shape[0] > 100000
