@@ -2,13 +2,16 @@
 
 #include <algorithm>
 #include <cmath>
+#include "edges/sides.h"
 #include "render/path.h"
 
 namespace edgepath {
 
 namespace {
-// The side rays of an edge sample pass this fraction of the distance either side of the edge.
-constexpr float kSideStep = 1e-4f;
+// Where the surface on one side of an edge sample touches the edge, that side is evaluated this
+// fraction of the distance off the edge (edges/sides.h). (At 3e-5 of the distance and below,
+// rays from there passing the edge's faces were still reported as hitting them.)
+constexpr float kTouchStep = 1e-4f;
 }  // namespace
 
 void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&)) {
@@ -108,13 +111,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     // cone towards the lights. Balance heuristic on the joint density of (edge, t).
     BoundsCone cone;
     // Inside the lights' bounding sphere the cone is everything: one strategy.
-    if (has_lights_ && cone.towards(sp.p, lights_center_, lights_radius_)) {
-        // Widened by a few times the side rays' offset (evaluate: kSideStep of the distance):
-        // an edge just outside the cone still sends one of them onto a light.
-        cone.half = std::min(cone.half + 4.f * kSideStep, kPi);
-        cone.cos_half = std::cos(cone.half);
-        q.cone = &cone;
-    }
+    if (has_lights_ && cone.towards(sp.p, lights_center_, lights_radius_)) q.cone = &cone;
     // One descent per vertex: strategy All, or Lights with a probability that grows with the
     // BSDF's diffuse share (shadows matter most on diffuse surfaces; a glossy lobe is better
     // served by All's lobe weighting). One-sample multiple importance sampling: the balance
@@ -172,33 +169,38 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     const float dist = length(x - p);
     if (!(dist > 0.f)) return d_p;
     const Vec3f w = (x - p) / dist;
-    if (e.kind == EdgeKind::Smooth && !is_silhouette(p, v0, m.face_normal(e.f0), m.face_normal(e.f1), e.kind))
-        return d_p;
+    EdgeEye eye;
+    eye.origin = p;
+    eye.step = kTouchStep;
+    // A smooth edge is a discontinuity only where it folds as seen from p.
+    if (e.kind == EdgeKind::Smooth && !is_fold(eye, m, e)) return d_p;
     // The plane through p and the edge; degenerate when p lies on the edge's line.
     const Vec3f N = cross(v0 - p, v1 - p);
     const float n_len = length(N);
     if (!(n_len > 1e-6f * length(v0 - p) * length(v1 - p))) return d_p;
-    const Vec3f side = N / n_len;
 
-    // Rays from p to points a small distance either side of x, off the plane: w_u with w_u . N > 0.
-    // (At 3e-5 of the distance and below, rays passing that close outside a triangle's edge were
-    // still reported as hitting it.)
-    const Vec3f w_u = normalize(x + side * (kSideStep * dist) - p), w_l = normalize(x - side * (kSideStep * dist) - p);
-    const Vec3f f_u = bsdf_eval_world(bsdf, sp.ns, wo, w_u), f_l = bsdf_eval_world(bsdf, sp.ns, wo, w_l);
-    if (is_black(f_u) && is_black(f_l)) return d_p;
-    Ray ray_u, ray_l;
-    ray_u.origin = ray_l.origin = p;
-    ray_u.dir = w_u;
-    ray_l.dir = w_l;
-    const FirstHit first_u = first_hit(scene_, ray_u), first_l = first_hit(scene_, ray_l);
-    if (same_surface(first_u, first_l)) return d_p;  // the edge is hidden from p
+    // The jump is the BSDF's value towards each side times the light arriving from there, both
+    // found in the limit at x (w . N > 0: upper; edges/sides.h); none where x is hidden from p.
+    // The BSDF is continuous across the edge (p's own surface, its horizon, was left out above).
+    const Vec3f f = bsdf_eval_world(bsdf, sp.ns, wo, w);
+    if (is_black(f)) return d_p;
+    Ray ray;
+    ray.origin = p;
+    ray.dir = w;
+    EdgeSide first_u, first_l;
+    if (!edge_sides(scene_, eye, e, ray, t, dist, first_u, first_l)) return d_p;
+    // A side evaluated off the edge (its surface touches it) sees the BSDF along its own ray.
+    auto bsdf_towards = [&](const EdgeSide& side) {
+        return !side.off_edge ? f : bsdf_eval_world(bsdf, sp.ns, wo, side.ray.dir);
+    };
+    const Vec3f f_u = bsdf_towards(first_u), f_l = bsdf_towards(first_l);
     RenderOptions rest = opt_;
     rest.max_bounces = bounces_left;
     RayCounters counters;
     Rng rng_u = rng, rng_l = rng;
     rng.next_u32();  // another stream for the next sample's paths
-    const Vec3f F_u = is_black(f_u) ? Vec3f(0.f) : f_u * trace_path(scene_, rest, ray_u, rng_u, counters, nullptr, &first_u);
-    const Vec3f F_l = is_black(f_l) ? Vec3f(0.f) : f_l * trace_path(scene_, rest, ray_l, rng_l, counters, nullptr, &first_l);
+    const Vec3f F_u = is_black(f_u) ? Vec3f(0.f) : f_u * trace_path(scene_, rest, first_u.ray, rng_u, counters, nullptr, &first_u);
+    const Vec3f F_l = is_black(f_l) ? Vec3f(0.f) : f_l * trace_path(scene_, rest, first_l.ray, rng_l, counters, nullptr, &first_l);
     const Vec3f delta = F_u - F_l;
     // Arc length per unit edge length, over |N| (the side function's rate across the arc),
     // times `scale` (the inverse of the density per unit edge length, and the MIS weight).

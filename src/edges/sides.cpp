@@ -159,6 +159,7 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
     for (int k = 0; k < 2; ++k) {
         EdgeSide& side = *out[k];
         side.ray = ray;
+        side.off_edge = false;
         if (near_face[k] >= 0) {
             side.found = true;
             side.hit = hit_at_edge(m, e.mesh, near_face[k], p0, p1, s, t_x);
@@ -169,6 +170,7 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
         // The touching surface a step off the edge, to this side: the ray aimed there, on the
         // plane of the face it touches with (not traced: a step may leap over a thin face).
         if (!(up_len > 0.0)) return false;
+        side.off_edge = true;
         const double offset = double(eye.step) * (eye.parallel ? double(t_x) + max_abs_component(x) : double(t_x));
         const Vec3d shift = up_dir * ((k == 0 ? offset : -offset) / up_len);
         if (eye.parallel) {

@@ -46,6 +46,7 @@ struct EdgeEye {
 // small step off the edge on that surface.
 struct EdgeSide : FirstHit {
     Ray ray;
+    bool off_edge = false;  // ray is aimed off the edge
 };
 
 // The side of the plane through the eye and the edge (e0, e1) that point c lies on: the sign of
