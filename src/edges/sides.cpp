@@ -10,8 +10,7 @@ namespace {
 // Hits on anything but the edge's own faces closer than this fraction of the distance (plus the
 // coordinates' magnitude) before x are taken for x itself: rounding, not occlusion.
 constexpr float kEdgeRounding = 1e-6f;
-// Faces skipped along the ray (own faces met again where the ray grazes their plane, and near
-// misses, see meets_triangle) before the sample is dropped.
+// Near misses (see meets_triangle) skipped along the ray before the sample is dropped.
 constexpr int kMaxSkips = 8;
 
 bool same_position(const Vec3f& a, const Vec3f& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
@@ -112,15 +111,13 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
     // The first hit on anything but the edge's own faces that the ray truly meets: before x, x
     // is hidden; past x, it is what the outer side of a fold or a boundary sees.
     const Vec3d o_exact(ray.origin), x_exact = Vec3d(p0) + (Vec3d(p1) - Vec3d(p0)) * double(s);
-    auto skip = [&](const Hit& h) {
-        if (h.mesh == e.mesh && (h.prim == e.f0 || h.prim == e.f1)) return true;
-        return !meets_triangle(scene.meshes[size_t(h.mesh)], h.prim, o_exact, x_exact);
-    };
     FirstHit beyond;
     Ray r = ray;
     for (int k = 0;; ++k) {
-        beyond.found = scene.intersect(r, beyond.hit);
-        if (!beyond.found || !skip(beyond.hit)) break;
+        beyond.found = scene.intersect_excluding(r, e.mesh, e.f0, e.f1, beyond.hit);
+        if (!beyond.found ||
+            meets_triangle(scene.meshes[size_t(beyond.hit.mesh)], beyond.hit.prim, o_exact, x_exact))
+            break;
         if (k == kMaxSkips) return false;
         r.tmin = std::nextafter(beyond.hit.t, std::numeric_limits<float>::infinity());
     }

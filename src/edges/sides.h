@@ -1,9 +1,9 @@
 // The two sides of an edge sample, found without stepping off the edge.
 //
-// An edge sample is a ray from an eye (the camera; the same holds from a shading point, whose
-// sampler, edges/secondary.cpp, still steps) through a point x on an
-// edge. Its boundary term needs the two one-sided limits of what the ray sees as it crosses the
-// edge: on the side function's upper side (g > 0, scene/edges.h) and on its lower side. Tracing
+// An edge sample is a ray from an eye (the camera, edges/primary.cpp, or a shading point,
+// edges/secondary.cpp) through a point x on an edge. Its boundary term needs the two one-sided
+// limits of what the ray sees as it crosses the edge: on the side function's upper side (g > 0,
+// scene/edges.h) and on its lower side. Tracing
 // two rays a fixed small offset either side of x gets those limits wrong wherever the faces next
 // to x are thinner (as seen from the eye) than the offset, as they are along the zig-zag outline
 // of a scanned mesh: a side ray leaps over a sliver that hides the edge or borders it, and the

@@ -45,7 +45,7 @@ def assert_agrees(d, d_se, f, f_se):
 
 
 # Bunny (smooth normals computed on load), 128^2, crop (20, 44, 12, 36), 8 seeds x 256 spp
-# against FD 8 x 1024 spp, step 1e-3: 17,030 +- 151 against 17,423 +- 167 (0.977); side rays a
+# against FD 8 x 1024 spp, step 1e-3: 17,859 +- 170 against 17,402 +- 168 (1.026); side rays a
 # fixed step either side of the edge gave 20,748 +- 150 (1.19).
 @pytest.mark.slow
 def test_bunny_outline_derivative_matches_finite_differences():
@@ -87,7 +87,7 @@ def rough_sphere_scene(vertices, indices):
 
 
 # 101,760 triangles, roughness 0.05%, seed 7; 6 seeds x 256 spp against FD 6 x 1024 spp, step
-# 2e-3: 9,832 +- 32 against 9,908 +- 28 (0.992); the side rays gave 10,759 +- 37 (1.086).
+# 2e-3: 9,832 +- 33 against 9,908 +- 28 (0.992); the side rays gave 10,759 +- 37 (1.086).
 @pytest.mark.slow
 def test_rough_sphere_outline_derivative_matches_finite_differences():
     vertices, indices = rough_sphere(160, 320, 5e-4, seed=7)
@@ -115,8 +115,8 @@ def rough_sphere_shadow_scene(vertices, indices):
 
 
 # The same sphere 1.5 in front of the wall, its shadow's edge moving with it along x: 6 seeds x
-# 64 spp against FD 6 x 256 spp, step 2e-3: -6,517 +- 116 against -6,620 +- 81 at 4 seeds
-# (0.985); side rays 1e-4 of the distance either side of the edge gave -13,480 +- 86 (2.04).
+# 64 spp against FD 6 x 256 spp, step 2e-3: -6,544 +- 91 against -6,611 +- 53 (0.990); side
+# rays 1e-4 of the distance either side of the edge gave -13,480 +- 86 (2.04, at 4 seeds).
 @pytest.mark.slow
 def test_rough_sphere_shadow_derivative_matches_finite_differences():
     vertices, indices = rough_sphere(160, 320, 5e-4, seed=7)
