@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <tbb/enumerable_thread_specific.h>
+#include "edges/sides.h"
 #include "render/path.h"
 #include "render/tiles.h"
 
@@ -145,13 +146,13 @@ bool film_point(const Camera& cam, const Eye& eye, const Vec3f& p, const Vec3f& 
     return std::isfinite(x) && std::isfinite(y);
 }
 
-// The point of segment (p0, p1) nearest to the line o + s d (d unit).
-Vec3f closest_on_segment(const Vec3f& p0, const Vec3f& p1, const Vec3f& o, const Vec3f& d) {
+// The parameter t of the point p0 + t (p1 - p0) of segment (p0, p1) nearest to the line
+// o + s d (d unit).
+float closest_on_segment(const Vec3f& p0, const Vec3f& p1, const Vec3f& o, const Vec3f& d) {
     const Vec3f e = p1 - p0, w = p0 - o;
     const float a = dot(e, e), b = dot(e, d), c = dot(e, w), f = dot(d, w);
     const float den = a - b * b;  // |d| = 1
-    const float t = den > 0.f ? std::clamp((b * f - c) / den, 0.f, 1.f) : 0.f;
-    return p0 + e * t;
+    return den > 0.f ? std::clamp((b * f - c) / den, 0.f, 1.f) : 0.f;
 }
 
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
@@ -187,13 +188,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     const double wx0 = scene.crop_x - margin, wy0 = scene.crop_y - margin;
     const double wx1 = scene.crop_x + scene.out_width + margin, wy1 = scene.crop_y + scene.out_height + margin;
 
+    // The eye the sides of an edge sample are found from (edges/sides.h): the camera, or per
+    // sample a thin lens's point.
+    EdgeEye camera_eye;
+    camera_eye.origin = cam.position;
+    camera_eye.parallel = cam.type == CameraType::Orthographic;
+    camera_eye.dir = cam.forward;
+    camera_eye.skip_emitters = opt.hide_emitters;
     std::vector<FilmEdge> film_edges;
     std::vector<double> lengths;
     for (const Edge& e : scene.edges()) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
         const Mesh& m = scene.meshes[size_t(e.mesh)];
         FilmEdge fe;
-        fe.fold = lens_may_fold(cam, m, e);
+        fe.fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
         double len;
         if (uniform) {
             len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
@@ -225,9 +233,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // Every point of every edge is drawn with density 1 / total (per unit film length; per unit
     // world length for uniform sampling, converted to film length per sample).
     const double sample_weight = total / double(n);
-    // The step to each side: an angle of about 1e-5 (float rays resolve it at any distance),
-    // never below a thousandth of a pixel.
-    const double step = std::max(1e-3, 1e-5 * cam.width / (2.0 * cam.tx));
     const double px_scale = 2.0 * cam.tx / cam.width;  // d(screen offset) / d(film pixel)
 
     const float radius = scene.filter.radius();
@@ -247,8 +252,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                                       film_edges.size() - 1);
             const FilmEdge& fe = film_edges[k];
             const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
-            const Mesh& m = scene.meshes[size_t(fe.mesh)];
-            const Vec3f p0 = m.vertex(fe.v0), p1 = m.vertex(fe.v1);
+            const Edge& edge = scene.edges()[fe.edge];
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
             float x, y;
             double point_weight = sample_weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
@@ -270,8 +276,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     // from the lens point.
                     const Vec2f sc = cam.screen(x, y);
                     const Vec3f dir = normalize(p1 - p0);
-                    const Vec3f p = closest_on_segment(p0, p1, cam.position,
-                                                       normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
+                    const Vec3f p = p0 + (p1 - p0) * closest_on_segment(p0, p1, cam.position,
+                                                                        normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
                     double fx, fy, j_lens, cx, cy, j_centre;
                     if (!film_point(cam, eye, p, dir, fx, fy, j_lens) || !film_point(cam, centre, p, dir, cx, cy, j_centre))
                         continue;
@@ -281,7 +287,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     point_weight *= j_lens / j_centre;
                 }
             }
-            const bool fold = thin_lens ? camera_fold(cam, eye.position, m, scene.edges()[fe.edge]) : fe.fold;
+            EdgeEye side_eye = camera_eye;
+            side_eye.origin = eye.position;
+            // From a thin lens's point, a smooth edge that does not fold there has no jump.
+            if (thin_lens && edge.kind == EdgeKind::Smooth && !smooth_edges_jump && !is_fold(side_eye, m, edge)) continue;
 
             // The side function at the sample and its film-space gradient.
             Vec3f o, d;
@@ -305,39 +314,25 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const double glen = std::hypot(gx, gy);
             if (!(glen > 0.0) || !std::isfinite(glen)) continue;
 
-            // Both sides: g > 0 (upper) and g < 0 (lower).
-            const float sx = float(gx / glen * step), sy = float(gy / glen * step);
-            const Ray ray_u = cam.generate_ray(x + sx, y + sy, eye.lu, eye.lv);
-            const Ray ray_l = cam.generate_ray(x - sx, y - sy, eye.lu, eye.lv);
-            const FirstHit first_u = first_hit(scene, ray_u, opt.hide_emitters),
-                           first_l = first_hit(scene, ray_l, opt.hide_emitters);
-            // The same surface (or the sky) on both sides: the edge is hidden here.
-            if (same_surface(first_u, first_l)) continue;
-            // A crease (both faces turned the same way) separates its two faces: both sides must
-            // show them (or a point next to the edge). Where thin faces converge on a vertex (a
-            // sphere's pole fan seen edge-on) the step can leap over a whole face, and the crease
-            // must not take what lies beyond (the sky past the outline) for its other side. A
-            // fold's outer side sees whatever lies behind, by definition: no such test.
-            if (!fold) {
-                const Vec3f on_edge = closest_on_segment(p0, p1, o, d);
-                const float tolerance = 1e-3f * std::max(length(on_edge - o), length(p1 - p0));
-                auto at_edge = [&](const FirstHit& f, const Ray& r) {
-                    if (!f.found) return false;
-                    if (f.hit.mesh == fe.mesh && (f.hit.prim == fe.f0 || f.hit.prim == fe.f1)) return true;
-                    return length(r.origin + r.dir * f.hit.t - on_edge) < tolerance;
-                };
-                if (!(at_edge(first_u, ray_u) && at_edge(first_l, ray_l))) continue;
-            }
+            // Both sides, g > 0 (upper) and g < 0 (lower), in the limit at the edge point the
+            // camera ray passes (edges/sides.h); none where that point is hidden.
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            const float edge_t = closest_on_segment(p0, p1, o, d);
+            const float t_x = dot(p0 + (p1 - p0) * edge_t - o, d);
+            EdgeSide first_u, first_l;
+            if (!edge_sides(scene, side_eye, edge, ray, edge_t, t_x, first_u, first_l)) continue;
             // The channels' values on both sides.
             float value_u[kMaxChannelValues], value_l[kMaxChannelValues], delta[kMaxChannelValues];
             if (hit_values) {
-                eval_hit_channels(scene, layout, ray_u, first_u.found, first_u.hit, value_u);
-                eval_hit_channels(scene, layout, ray_l, first_l.found, first_l.hit, value_l);
+                eval_hit_channels(scene, layout, first_u.ray, first_u.found, first_u.hit, value_u);
+                eval_hit_channels(scene, layout, first_l.ray, first_l.found, first_l.hit, value_l);
             }
             if (radiance) {
                 Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
-                const Vec3f L = trace_path(scene, opt, ray_u, path_u, counters, nullptr, &first_u) -
-                                trace_path(scene, opt, ray_l, path_l, counters, nullptr, &first_l);
+                const Vec3f L = trace_path(scene, opt, first_u.ray, path_u, counters, nullptr, &first_u) -
+                                trace_path(scene, opt, first_l.ray, path_l, counters, nullptr, &first_l);
                 for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], value_l[ro + c] = 0.f;
             }
             bool jump = false;
@@ -364,10 +359,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             };
             // Adds s * dg/d(parameter) to the sink.
             auto add_side_gradient = [&](float s) {
-                if (vertices_wanted(slots, fe.mesh)) {
-                    const GradSlot& vs = slots.meshes[size_t(fe.mesh)].vertices;
-                    sink.add3(vs, fe.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
-                    sink.add3(vs, fe.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
+                if (vertices_wanted(slots, edge.mesh)) {
+                    const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
+                    sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
+                    sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
                 }
                 if (camera_wanted) {
                     float cg[kCameraParams] = {};

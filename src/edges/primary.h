@@ -1,9 +1,10 @@
 // The boundary term of primary visibility: edges seen by the camera (edge sampling, section 3 of
 // the docs). Silhouette edges are projected to the film, clipped to the output (widened by the
 // pixel filter), and sampled in proportion to their clipped film length; at each sample a full
-// camera path is traced a tiny step to each side of the edge, and the difference, weighted by
-// the pixel filter (and by the adjoint image in reverse mode), moves the edge's two vertices and
-// the camera through the derivative of the side function (scene/edges.h).
+// camera path is traced on each side of the edge, in the limit at the edge point (edges/sides.h),
+// and the difference, weighted by the pixel filter (and by the adjoint image in reverse mode),
+// moves the edge's two vertices and the camera through the derivative of the side function
+// (scene/edges.h).
 #pragma once
 #include "render/channels.h"
 #include "scene/desc.h"

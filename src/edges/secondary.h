@@ -38,7 +38,7 @@ struct EdgeTerm {
 
 // The edge terms of one path's vertices, kept by the first of several sweeps over the same path
 // and replayed by the others (forward-mode derivative images sweep once per colour): which edges
-// and points are sampled, and what the side rays see, do not depend on the adjoint.
+// and points are sampled, and what the two sides see, do not depend on the adjoint.
 struct EdgeTermLog {
     std::vector<EdgeTerm> terms;
     std::vector<uint32_t> begin, end;  // vertex k's terms: [begin[k], end[k])

@@ -10,8 +10,8 @@ namespace {
 // Hits on anything but the edge's own faces closer than this fraction of the distance (plus the
 // coordinates' magnitude) before x are taken for x itself: rounding, not occlusion.
 constexpr float kEdgeRounding = 1e-6f;
-// Faces skipped along the ray (own faces met again where the ray grazes their plane, and near
-// misses, see meets_triangle) before the sample is dropped.
+// Near misses (see meets_triangle) and hidden emitters skipped along the ray before the sample
+// is dropped.
 constexpr int kMaxSkips = 8;
 
 bool same_position(const Vec3f& a, const Vec3f& b) { return a.x == b.x && a.y == b.y && a.z == b.z; }
@@ -63,6 +63,25 @@ bool meets_triangle(const Mesh& m, int64_t f, const Vec3d& o, const Vec3d& x) {
     return b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
 }
 
+// The hit on the plane of triangle f of mesh m of the ray (o, d), inside the triangle or not, in
+// double precision; false when the ray runs parallel to the plane or meets it behind o.
+bool hit_on_plane(const Mesh& m, int mesh, int64_t f, const Ray& ray, Hit& h) {
+    const int32_t* t = m.indices + 3 * f;
+    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
+    const Vec3d o(ray.origin), d(ray.dir), q = cross(d, e2);
+    const double det = dot(e1, q);
+    if (det == 0.0) return false;
+    const Vec3d w = o - p0, r = cross(w, e1);
+    const double dist = dot(e2, r) / det;
+    if (!(dist > double(ray.tmin)) || !std::isfinite(dist)) return false;
+    h.mesh = mesh;
+    h.prim = f;
+    h.b1 = float(dot(w, q) / det);
+    h.b2 = float(dot(d, r) / det);
+    h.t = float(dist);
+    return true;
+}
+
 }  // namespace
 
 double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f& c) {
@@ -84,24 +103,24 @@ bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
 }
 
 bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray& ray, float s, float t_x,
-                FirstHit& upper, FirstHit& lower) {
+                EdgeSide& upper, EdgeSide& lower) {
     const Mesh& m = scene.meshes[size_t(e.mesh)];
     const Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
     const Vec3f x = p0 + (p1 - p0) * s;
     if (!(t_x > ray.tmin)) return false;  // behind the eye (an orthographic camera's film plane)
+    if (eye.skip_emitters && m.is_emitter()) return false;  // the eye sees through the edge
 
     // The first hit on anything but the edge's own faces that the ray truly meets: before x, x
     // is hidden; past x, it is what the outer side of a fold or a boundary sees.
     const Vec3d o_exact(ray.origin), x_exact = Vec3d(p0) + (Vec3d(p1) - Vec3d(p0)) * double(s);
-    auto skip = [&](const Hit& h) {
-        if (h.mesh == e.mesh && (h.prim == e.f0 || h.prim == e.f1)) return true;
-        return !meets_triangle(scene.meshes[size_t(h.mesh)], h.prim, o_exact, x_exact);
-    };
     FirstHit beyond;
     Ray r = ray;
     for (int k = 0;; ++k) {
-        beyond.found = scene.intersect(r, beyond.hit);
-        if (!beyond.found || !skip(beyond.hit)) break;
+        beyond.found = scene.intersect_excluding(r, e.mesh, e.f0, e.f1, beyond.hit);
+        if (!beyond.found) break;
+        const Mesh& hit_mesh = scene.meshes[size_t(beyond.hit.mesh)];
+        if (!(eye.skip_emitters && hit_mesh.is_emitter()) && meets_triangle(hit_mesh, beyond.hit.prim, o_exact, x_exact))
+            break;
         if (k == kMaxSkips) return false;
         r.tmin = std::nextafter(beyond.hit.t, std::numeric_limits<float>::infinity());
     }
@@ -133,14 +152,35 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
         any = true;
     }
     if (!any) return false;
-    FirstHit* out[2] = {&upper, &lower};
+    // Touching: what lies beyond passes through x, up to rounding.
+    const bool touching = beyond.found && beyond.hit.t <= t_x + 4.f * rounding;
+    const double up_len = length(up_dir);
+    EdgeSide* out[2] = {&upper, &lower};
     for (int k = 0; k < 2; ++k) {
-        if (near_face[k] < 0) {
-            *out[k] = beyond;
-        } else {
-            out[k]->found = true;
-            out[k]->hit = hit_at_edge(m, e.mesh, near_face[k], p0, p1, s, t_x);
+        EdgeSide& side = *out[k];
+        side.ray = ray;
+        side.off_edge = false;
+        if (near_face[k] >= 0) {
+            side.found = true;
+            side.hit = hit_at_edge(m, e.mesh, near_face[k], p0, p1, s, t_x);
+            continue;
         }
+        static_cast<FirstHit&>(side) = beyond;
+        if (!touching) continue;
+        // The touching surface a step off the edge, to this side: the ray aimed there, on the
+        // plane of the face it touches with (not traced: a step may leap over a thin face).
+        if (!(up_len > 0.0)) return false;
+        side.off_edge = true;
+        const double offset = double(eye.step) * (eye.parallel ? double(t_x) + max_abs_component(x) : double(t_x));
+        const Vec3d shift = up_dir * ((k == 0 ? offset : -offset) / up_len);
+        if (eye.parallel) {
+            side.ray.origin = Vec3f(Vec3d(ray.origin) + shift);
+        } else {
+            side.ray.dir = Vec3f(normalize(x_exact + shift - o_exact));
+        }
+        if (!hit_on_plane(scene.meshes[size_t(beyond.hit.mesh)], beyond.hit.mesh, beyond.hit.prim, side.ray,
+                          side.hit))
+            return false;
     }
     return true;
 }

@@ -364,7 +364,9 @@ void Scene::build_geometry(bool refittable) {
     RTCDevice device = shared_device();
     if (rtc_) rtcReleaseScene(rtc_);
     rtc_ = rtcNewScene(device);
-    rtcSetSceneFlags(rtc_, refittable ? RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_DYNAMIC : RTC_SCENE_FLAG_ROBUST);
+    // The context filter serves intersect_excluding; other queries pass none.
+    const RTCSceneFlags flags = RTCSceneFlags(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
+    rtcSetSceneFlags(rtc_, refittable ? RTCSceneFlags(flags | RTC_SCENE_FLAG_DYNAMIC) : flags);
     // Refittable: Embree's two-level BVH, one SAH-built BVH per mesh (RTC_BUILD_QUALITY_REFIT)
     // under a top level over the meshes. The scene's quality must be low for that: at the
     // default (medium) quality a dynamic scene is rebuilt whole at every commit (measured on a
@@ -442,6 +444,43 @@ bool Scene::intersect(const Ray& ray, Hit& hit) const {
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh = to_rtc_ray_hit(ray);
     rtcIntersect1(rtc_, &ctx, &rh);
+    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
+    hit.mesh = int(rh.hit.geomID);
+    hit.prim = int64_t(rh.hit.primID);
+    hit.b1 = rh.hit.u;
+    hit.b2 = rh.hit.v;
+    hit.t = rh.ray.tfar;
+    return true;
+}
+
+namespace {
+// An intersection context that rejects two faces of one mesh (Embree passes the context to the
+// filter, which finds the faces after it).
+struct ExcludingContext {
+    RTCIntersectContext rtc;
+    unsigned mesh;
+    unsigned f0, f1;
+};
+
+void reject_excluded(const RTCFilterFunctionNArguments* args) {
+    const ExcludingContext* c = reinterpret_cast<const ExcludingContext*>(args->context);
+    for (unsigned i = 0; i < args->N; ++i) {
+        if (args->valid[i] == 0) continue;
+        const unsigned geom = RTCHitN_geomID(args->hit, args->N, i), prim = RTCHitN_primID(args->hit, args->N, i);
+        if (geom == c->mesh && (prim == c->f0 || prim == c->f1)) args->valid[i] = 0;
+    }
+}
+}  // namespace
+
+bool Scene::intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1, Hit& hit) const {
+    ExcludingContext c;
+    rtcInitIntersectContext(&c.rtc);
+    c.rtc.filter = reject_excluded;
+    c.mesh = unsigned(mesh);
+    c.f0 = f0 < 0 ? RTC_INVALID_GEOMETRY_ID : unsigned(f0);
+    c.f1 = f1 < 0 ? RTC_INVALID_GEOMETRY_ID : unsigned(f1);
+    RTCRayHit rh = to_rtc_ray_hit(ray);
+    rtcIntersect1(rtc_, &c.rtc, &rh);
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
     hit.mesh = int(rh.hit.geomID);
     hit.prim = int64_t(rh.hit.primID);

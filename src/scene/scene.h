@@ -168,6 +168,10 @@ public:
     bool env_sampled = false;  // the environment has light to sample (not black)
 
     bool intersect(const Ray& ray, Hit& hit) const;
+    // The first hit on anything but faces f0 and f1 of mesh `mesh` (-1: none), however close to
+    // theirs: a surface meeting the ray where they do is found, which stepping the ray's start
+    // past their hit cannot do (edges/sides.h: a floor through a wall's lower edge).
+    bool intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1, Hit& hit) const;
     bool occluded(const Ray& ray) const;
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;

@@ -22,10 +22,11 @@ struct SidesScene {
     std::vector<int32_t> fold_indices = {0, 1, 2, 1, 0, 3}, sliver_indices = {0, 1, 2};
     std::vector<float> kd = {0.5f, 0.5f, 0.5f}, ks = {0, 0, 0}, rough = {0.5f};
     std::shared_ptr<const Scene> scene;
-    SidesScene(bool fold, float sliver_z, bool flip_second = false) {
+    SidesScene(bool fold, float sliver_z, bool flip_second = false, const std::vector<float>& second = {}) {
         fold_vertices = {0, -1, 2, 0, 1, 2, -1, 0, 2, fold ? -1.f : 1.f, 0, fold ? 3.f : 2.2f};
         if (flip_second) std::swap(fold_indices[3], fold_indices[4]);
         for (int k = 0; k < 3; ++k) sliver_vertices[3 * k + 2] = sliver_z;
+        if (!second.empty()) sliver_vertices = second;
         SceneDesc d;
         d.camera.width = d.camera.height = 8;
         MaterialDesc m;
@@ -74,7 +75,7 @@ TEST(EdgeSides, FoldSeesItsNearFaceAndWhatLiesJustBeyond) {
         EdgeEye eye;
         float t_x;
         const Ray ray = ray_to_edge(0.3f, t_x);
-        FirstHit upper, lower;
+        EdgeSide upper, lower;
         ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.3f, t_x, upper, lower));
         // Both faces lie on the upper side; face 0 (at depth 2) hides face 1 (going deeper).
         ASSERT_TRUE(upper.found);
@@ -91,18 +92,50 @@ TEST(EdgeSides, FoldSeesItsNearFaceAndWhatLiesJustBeyond) {
     SidesScene s(true, -50.f);
     EdgeEye eye;
     float t_x;
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     const Ray ray = ray_to_edge(0.6f, t_x);
     ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.6f, t_x, upper, lower));
     EXPECT_TRUE(upper.found);
     EXPECT_FALSE(lower.found);
 }
 
+// A floor through the edge's line (a wall standing on a floor): nearer than the edge's faces on
+// the outer side, behind them on the other (plane z = 2 - x).
+// the outer side sees the floor, not at the edge point (rays leaving it graze the edge's faces)
+// but a step off the edge on the floor's plane, on a ray aimed there.
+TEST(EdgeSides, OuterSideTouchingTheEdgeIsEvaluatedOffIt) {
+    SidesScene s(true, 0.f, false, {-3, -5, 5, -3, 5, 5, 1.5f, 0, 0.5f});
+    EdgeEye eye;
+    eye.step = 1e-4f;
+    float t_x;
+    const Ray ray = ray_to_edge(0.4f, t_x);
+    EdgeSide upper, lower;
+    ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.4f, t_x, upper, lower));
+    EXPECT_EQ(upper.hit.prim, 0);
+    EXPECT_FALSE(upper.off_edge);
+    ASSERT_TRUE(lower.found);
+    EXPECT_EQ(lower.hit.mesh, 1);
+    ASSERT_TRUE(lower.off_edge);
+    // On the floor, on the lower side (x > 0), about step * t_x off the edge.
+    const Vec3f x(0.f, -0.2f, 2.f);
+    const Vec3f p = s.scene->surface_point(lower.hit).p;
+    EXPECT_NEAR(p.z, 2.f - p.x, 1e-6f);
+    EXPECT_GT(p.x, 0.f);
+    EXPECT_NEAR(length(p - x), 1e-4f * t_x, 1e-4f * t_x);
+    EXPECT_NEAR(length(lower.ray.origin + lower.ray.dir * lower.hit.t - p), 0.f, 1e-5f);
+    // A floor well behind the edge point is not touching: seen on the eye's ray itself.
+    SidesScene behind(true, 0.f, false, {-3, -5, 5.5f, -3, 5, 5.5f, 1.5f, 0, 1.f});
+    ASSERT_TRUE(edge_sides(*behind.scene, eye, behind.edge(), ray, 0.4f, t_x, upper, lower));
+    EXPECT_EQ(lower.hit.mesh, 1);
+    EXPECT_FALSE(lower.off_edge);
+    EXPECT_GT(lower.hit.t, t_x);
+}
+
 TEST(EdgeSides, ThinOccluderHidesTheEdgePoint) {
     SidesScene s(true, 1.5f);  // the sliver in front of the edge
     EdgeEye eye;
     float t_x;
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     const Ray through_sliver = ray_to_edge(0.5f, t_x);
     EXPECT_FALSE(edge_sides(*s.scene, eye, s.edge(), through_sliver, 0.5f, t_x, upper, lower));
     // Off the sliver (it narrows to a point at y = +-1): visible again.
@@ -115,7 +148,7 @@ TEST(EdgeSides, CreaseSeesOneFaceOnEachSideWhateverTheWinding) {
         SidesScene s(false, 50.f, flip);
         EdgeEye eye;
         float t_x;
-        FirstHit upper, lower;
+        EdgeSide upper, lower;
         const Ray ray = ray_to_edge(0.7f, t_x);
         ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.7f, t_x, upper, lower));
         EXPECT_EQ(upper.hit.prim, 0);
@@ -140,7 +173,7 @@ TEST(EdgeSides, PointBehindTheEyeIsDropped) {
     Ray ray;
     ray.origin = Vec3f(0, 0, 3);  // past the edge, looking on along +z
     ray.dir = Vec3f(0, 0, 1);
-    FirstHit upper, lower;
+    EdgeSide upper, lower;
     EXPECT_FALSE(edge_sides(*s.scene, eye, s.edge(), ray, 0.5f, -1.f, upper, lower));
 }
 
