@@ -401,6 +401,8 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     // A description that fails validation throws and names the field.
     d.meshes[0].material = 7;
     EXPECT_THROW(update_scene(*scene, d), std::invalid_argument);
+}
+
 // Camera rays are traced in packets (render/packet.h): each hit is the one a single-ray query
 // finds, and the image is, bit for bit, the mean of trace_path over each pixel's samples traced
 // one by one with their own streams, whatever the packets' grouping (spp 3: packets straddle
