@@ -7,6 +7,8 @@ import pathlib
 import subprocess
 import sys
 
+import pytest
+
 EXAMPLES = pathlib.Path(__file__).resolve().parents[2] / "examples"
 
 
@@ -95,3 +97,13 @@ def test_multiview_distributed_matches_one_process(tmp_path):
     torch.testing.assert_close(g2, g1, rtol=1e-4, atol=1e-5 * scale)
     assert abs(two["loss"][0] - one["loss"][0]) <= 1e-6 * one["loss"][0]
     assert (tmp_path / "two" / "result.png").is_file()
+
+
+def test_bunny_pose(tmp_path):
+    bunny = EXAMPLES.parents[1] / "shared" / "data" / "bunny.ply"
+    if not bunny.exists():
+        pytest.skip(f"test data not found: {bunny}")
+    r = run("bunny_pose", tmp_path, "--iterations", "8", "--size", "24", "--spp", "2", "--mesh", str(bunny))
+    assert fell(r["loss"], 0.8)
+    assert r["shift_error"][-1] < 0.7 * r["shift_error"][0]
+    assert (tmp_path / "comparison.png").is_file()
