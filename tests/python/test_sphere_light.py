@@ -59,10 +59,10 @@ def test_occluder_derivative_matches_finite_differences():
 
 def test_height_derivative_matches_finite_differences_in_sum():
     """Raising the light dims the floor and moves the shadow, through the light's outline seen
-    from the floor (the sampled directions stay fixed), as for the sun. Measured over seeds:
-    -41.0 +- 0.3 at 512 spp against the finite difference's -37.9 +- 1.0: 8% off, the known
-    bias of today's side rays on a polyhedron's outline (20% with 320 faces; docs/gradients.md),
-    which this bound keeps from growing."""
+    from the floor (the sampled directions stay fixed), as for the sun. Side rays a step either
+    side of the light's outline gave -41.0 +- 0.3 at 512 spp against the finite difference's
+    -37.9 +- 1.0 (8% off); with both sides in the limit (edges/sides.h) -39.1 against -37.3
+    at this seed (docs/gradients.md)."""
     height = torch.tensor(2.0, dtype=torch.float64, requires_grad=True)
 
     def make(v):
