@@ -439,11 +439,9 @@ void Scene::build_lights() {
     light_distribution.build(light_weights);
 }
 
-bool Scene::intersect(const Ray& ray, Hit& hit) const {
-    RTCIntersectContext ctx;
-    rtcInitIntersectContext(&ctx);
-    RTCRayHit rh = to_rtc_ray_hit(ray);
-    rtcIntersect1(rtc_, &ctx, &rh);
+namespace {
+// The hit of an answered query, if any.
+bool hit_of(const RTCRayHit& rh, Hit& hit) {
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
     hit.mesh = int(rh.hit.geomID);
     hit.prim = int64_t(rh.hit.primID);
@@ -451,6 +449,15 @@ bool Scene::intersect(const Ray& ray, Hit& hit) const {
     hit.b2 = rh.hit.v;
     hit.t = rh.ray.tfar;
     return true;
+}
+}  // namespace
+
+bool Scene::intersect(const Ray& ray, Hit& hit) const {
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    RTCRayHit rh = to_rtc_ray_hit(ray);
+    rtcIntersect1(rtc_, &ctx, &rh);
+    return hit_of(rh, hit);
 }
 
 namespace {
@@ -481,13 +488,7 @@ bool Scene::intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1
     c.f1 = f1 < 0 ? RTC_INVALID_GEOMETRY_ID : unsigned(f1);
     RTCRayHit rh = to_rtc_ray_hit(ray);
     rtcIntersect1(rtc_, &c.rtc, &rh);
-    if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
-    hit.mesh = int(rh.hit.geomID);
-    hit.prim = int64_t(rh.hit.primID);
-    hit.b1 = rh.hit.u;
-    hit.b2 = rh.hit.v;
-    hit.t = rh.ray.tfar;
-    return true;
+    return hit_of(rh, hit);
 }
 
 bool Scene::occluded(const Ray& ray) const {
