@@ -11,13 +11,9 @@ namespace edgepath {
 
 namespace {
 
-// A silhouette edge's part on the film: the mesh vertices that receive its gradient and the
-// clipped segment (full-film pixels).
+// An edge's part on the film: the edge and the clipped segment (full-film pixels).
 struct FilmEdge {
     size_t edge;  // in Scene::edges()
-    int32_t mesh, v0, v1;
-    int64_t f0, f1;  // adjacent faces (f1 = -1 on a boundary)
-    bool fold;       // a boundary, or one face turned to the camera and the other away
     double ax, ay, bx, by;
 };
 
@@ -42,19 +38,10 @@ Eye lens_eye(const Camera& cam, float lu, float lv) {
     return eye;
 }
 
-// Whether the camera sees the edge as a fold from `eye`: a boundary, or one face turned to the
-// eye and the other away (the outline of the surface can run along it).
-bool camera_fold(const Camera& cam, const Vec3f& eye, const Mesh& m, const Edge& e) {
-    if (e.kind == EdgeKind::Boundary) return true;
-    const Vec3f n0 = m.face_normal(e.f0), n1 = m.face_normal(e.f1);
-    if (cam.type == CameraType::Orthographic) return (dot(cam.forward, n0) < 0.f) != (dot(cam.forward, n1) < 0.f);
-    return is_silhouette(eye, m.vertex(e.v0), n0, n1, e.kind);
-}
-
 // Whether the edge is a fold seen from some point of a thin lens's aperture: each face's plane
 // may have the aperture's points on both sides.
 bool lens_may_fold(const Camera& cam, const Mesh& m, const Edge& e) {
-    if (e.kind == EdgeKind::Boundary || cam.type != CameraType::ThinLens) return camera_fold(cam, cam.position, m, e);
+    if (e.kind == EdgeKind::Boundary) return true;
     if (is_silhouette(cam.position, m.vertex(e.v0), m.face_normal(e.f0), m.face_normal(e.f1), e.kind)) return true;
     bool front[2], back[2];
     for (int i = 0; i < 2; ++i) {
@@ -201,23 +188,19 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
         const Mesh& m = scene.meshes[size_t(e.mesh)];
         FilmEdge fe;
-        fe.fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
         double len;
         if (uniform) {
             len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
         } else {
             // Folds and creases (shading or texture jumps); smooth edges that do not fold
-            // separate different values only in the geometric normal.
-            if (!fe.fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) continue;
+            // separate different values in the geometric normal, and where the mesh shadows
+            // itself along them (not sampled yet: docs/gradients.md, known limitations).
+            const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
+            if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) continue;
             if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
             len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
         }
         fe.edge = size_t(&e - scene.edges().data());
-        fe.mesh = e.mesh;
-        fe.v0 = e.v0;
-        fe.v1 = e.v1;
-        fe.f0 = e.f0;
-        fe.f1 = e.f1;
         if (!(len > 0.0)) continue;
         film_edges.push_back(fe);
         lengths.push_back(len);

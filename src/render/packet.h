@@ -37,7 +37,7 @@ struct CameraSample {
     int x = 0, y = 0;  // output pixel
     int s = 0;         // sample index in the pixel
     uint64_t pixel = 0;  // film pixel index (seeds the sample's streams)
-    Rng rng;           // the sample's stream, past the film point
+    Rng rng;           // the sample's stream, past the film and lens points
     Vec2f film;
     Vec2f lens;        // the lens sample (thin lens; otherwise the lens centre)
     Ray ray;
