@@ -46,6 +46,22 @@ Hit hit_at_edge(const Mesh& m, int mesh, int64_t f, const Vec3f& p0, const Vec3f
     return h;
 }
 
+// Where the line o + s d meets the plane of triangle f of mesh m, in double precision: the
+// barycentrics (b1, b2) of the point and its parameter s. False when the line runs parallel to
+// the plane.
+bool line_on_plane(const Mesh& m, int64_t f, const Vec3d& o, const Vec3d& d, double& b1, double& b2, double& s) {
+    const int32_t* t = m.indices + 3 * f;
+    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
+    const Vec3d q = cross(d, e2);
+    const double det = dot(e1, q);
+    if (det == 0.0) return false;
+    const Vec3d w = o - p0, r = cross(w, e1);
+    b1 = dot(w, q) / det;
+    b2 = dot(d, r) / det;
+    s = dot(e2, r) / det;
+    return true;
+}
+
 // Whether the line through o and x meets triangle f of mesh m, in double precision. Embree's
 // float test reports rays that pass outside a triangle by up to about 1e-4 of its size (in
 // barycentric terms) as hits, and a float ray's direction is itself off by some 1e-7: a ray
@@ -53,31 +69,20 @@ Hit hit_at_edge(const Mesh& m, int mesh, int64_t f, const Vec3f& p0, const Vec3f
 // scanned mesh's outline (faces within 1e-5 rad of edge-on), and would take one of them for
 // the far side or for an occluder.
 bool meets_triangle(const Mesh& m, int64_t f, const Vec3d& o, const Vec3d& x) {
-    const int32_t* t = m.indices + 3 * f;
-    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
-    const Vec3d d = x - o, q = cross(d, e2);
-    const double det = dot(e1, q);
-    if (det == 0.0) return false;
-    const Vec3d w = o - p0;
-    const double b1 = dot(w, q) / det, b2 = dot(d, cross(w, e1)) / det;
-    return b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
+    double b1, b2, s;
+    return line_on_plane(m, f, o, x - o, b1, b2, s) && b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
 }
 
 // The hit on the plane of triangle f of mesh m of the ray (o, d), inside the triangle or not, in
 // double precision; false when the ray runs parallel to the plane or meets it behind o.
 bool hit_on_plane(const Mesh& m, int mesh, int64_t f, const Ray& ray, Hit& h) {
-    const int32_t* t = m.indices + 3 * f;
-    const Vec3d p0(m.vertex(t[0])), e1 = Vec3d(m.vertex(t[1])) - p0, e2 = Vec3d(m.vertex(t[2])) - p0;
-    const Vec3d o(ray.origin), d(ray.dir), q = cross(d, e2);
-    const double det = dot(e1, q);
-    if (det == 0.0) return false;
-    const Vec3d w = o - p0, r = cross(w, e1);
-    const double dist = dot(e2, r) / det;
+    double b1, b2, dist;
+    if (!line_on_plane(m, f, Vec3d(ray.origin), Vec3d(ray.dir), b1, b2, dist)) return false;
     if (!(dist > double(ray.tmin)) || !std::isfinite(dist)) return false;
     h.mesh = mesh;
     h.prim = f;
-    h.b1 = float(dot(w, q) / det);
-    h.b2 = float(dot(d, r) / det);
+    h.b1 = float(b1);
+    h.b2 = float(b2);
     h.t = float(dist);
     return true;
 }
