@@ -736,7 +736,24 @@ NB_MODULE(_core, m) {
                 return d;
             },
             "How often the kept scene was built, refitted and reused (zeros before its first "
-            "build; a failed update drops it and starts the counts again).");
+            "build; a failed update drops it and starts the counts again).")
+        .def(
+            "hierarchy_counts",
+            [](SceneCache& c) {
+                nb::dict d;
+                edgepath::SceneBuildCounts n;
+                {
+                    nb::gil_scoped_release release;
+                    std::lock_guard<std::mutex> lock(c.mutex);
+                    if (c.scene) n = edgepath::scene_hierarchy_counts(*c.scene);
+                }
+                d["builds"] = n.builds;
+                d["refits"] = n.refits;
+                d["reuses"] = n.reuses;
+                return d;
+            },
+            "How often gradient passes on the kept scene built, refitted and reused its edge "
+            "hierarchy (zeros before the first, and after a failed update).");
 
     m.def("render", &render, "camera"_a, "materials"_a, "meshes"_a, "envmap"_a.none(),
           "image"_a, "options"_a, "cache"_a.none() = nb::none(),

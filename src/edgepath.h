@@ -34,6 +34,9 @@ struct SceneBuildCounts {
     uint64_t builds = 0, refits = 0, reuses = 0;
 };
 SceneBuildCounts scene_build_counts(const Scene& scene);
+// How often gradient passes built, refitted and reused the scene's edge hierarchy (the
+// importance sampler of the edges seen from path vertices), kept across calls and views.
+SceneBuildCounts scene_hierarchy_counts(const Scene& scene);
 
 // Size of the rendered image (the crop window if one is set).
 int image_width(const Scene& scene);

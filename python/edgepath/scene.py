@@ -182,6 +182,16 @@ class Scene:
         cache = getattr(self, "_core_cache", None)
         return cache.counts() if cache is not None else {"builds": 0, "refits": 0, "reuses": 0}
 
+    def edge_hierarchy_counts(self) -> dict:
+        """How often gradient passes of renders of this scene built its edge hierarchy afresh
+        (``"builds"``: the first pass that samples the edges seen from path vertices, a change
+        of topology or of which meshes' vertices need gradients), refitted it (``"refits"``:
+        only vertex positions moved) and reused it (``"reuses"``: nothing it depends on moved;
+        materials, lights, the environment or the camera changed, or nothing). One count per
+        view of a call with several cameras."""
+        cache = getattr(self, "_core_cache", None)
+        return cache.hierarchy_counts() if cache is not None else {"builds": 0, "refits": 0, "reuses": 0}
+
     def __getstate__(self):
         state = dict(self.__dict__)
         state["_core_cache"] = None

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstring>
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include "scene/scene.h"
 
@@ -27,6 +30,7 @@ constexpr int kParallelRange = 8192;
 // is narrow; children comparable when the smaller importance is at least this share of the
 // larger, large when together at least this share of the root's.
 constexpr float kNarrowCone = 0.95f, kComparable = 0.25f, kLarge = 0.25f;
+bool bitwise_equal(const Vec3f& a, const Vec3f& b) { return std::memcmp(&a, &b, sizeof(Vec3f)) == 0; }
 
 }  // namespace
 
@@ -140,38 +144,93 @@ struct EdgeHierarchy::Input {
     std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
     std::vector<uint8_t> emissive;     // an edge of an emitter
     const std::vector<int32_t>* ids;
+
+    // What the hierarchy needs of the edges `ids` (indices into scene.edges()).
+    Input(const Scene& scene, const std::vector<int32_t>& edges) : ids(&edges) {
+        const std::vector<Edge>& all = scene.edges();
+        const size_t n = edges.size();
+        p0.resize(n);
+        p1.resize(n);
+        n0.assign(n, Vec3f(0.f));
+        n1.assign(n, Vec3f(0.f));
+        always.resize(n);
+        dark_behind.assign(n, 0);
+        emissive.assign(n, 0);
+        crease.assign(n, 0);
+        auto one = [&](size_t i) {
+            const Edge& e = all[size_t(edges[i])];
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            p0[i] = m.vertex(e.v0);
+            p1[i] = m.vertex(e.v1);
+            always[i] = e.kind != EdgeKind::Smooth;
+            // A crease between faces that are black seen from behind (a one-sided material, no
+            // emission from the back): from a point behind both, either side of it looks black
+            // (or both sides see what hides it), so it adds nothing there.
+            const Material& mat = scene.materials[size_t(m.material)];
+            crease[i] = e.kind == EdgeKind::Crease;
+            dark_behind[i] = crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+            emissive[i] = m.is_emitter();
+            if (!always[i] || crease[i]) {
+                const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
+                // A face of zero area has no side: its edge is treated as a discontinuity.
+                if (length(a) > 0.f && length(b) > 0.f) {
+                    n0[i] = normalize(a);
+                    n1[i] = normalize(b);
+                } else {
+                    always[i] = 1;
+                    dark_behind[i] = 0;
+                    crease[i] = 0;
+                }
+            }
+        };
+        if (n > size_t(kParallelRange))
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
+                for (size_t i = r.begin(); i != r.end(); ++i) one(i);
+            });
+        else
+            for (size_t i = 0; i < n; ++i) one(i);
+    }
 };
 
+void EdgeHierarchy::set_leaf(const Input& in, size_t i, Node& node) {
+    node.lo = min(in.p0[i], in.p1[i]);
+    node.hi = max(in.p0[i], in.p1[i]);
+    node.length = length(in.p1[i] - in.p0[i]);
+    node.edge = (*in.ids)[i];
+    node.count = 1;
+    node.always = in.always[i] != 0;
+    node.center = (node.lo + node.hi) * 0.5f;
+    node.radius = length(node.hi - node.lo) * 0.5f;
+    node.a = in.p0[i];
+    node.b = in.p1[i];
+    node.n0 = in.n0[i];
+    node.n1 = in.n1[i];
+    node.dark_behind = in.dark_behind[i] != 0;
+    node.emissive = in.emissive[i] != 0;
+    node.crease = in.crease[i] != 0;
+    node.cone_axis = Vec3f();
+    node.cone_cos = -1.f;
+    node.cone_sin = 0.f;
+    node.dihedral = 0.f;
+    const Vec3f s = in.n0[i] + in.n1[i];
+    if ((!node.always || node.crease) && length(s) > 1e-6f) {
+        node.cone_axis = normalize(s);
+        node.cone_cos = std::clamp(dot(node.cone_axis, in.n0[i]), -1.f, 1.f);
+        node.cone_sin = sine(node.cone_cos);
+        node.dihedral = 2.f * std::acos(node.cone_cos);
+    }
+}
+
 // The subtree over items [begin, end) takes the 2 (end - begin) - 1 nodes from `index` on: its
-// root, then the left subtree, then the right one; so both halves can be built at once.
+// root, then the left subtree, then the right one; so both halves can be built at once. The
+// items end up in the order of the leaves (order_), each node's from node.first on.
 void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index,
                                 int32_t parent) {
     Node& node = nodes_[size_t(index)];
     node.parent = parent;
+    node.first = begin;
     if (end - begin == 1) {
-        const size_t i = size_t(items[size_t(begin)]);
-        node.lo = min(in.p0[i], in.p1[i]);
-        node.hi = max(in.p0[i], in.p1[i]);
-        node.length = length(in.p1[i] - in.p0[i]);
-        node.edge = (*in.ids)[i];
-        node.count = 1;
-        node.always = in.always[i] != 0;
-        node.center = (node.lo + node.hi) * 0.5f;
-        node.radius = length(node.hi - node.lo) * 0.5f;
-        node.a = in.p0[i];
-        node.b = in.p1[i];
-        node.n0 = in.n0[i];
-        node.n1 = in.n1[i];
-        node.dark_behind = in.dark_behind[i] != 0;
-        node.emissive = in.emissive[i] != 0;
-        node.crease = in.crease[i] != 0;
-        const Vec3f s = in.n0[i] + in.n1[i];
-        if ((!node.always || node.crease) && length(s) > 1e-6f) {
-            node.cone_axis = normalize(s);
-            node.cone_cos = std::clamp(dot(node.cone_axis, in.n0[i]), -1.f, 1.f);
-            node.cone_sin = sine(node.cone_cos);
-            node.dihedral = 2.f * std::acos(node.cone_cos);
-        }
+        set_leaf(in, size_t(items[size_t(begin)]), node);
         leaf_of_[size_t(node.edge)] = index;
         return;
     }
@@ -200,6 +259,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         build_range(in, items, mid, end, r, index);
     }
     finish_inner(index);
+    // The children are done: items [begin, end) are in the leaves' order.
     if (!node.always || node.crease) fit_cone(in, items, begin, end, index);
 }
 
@@ -266,59 +326,37 @@ void EdgeHierarchy::build_kinds(const Input& in, std::vector<int32_t>& items, in
     }
     Node& node = nodes_[size_t(index)];
     node.parent = parent;
+    node.first = begin;
+    node.mixed = true;  // holds discontinuities: never culled
     node.left = index + 1;
     node.right = index + 2 * (split - begin);
     build_range(in, items, begin, split, node.left, index);
     build_range(in, items, split, end, node.right, index);
-    finish_inner(index);  // holds discontinuities: never culled
+    finish_inner(index);
 }
 
 void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges, size_t group) {
     const auto start = std::chrono::steady_clock::now();
+    const Input in(scene, edges);
+    build(scene, in, group);
+    build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+}
+
+void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
     nodes_.clear();
     const std::vector<Edge>& all = scene.edges();
     leaf_of_.assign(all.size(), -1);
+    const std::vector<int32_t>& edges = *in.ids;
     const size_t n = edges.size();
-    Input in;
-    in.p0.resize(n);
-    in.p1.resize(n);
-    in.n0.assign(n, Vec3f(0.f));
-    in.n1.assign(n, Vec3f(0.f));
-    in.always.resize(n);
-    in.dark_behind.assign(n, 0);
-    in.emissive.assign(n, 0);
-    in.crease.assign(n, 0);
-    in.ids = &edges;
+    ids_ = edges;
+    group_ = group;
+    kept_edges_.resize(n);
+    for (size_t i = 0; i < n; ++i) kept_edges_[i] = all[size_t(edges[i])];
     // The group's edges, then the others; in each, the discontinuities from everywhere first,
     // then the smooth edges.
-    std::vector<int32_t> items;
+    std::vector<int32_t>& items = order_;
+    items.clear();
     items.reserve(n);
-    for (size_t i = 0; i < n; ++i) {
-        const Edge& e = all[size_t(edges[i])];
-        const Mesh& m = scene.meshes[size_t(e.mesh)];
-        in.p0[i] = m.vertex(e.v0);
-        in.p1[i] = m.vertex(e.v1);
-        in.always[i] = e.kind != EdgeKind::Smooth;
-        // A crease between faces that are black seen from behind (a one-sided material, no
-        // emission from the back): from a point behind both, either side of it looks black (or
-        // both sides see what hides it), so it adds nothing there.
-        const Material& mat = scene.materials[size_t(m.material)];
-        in.crease[i] = e.kind == EdgeKind::Crease;
-        in.dark_behind[i] = in.crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
-        in.emissive[i] = m.is_emitter();
-        if (!in.always[i] || in.crease[i]) {
-            const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
-            // A face of zero area has no side: its edge is treated as a discontinuity.
-            if (length(a) > 0.f && length(b) > 0.f) {
-                in.n0[i] = normalize(a);
-                in.n1[i] = normalize(b);
-            } else {
-                in.always[i] = 1;
-                in.dark_behind[i] = 0;
-                in.crease[i] = 0;
-            }
-        }
-    }
     const bool everything = n > 0 && group >= n;
     if (everything) group = 0;  // no subtree of their own: the root is theirs
     int splits[2] = {0, 0};
@@ -341,12 +379,133 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges,
             Node& root = nodes_[0];
             root.left = 1;
             root.right = 2 * g;
+            root.mixed = true;
+            root.first = 0;
             build_kinds(in, items, 0, splits[0], g, root.left, 0);
             build_kinds(in, items, g, splits[1], int(n), root.right, 0);
             finish_inner(0);
         }
     }
+    built_ = true;
+}
+
+EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vector<int32_t>& edges, size_t group) {
+    const auto start = std::chrono::steady_clock::now();
+    const std::vector<Edge>& all = scene.edges();
+    const size_t n = edges.size();
+    // The same edges (the same ends, faces and kinds) in the same groups: the same tree.
+    bool same = built_ && group == group_ && edges == ids_ && leaf_of_.size() == all.size();
+    for (size_t i = 0; i < n && same; ++i) {
+        const Edge &e = all[size_t(edges[i])], &k = kept_edges_[i];
+        same = e.mesh == k.mesh && e.v0 == k.v0 && e.v1 == k.v1 && e.f0 == k.f0 && e.f1 == k.f1 && e.kind == k.kind;
+    }
+    const Input in(scene, edges);
+    // Which leaves changed: their edge's ends or faces (a refit), only the flags the materials
+    // and emission decide (those flags alone), or which tree (discontinuity or smooth) it
+    // belongs in (a face became or stopped being degenerate: a rebuild).
+    bool moved = false, flags = false;
+    for (size_t i = 0; i < n && same; ++i) {
+        const Node& leaf = nodes_[size_t(leaf_of_[size_t(edges[i])])];
+        same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0);
+        moved = moved || !(bitwise_equal(leaf.a, in.p0[i]) && bitwise_equal(leaf.b, in.p1[i]) &&
+                           bitwise_equal(leaf.n0, in.n0[i]) && bitwise_equal(leaf.n1, in.n1[i]));
+        flags = flags || leaf.dark_behind != (in.dark_behind[i] != 0) || leaf.emissive != (in.emissive[i] != 0);
+    }
+    Update what = Update::Reused;
+    if (!same) {
+        build(scene, in, group);
+        built_ = true;
+        ++stats_.builds;
+        what = Update::Built;
+    } else if (moved) {
+        refit(in);
+        ++stats_.refits;
+        what = Update::Refit;
+    } else {
+        if (flags) refresh_flags(in);
+        ++stats_.reuses;
+    }
     build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+    return what;
+}
+
+void EdgeHierarchy::refit(const Input& in) {
+    const size_t n = in.ids->size();
+    auto leaves = [&](size_t b, size_t e) {
+        for (size_t i = b; i < e; ++i) set_leaf(in, i, nodes_[size_t(leaf_of_[size_t((*in.ids)[i])])]);
+    };
+    if (n > size_t(kParallelRange))
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024),
+                          [&](const tbb::blocked_range<size_t>& r) { leaves(r.begin(), r.end()); });
+    else
+        leaves(0, n);
+    // Children come after their parent: bottom-up in reverse.
+    for (size_t k = nodes_.size(); k-- > 0;)
+        if (nodes_[k].left >= 0) finish_inner(int32_t(k));
+    // The cones of the nodes build_range made, over their leaves' items, as the build fits them.
+    auto cones = [&](size_t b, size_t e) {
+        for (size_t k = b; k < e; ++k) {
+            const Node& node = nodes_[k];
+            if (node.left >= 0 && !node.mixed && (!node.always || node.crease))
+                fit_cone(in, order_, node.first, node.first + node.count, int32_t(k));
+        }
+    };
+    if (n > size_t(kParallelRange))
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 64),
+                          [&](const tbb::blocked_range<size_t>& r) { cones(r.begin(), r.end()); });
+    else
+        cones(0, nodes_.size());
+}
+
+void EdgeHierarchy::refresh_flags(const Input& in) {
+    for (size_t i = 0; i < in.ids->size(); ++i) {
+        Node& leaf = nodes_[size_t(leaf_of_[size_t((*in.ids)[i])])];
+        leaf.dark_behind = in.dark_behind[i] != 0;
+        leaf.emissive = in.emissive[i] != 0;
+    }
+    for (size_t k = nodes_.size(); k-- > 0;) {
+        Node& node = nodes_[k];
+        if (node.left < 0) continue;
+        const Node &a = nodes_[size_t(node.left)], &b = nodes_[size_t(node.right)];
+        node.dark_behind = a.dark_behind && b.dark_behind;
+        node.emissive = a.emissive || b.emissive;
+    }
+}
+
+int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
+    const std::vector<Edge>& all = scene.edges();
+    for (size_t k = 0; k < nodes_.size(); ++k) {
+        const Node& node = nodes_[k];
+        const float scale = tol * (length(node.hi - node.lo) + length(node.center) + 1e-6f);
+        double total = 0.0;
+        for (int32_t j = node.first; j < node.first + node.count; ++j) {
+            const int32_t id = ids_[size_t(order_[size_t(j)])];
+            const Node& leaf = nodes_[size_t(leaf_of_[size_t(id)])];
+            if (size_t(id) >= all.size()) return int32_t(k);
+            // The edge as the scene has it now (not as the leaf kept it).
+            const Edge& e = all[size_t(id)];
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            const Vec3f a = m.vertex(e.v0), b = m.vertex(e.v1);
+            total += length(b - a);
+            for (const Vec3f& x : {a, b}) {
+                for (int c = 0; c < 3; ++c)
+                    if (x[c] < node.lo[c] - scale || x[c] > node.hi[c] + scale) return int32_t(k);
+                if (length(x - node.center) > node.radius + scale) return int32_t(k);
+            }
+            if (node.cone_cos > -1.f && !node.mixed && length(leaf.n0) > 0.f) {
+                const Vec3f n0 = normalize(m.face_normal(e.f0)), n1 = normalize(m.face_normal(e.f1));
+                for (const Vec3f& nf : {n0, n1})
+                    if (dot(node.cone_axis, nf) < node.cone_cos - tol) return int32_t(k);
+                if (node.left >= 0) {
+                    const float pa = dot(n0, node.center - a), pb = dot(n1, node.center - a);
+                    if (std::min(pa, pb) < node.plane_lo - scale || std::max(pa, pb) > node.plane_hi + scale)
+                        return int32_t(k);
+                }
+            }
+        }
+        if (std::abs(total - double(node.length)) > double(tol) * (total + 1e-6)) return int32_t(k);
+    }
+    return -1;
 }
 
 // ---- importance -------------------------------------------------------------------------------

@@ -32,7 +32,8 @@
 // Lights: uniform by length over the part of the edge inside the light cone (found in closed
 // form: w(phi) . axis = R cos(phi - psi) >= cos(half angle)).
 //
-// Built once per render call in O(n log n) (parallel median splits).
+// Built in O(n log n) (parallel median splits), kept in the scene across calls and views
+// (Scene::edge_hierarchy), refit when only vertices move.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -76,10 +77,35 @@ public:
     // `group` of them (if neither none nor all) get a subtree of their own under the root,
     // group_root(), which sample() and pdf() can start from to pick among those alone.
     void build(const Scene& scene, const std::vector<int32_t>& edges, size_t group = 0);
+    // Brings a hierarchy kept across calls up to date with `scene`, for the same arguments as
+    // build(): rebuilt when the edges or groups differ from the last build's (their ends, faces
+    // or kinds: a change of topology), or when an edge moves between the discontinuities and the
+    // smooth edges (a face became degenerate or stopped being so); refit when only the edges'
+    // positions or faces' normals changed: the leaves, then the nodes' boxes, lengths and
+    // normal cones over the same tree, bottom-up (no new splits; the cones fitted over each
+    // node's edges exactly as a build fits them, so a refit tree equals a build that splits
+    // alike); otherwise reused, with the flags the materials and emission decide (one-sided
+    // creases, emitters) brought up to date if they changed.
+    enum class Update { Built, Refit, Reused };
+    Update update(const Scene& scene, const std::vector<int32_t>& edges, size_t group = 0);
+    struct Stats {
+        uint64_t builds = 0, refits = 0, reuses = 0;  // update() calls
+    };
+    const Stats& stats() const { return stats_; }
+    // Whether the last build was for these arguments.
+    bool built_for(const std::vector<int32_t>& edges, size_t group) const {
+        return built_ && group == group_ && edges == ids_;
+    }
     // The node over the group's edges: 0 (the root) when they are all the edges, -1 when none.
     int32_t group_root() const { return group_root_; }
     bool empty() const { return nodes_.empty(); }
+    // The last build() or update(), in milliseconds.
     double build_ms() const { return build_ms_; }
+    // Checks (for tests) that every node's box and sphere hold its edges as `scene` has them
+    // now, its length is theirs, its normal cone holds their faces' normals and its plane range
+    // their planes at its centre, within a relative tolerance `tol`; returns the first node that
+    // fails, or -1.
+    int32_t check_bounds(const Scene& scene, float tol) const;
 
     // The nodes' bounds at one point, kept across the descents of one query (both strategies,
     // every split, and the levels of children that score a node): each is computed once.
@@ -134,6 +160,8 @@ private:
         bool crease = false;        // holds only creases
         bool dark_behind = false;   // holds only creases whose faces are black seen from behind
         bool emissive = false;      // holds an edge of an emitter
+        bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
+        int32_t first = 0;          // its edges: order_[first, first + count)
     };
 public:
     // A node's own bounds at a point: its importance under both strategies; whether p lies
@@ -175,6 +203,10 @@ private:
     // where no leaf can contribute).
     static constexpr int kExactLeaves = 8;
     struct Input;
+    void build(const Scene& scene, const Input& in, size_t group);
+    static void set_leaf(const Input& in, size_t i, Node& node);
+    void refit(const Input& in);
+    void refresh_flags(const Input& in);
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
     // A subtree over items [begin, end): [begin, split) the discontinuities from everywhere,
     // [split, end) the smooth edges, each under a child of its own when both are there.
@@ -190,6 +222,14 @@ private:
     std::vector<int32_t> leaf_of_;  // scene edge index -> leaf node (-1: not in the hierarchy)
     int32_t group_root_ = -1;
     double build_ms_ = 0.0;
+    // The last build's arguments and edges (what update() compares), and its items in the
+    // leaves' order (indices into the edge list it was given).
+    bool built_ = false;
+    std::vector<int32_t> ids_;
+    size_t group_ = 0;
+    std::vector<Edge> kept_edges_;
+    std::vector<int32_t> order_;
+    Stats stats_;
 };
 
 class EdgePointSampler {

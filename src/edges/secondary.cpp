@@ -57,8 +57,8 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         if (has_wanted_set_)
             for (int32_t e : all_.edges)
                 if (!mesh_wanted(scene.edges()[size_t(e)].mesh)) order.push_back(e);
-        hierarchy_.build(scene, order, has_wanted_set_ ? wanted_.edges.size() : 0);
-        wanted_root_ = has_wanted_set_ ? hierarchy_.group_root() : 0;
+        hierarchy_ = &scene.edge_hierarchy(order, has_wanted_set_ ? wanted_.edges.size() : 0);
+        wanted_root_ = has_wanted_set_ ? hierarchy_->group_root() : 0;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.
     auto each_light_vertex = [&](auto&& f) {
@@ -139,7 +139,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     us = s == EdgeHierarchy::Lights ? us / c_lights : (us - c_lights) / c_all;
     const Edge* edges = scene_.edges().data();
     EdgeHierarchy::Choice choices[EdgeHierarchy::kMaxChoices];
-    const int count = hierarchy_.sample(q, s, std::min(us, 0.99999994f), choices, &set == &wanted_ ? wanted_root_ : 0);
+    const int count = hierarchy_->sample(q, s, std::min(us, 0.99999994f), choices, &set == &wanted_ ? wanted_root_ : 0);
     for (int c = 0; c < count; ++c) {
         const EdgeHierarchy::Choice& choice = choices[c];
         const float ut = rng.next_float();

@@ -99,8 +99,9 @@ private:
     bool uniform_ = false;
     EdgeSet all_, wanted_;  // every edge; the edges of meshes whose vertices are wanted
     // The hierarchy over every edge, the wanted meshes' edges under a node of their own
-    // (wanted_root_) when not every mesh is wanted: one build serves both sets.
-    EdgeHierarchy hierarchy_;
+    // (wanted_root_) when not every mesh is wanted: one build serves both sets. Kept by the
+    // scene across calls and views (Scene::edge_hierarchy).
+    const EdgeHierarchy* hierarchy_ = nullptr;
     int32_t wanted_root_ = 0;
     bool has_wanted_set_ = false;
     double total_ = 0.0;

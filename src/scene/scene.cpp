@@ -1,5 +1,7 @@
 #include "scene/scene.h"
 
+#include "edges/hierarchy.h"
+
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -190,6 +192,31 @@ const std::vector<Edge>& Scene::edges() const {
         edges_ready_.store(true, std::memory_order_release);
     }
     return edges_;
+}
+
+struct Scene::KeptHierarchies {
+    static constexpr size_t kKept = 2;
+    EdgeHierarchy kept[kKept];
+    uint64_t used[kKept] = {0, 0};  // when each was last used (a count of calls)
+    uint64_t calls = 0;
+};
+
+const EdgeHierarchy& Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
+    if (!hierarchies_) hierarchies_ = std::make_unique<KeptHierarchies>();
+    KeptHierarchies& h = *hierarchies_;
+    // The one built for these arguments, or else the one used least recently.
+    size_t pick = 0;
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
+        if (h.used[k] < h.used[pick]) pick = k;
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
+        if (h.used[k] > 0 && h.kept[k].built_for(edges, group)) pick = k;
+    h.used[pick] = ++h.calls;
+    switch (h.kept[pick].update(*this, edges, group)) {
+        case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
+        case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;
+        case EdgeHierarchy::Update::Reused: ++hierarchy_stats_.reuses; break;
+    }
+    return h.kept[pick];
 }
 
 Scene::~Scene() {

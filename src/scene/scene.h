@@ -121,6 +121,8 @@ inline Ray shadow_ray(const SurfacePoint& sp, const LightSample& ls) {
     return spawn_ray_to(sp.p, sp.p_error, sp.ng, ls.p, ls.p_error, ls.ng);
 }
 
+class EdgeHierarchy;
+
 class Scene {
 public:
     ~Scene();
@@ -200,6 +202,17 @@ public:
     // that want geometry or camera derivatives pay for them.
     const std::vector<Edge>& edges() const;
 
+    // The edge hierarchy (edges/hierarchy.h) over `edges` (indices into edges()), the first
+    // `group` of them under a subtree of their own, kept across calls and views: the kept one
+    // for these arguments brought up to date (EdgeHierarchy::update: rebuilt, refit or reused).
+    // Two are kept (the views of one call may want different things: each keeps its own). The
+    // reference holds until the next call of this or of update(). Not thread-safe, as update().
+    const EdgeHierarchy& edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const;
+    struct HierarchyStats {
+        uint64_t builds = 0, refits = 0, reuses = 0;  // edge_hierarchy() calls
+    };
+    const HierarchyStats& hierarchy_stats() const { return hierarchy_stats_; }
+
 private:
     Scene() = default;
     void set_views(const SceneDesc& desc);
@@ -221,6 +234,9 @@ private:
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
+    struct KeptHierarchies;
+    mutable std::unique_ptr<KeptHierarchies> hierarchies_;
+    mutable HierarchyStats hierarchy_stats_;
 };
 
 }  // namespace edgepath

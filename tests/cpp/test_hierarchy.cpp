@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <map>
 #include <vector>
 
@@ -561,6 +562,143 @@ TEST(LobeBound, IntegralMatchesQuadrature) {
         ++checked;
     }
     EXPECT_EQ(checked, 300);
+}
+
+}  // namespace
+}  // namespace edgepath
+
+namespace edgepath {
+namespace {
+
+// The indices of every edge of `scene`, those of mesh `first` first; and how many those are.
+std::vector<int32_t> edges_mesh_first(const Scene& scene, int first, size_t* group) {
+    std::vector<int32_t> ids, rest;
+    for (size_t i = 0; i < scene.edges().size(); ++i)
+        (scene.edges()[i].mesh == first ? ids : rest).push_back(int32_t(i));
+    *group = ids.size();
+    ids.insert(ids.end(), rest.begin(), rest.end());
+    return ids;
+}
+
+// The kept hierarchy after random vertex moves: refit (not rebuilt) while the edges stay the
+// same, and then every node's box, sphere, length, normal cone and plane range still hold the
+// edges under it as they are now; a hierarchy kept from before the moves does not (so the check
+// sees stale bounds). Sampling still agrees with pdf().
+TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
+    HierarchyScene hs;
+    Rng rng(3, 9);
+    // The sphere's vertices moved by a random affine map of their first positions (a shear, a
+    // stretch, a turn and a shift): its normals turn unevenly, and its edges stay the same
+    // (vertices at one position stay together; its planar quads, whose diagonals are dropped
+    // as coplanar, stay planar; its degenerate triangles at the poles stay degenerate).
+    const std::vector<float> rest = hs.sphere.vertices;
+    auto wave = [&] {
+        float a[3][3], t[3];
+        for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) a[r][c] = (r == c ? 1.f : 0.f) + 0.4f * (rng.next_float() - 0.5f);
+            t[r] = 0.3f * (rng.next_float() - 0.5f);
+        }
+        for (size_t v = 0; v + 2 < rest.size(); v += 3)
+            for (int r = 0; r < 3; ++r)
+                hs.sphere.vertices[v + size_t(r)] =
+                    a[r][0] * rest[v] + a[r][1] * rest[v + 1] + a[r][2] * rest[v + 2] + t[r];
+    };
+    SceneDesc d = hs.matte.desc();
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    const std::shared_ptr<Scene> scene = build_scene(d);
+    size_t group = 0;
+    const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
+    ASSERT_GT(group, 0u);
+    const EdgeHierarchy& kept = scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(kept.check_bounds(*scene, 1e-5f), -1);
+    const EdgeHierarchy before = kept;
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    for (int round = 1; round <= 4; ++round) {
+        wave();  // the sphere only; the box and the floor stay
+        d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+        update_scene(*scene, d);
+        size_t g = 0;
+        const std::vector<int32_t> now = edges_mesh_first(*scene, 0, &g);
+        ASSERT_EQ(now, ids);  // the same edges: a refit is possible
+        ASSERT_EQ(g, group);
+        const EdgeHierarchy& h = scene->edge_hierarchy(now, g);
+        EXPECT_EQ(&h, &kept);
+        EXPECT_EQ(scene->hierarchy_stats().refits, uint64_t(round));
+        EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+        EXPECT_EQ(h.check_bounds(*scene, 1e-5f), -1) << "round " << round;
+        EXPECT_GE(before.check_bounds(*scene, 1e-5f), 0) << "round " << round;
+        for (int i = 0; i < 50; ++i) {
+            EdgeHierarchy::Query q;
+            q.p = Vec3f(4.f * rng.next_float() - 2.f, 0.05f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+            q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
+            for (int32_t start : {0, h.group_root()}) {
+                EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+                const int n = h.sample(q, EdgeHierarchy::All, rng.next_float(), c, start);
+                for (int j = 0; j < n; ++j) {
+                    const float want = h.pdf(q, c[j].edge, start).prob[0];
+                    EXPECT_NEAR(c[j].prob[0], want, 1e-5f * want);
+                }
+            }
+        }
+    }
+    // Nothing moved: reused.
+    scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
+}
+
+// A refit gives the hierarchy a build gives where the build would split alike: every vertex
+// scaled by two (every comparison of the median splits comes out the same, every bound scales
+// exactly), the refit kept hierarchy and a fresh build give the same probabilities, bit for bit.
+// A material made two-sided (the creases' flags) is taken up without a rebuild, the same way.
+TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
+    HierarchyScene hs;
+    SceneDesc d = hs.matte.desc();
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    const std::shared_ptr<Scene> scene = build_scene(d);
+    size_t group = 0;
+    const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
+    scene->edge_hierarchy(ids, group);
+    for (MeshData* m : {&hs.sphere, &hs.box, &hs.quad})
+        for (float& x : m->vertices) x *= 2.f;
+    // The kept hierarchy and a fresh build over the scene `d` describes: the same
+    // probabilities at random points, both strategies, every edge, from either start.
+    auto expect_fresh = [&](const EdgeHierarchy& kept, const SceneDesc& desc) {
+        const std::shared_ptr<Scene> fresh_scene = build_scene(desc);
+        EdgeHierarchy fresh;
+        fresh.build(*fresh_scene, ids, group);
+        ASSERT_EQ(kept.group_root(), fresh.group_root());
+        Rng rng(8, 1);
+        int nonzero = 0;
+        for (int i = 0; i < 20; ++i) {
+            EdgeHierarchy::Query q;
+            q.p = Vec3f(8.f * rng.next_float() - 4.f, 0.1f + 4.f * rng.next_float(), 8.f * rng.next_float() - 4.f);
+            q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
+            BoundsCone cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
+            q.cone = &cone;
+            q.direct_only = i % 2 == 0;
+            for (int32_t start : {0, kept.group_root()})
+                for (int32_t e : ids) {
+                    const EdgeHierarchy::Choice a = kept.pdf(q, e, start), b = fresh.pdf(q, e, start);
+                    ASSERT_EQ(a.prob[0], b.prob[0]) << "edge " << e;
+                    ASSERT_EQ(a.prob[1], b.prob[1]) << "edge " << e;
+                    nonzero += a.prob[0] > 0.f;
+                }
+        }
+        EXPECT_GT(nonzero, 100);
+    };
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    update_scene(*scene, d);
+    const EdgeHierarchy& refit = scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().refits, 1u);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    expect_fresh(refit, d);
+    // One-sided creases (the box's) are skipped from behind; two-sided ones are not.
+    d.materials[0].two_sided = true;
+    update_scene(*scene, d);
+    const EdgeHierarchy& flags = scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    expect_fresh(flags, d);
 }
 
 }  // namespace

@@ -334,70 +334,91 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     opt.spp = 2;
     opt.num_threads = 1;
     const size_t pixels = 16 * 12 * 3;
-    // Image and vertex gradients of `scene`, against a fresh build of `d`.
-    auto expect_fresh = [&](const Scene& scene, const SceneDesc& d) {
+    // Image and vertex gradients of `scene`, against a fresh build of `d`. The edge hierarchy
+    // is kept too, and refit when only vertices move: a tree with the splits of the positions it
+    // was built at (tests/cpp/test_hierarchy.cpp checks its bounds), which a fresh build need
+    // not share. So the gradients are also compared with `twin`, a scene that went through the
+    // same updates and gradient passes; with the fresh build only where the kept hierarchy was
+    // built afresh too (`refit`: false).
+    std::shared_ptr<Scene> twin;
+    auto expect_fresh = [&](const Scene& scene, const SceneDesc& d, bool refit = false) {
         std::vector<float> a(pixels), b(pixels), adjoint(pixels);
         for (size_t i = 0; i < pixels; ++i) adjoint[i] = float(i % 7) - 3.f;
         render(scene, opt, a.data());
         const auto fresh = build_scene(d);
         render(*fresh, opt, b.data());
         EXPECT_EQ(a, b);
-        std::vector<float> ga(ball.vertices.size(), 0.f), gb(ball.vertices.size(), 0.f);
+        std::vector<float> ga(ball.vertices.size(), 0.f), gb(ball.vertices.size(), 0.f), gt(ga);
         SceneGradients g;
         g.meshes.resize(3);
         g.meshes[0].vertices.grad = ga.data();
         render_gradients(scene, opt, adjoint.data(), g);
         g.meshes[0].vertices.grad = gb.data();
         render_gradients(*fresh, opt, adjoint.data(), g);
-        EXPECT_EQ(ga, gb);
+        g.meshes[0].vertices.grad = gt.data();
+        render_gradients(*twin, opt, adjoint.data(), g);
+        EXPECT_EQ(ga, gt);
+        if (!refit) EXPECT_EQ(ga, gb);
     };
     SceneDesc d = describe(kd);
     const std::shared_ptr<Scene> scene = build_scene(d);
+    twin = build_scene(d);
+    // update_scene on both.
+    auto update = [&](const SceneDesc& d) {
+        update_scene(*twin, d);
+        return update_scene(*scene, d);
+    };
     expect_fresh(*scene, d);
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+    EXPECT_EQ(update(d), SceneUpdate::Reused);
 
     ConstTex other({0.2f, 0.7f, 0.3f});  // a material only, in memory of its own
     d = describe(other);
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+    EXPECT_EQ(update(d), SceneUpdate::Reused);
     expect_fresh(*scene, d);
 
     d.camera = camera(Vec3f(-1.f, 1.5f, 4.f), Vec3f(0, 0.2f, 0), 16, 12, 40);
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Reused);
+    EXPECT_EQ(update(d), SceneUpdate::Reused);
     expect_fresh(*scene, d);
 
     // Vertices moved in place: the first time a refittable build, then refits.
     for (SceneUpdate expected : {SceneUpdate::Built, SceneUpdate::Refit, SceneUpdate::Refit}) {
         for (size_t i = 1; i < ball.vertices.size(); i += 3) ball.vertices[i] += 0.05f * ball.vertices[i - 1];
-        EXPECT_EQ(update_scene(*scene, d), expected);
-        expect_fresh(*scene, d);
+        EXPECT_EQ(update(d), expected);
+        expect_fresh(*scene, d, true);
     }
     // Topology: two triangles' winding flipped.
     std::swap(ball.indices[1], ball.indices[2]);
     std::swap(ball.indices[4], ball.indices[5]);
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_EQ(update(d), SceneUpdate::Built);
     expect_fresh(*scene, d);
     // A triangle made degenerate: rebuilt (Embree's index buffer changes), then moved back.
     const std::vector<float> before = ball.vertices;
     const int32_t* t = ball.indices.data() + 3 * 20;
     for (int k = 0; k < 3; ++k) ball.vertices[size_t(3 * t[1] + k)] = ball.vertices[size_t(3 * t[0] + k)];
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_EQ(update(d), SceneUpdate::Built);
     EXPECT_GT(degenerate_triangles(*scene, 0), 0);
     expect_fresh(*scene, d);
     ball.vertices = before;
     d = describe(other);  // the vector may have moved
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_EQ(update(d), SceneUpdate::Built);
     EXPECT_EQ(degenerate_triangles(*scene, 0), 0);
     expect_fresh(*scene, d);
     // A mesh more.
     MeshData box = make_box(Vec3f(1, -1, 0), Vec3f(1.5f, -0.5f, 0.5f));
     d.meshes.push_back(box.desc(0));
-    EXPECT_EQ(update_scene(*scene, d), SceneUpdate::Built);
+    EXPECT_EQ(update(d), SceneUpdate::Built);
     expect_fresh(*scene, d);
 
     const SceneBuildCounts n = scene_build_counts(*scene);
     EXPECT_EQ(n.builds, 6u);
     EXPECT_EQ(n.refits, 2u);
     EXPECT_EQ(n.reuses, 3u);
+    // The edge hierarchy: built on the first gradient pass, refit after each move, rebuilt
+    // after each change of the edges (topology, a degenerate triangle and back, a mesh more).
+    const SceneBuildCounts h = scene_hierarchy_counts(*scene);
+    EXPECT_EQ(h.builds, 5u);
+    EXPECT_EQ(h.refits, 3u);
+    EXPECT_EQ(h.reuses, 2u);
     // A description that fails validation throws and names the field.
     d.meshes[0].material = 7;
     EXPECT_THROW(update_scene(*scene, d), std::invalid_argument);

@@ -44,6 +44,8 @@ def test_views_equal_a_loop_over_views():
     w = weights(images.shape)
     grads = torch.autograd.grad((images * w).sum(), params)
     assert scene.build_counts() == {"builds": 1, "refits": 0, "reuses": 1}
+    # The edge hierarchy is built once, for the first view, and shared by the others.
+    assert scene.edge_hierarchy_counts() == {"builds": 1, "refits": 0, "reuses": 2}
 
     loop_images, loss = [], 0.0
     for k, camera in enumerate(views):

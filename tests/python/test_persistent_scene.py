@@ -51,13 +51,49 @@ def fresh(scene):
     return ep.Scene(camera=scene.camera, meshes=list(scene.meshes), envmap=scene.envmap)
 
 
+# The kept scene's twin: a second kept scene that sees the same tensors and goes through the
+# same calls (so its edge hierarchy is built and refit at the same points).
+_twins = {}
+# Whether the kept scene's edge hierarchy was refit since it was last built.
+_refit = {}
+
+
+def geometric(scene):
+    """Which of leaves(scene) move the shading points and edges: the camera position and the
+    vertices."""
+    moving = [scene.camera.position] + [m.vertices for m in scene.meshes]
+    return [any(t is m for m in moving) for t in leaves(scene)]
+
+
 def assert_same_as_fresh(scene):
+    """The image and the gradients equal those of a fresh scene, bit for bit; except where the
+    kept edge hierarchy was refit since it was built (only vertices moved): a refit tree keeps
+    the splits of the positions it was built at, so it samples the edges seen from path
+    vertices with other (still valid) probabilities than a fresh build, and the gradients of
+    the camera and the vertices, which those edge samples reach, equal those of the twin
+    (the same history) instead. The other gradients do not see those samples (their random
+    numbers are apart) and still equal the fresh scene's. (The refit tree itself is checked
+    against a fresh build in tests/cpp/test_hierarchy.cpp and
+    test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike below.)"""
+    twin = _twins.setdefault(id(scene), fresh(scene))
+    twin.camera, twin.meshes, twin.envmap = scene.camera, list(scene.meshes), scene.envmap
+    before = scene.edge_hierarchy_counts()
     image, grads = image_and_gradients(scene)
+    after = scene.edge_hierarchy_counts()
+    if after["builds"] > before["builds"]:
+        _refit[id(scene)] = False
+    elif after["refits"] > before["refits"]:
+        _refit[id(scene)] = True
+    image_twin, grads_twin = image_and_gradients(twin)
     image_fresh, grads_fresh = image_and_gradients(fresh(scene))
     assert torch.equal(image, image_fresh)
-    assert len(grads) == len(grads_fresh)
-    for g, h in zip(grads, grads_fresh):
-        assert torch.equal(g, h)
+    assert torch.equal(image, image_twin)
+    assert len(grads) == len(grads_fresh) == len(grads_twin)
+    refit = _refit.get(id(scene), False)
+    for g, h, t, moves in zip(grads, grads_fresh, grads_twin, geometric(scene)):
+        assert torch.equal(g, t)
+        if not (refit and moves):
+            assert torch.equal(g, h)
 
 
 def counts_after(scene, change):
@@ -114,16 +150,24 @@ def test_each_kind_of_change_gives_the_fresh_scene_and_rebuilds_only_what_it_mus
         with torch.no_grad():
             scene.envmap.values[1, 2] = 1.5
 
+    hierarchy = scene.edge_hierarchy_counts()
+    assert hierarchy == {"builds": 1, "refits": 0, "reuses": 0}
     for change in (material_colour, roughness, light, camera, envmap):
         assert counts_after(scene, change) == nothing_rebuilt, change.__name__
+    # Nor is the edge hierarchy: one reuse per gradient pass.
+    assert scene.edge_hierarchy_counts() == {"builds": 1, "refits": 0, "reuses": 5}
 
     def move_vertices():
         with torch.no_grad():
             box.vertices[:, 1] += 0.05 * box.vertices[:, 0]
 
-    # The first move builds a BVH that can be refitted; later moves refit it.
+    # The first move builds a BVH that can be refitted; later moves refit it. The edge
+    # hierarchy is refit from the first.
+    hierarchy = scene.edge_hierarchy_counts()
     assert counts_after(scene, move_vertices) == {"builds": 1, "refits": 0, "reuses": 1}
     assert counts_after(scene, move_vertices) == {"builds": 0, "refits": 1, "reuses": 1}
+    after = scene.edge_hierarchy_counts()
+    assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 0, "refits": 2, "reuses": 0}
 
     def new_vertices_same_shape():
         box.vertices = (box.vertices.detach() * 1.01).requires_grad_()
@@ -153,6 +197,32 @@ def test_each_kind_of_change_gives_the_fresh_scene_and_rebuilds_only_what_it_mus
         scene.envmap = None
 
     assert counts_after(scene, remove_envmap) == nothing_rebuilt
+
+
+def test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike():
+    """Every vertex scaled by two: the median splits of a fresh build compare the same numbers
+    times two and split alike, so the kept hierarchy, refit, must be the fresh one bit for bit,
+    and so must every gradient. A one-sided material made two-sided (which changes which
+    creases the hierarchy skips from behind) is taken up without a rebuild, the same way."""
+    scene = make_scene()
+    assert_same_as_fresh(scene)
+    for mesh in scene.meshes:
+        mesh.vertices = (mesh.vertices.detach() * 2.0).requires_grad_(mesh.vertices.requires_grad)
+    before = scene.edge_hierarchy_counts()
+    image, grads = image_and_gradients(scene)
+    after = scene.edge_hierarchy_counts()
+    assert {k: after[k] - before[k] for k in after} == {"builds": 0, "refits": 1, "reuses": 0}
+    image_fresh, grads_fresh = image_and_gradients(fresh(scene))
+    assert torch.equal(image, image_fresh)
+    for g, h in zip(grads, grads_fresh):
+        assert torch.equal(g, h)
+    scene.meshes[0].material.two_sided = True
+    image, grads = image_and_gradients(scene)
+    assert scene.edge_hierarchy_counts()["builds"] == after["builds"]
+    image_fresh, grads_fresh = image_and_gradients(fresh(scene))
+    assert torch.equal(image, image_fresh)
+    for g, h in zip(grads, grads_fresh):
+        assert torch.equal(g, h)
 
 
 def test_never_stale():
