@@ -389,8 +389,32 @@ void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
     built_ = true;
 }
 
+std::vector<uint8_t> EdgeHierarchy::mesh_flags(const Scene& scene) {
+    std::vector<uint8_t> out(scene.meshes.size());
+    for (size_t i = 0; i < out.size(); ++i) {
+        const Mesh& m = scene.meshes[i];
+        const bool dark = !scene.materials[size_t(m.material)].two_sided && !(m.is_emitter() && m.two_sided_emission);
+        out[i] = uint8_t((m.is_emitter() ? 1 : 0) | (dark ? 2 : 0));
+    }
+    return out;
+}
+
 EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vector<int32_t>& edges, size_t group) {
     const auto start = std::chrono::steady_clock::now();
+    auto done = [&](Update what) {
+        scene_ = &scene;
+        version_ = scene.geometry_version();
+        mesh_flags_ = mesh_flags(scene);
+        ++(what == Update::Built ? stats_.builds : what == Update::Refit ? stats_.refits : stats_.reuses);
+        build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
+        return what;
+    };
+    // The scene's geometry as the leaves have it (the other views of a call, or a call that
+    // changed materials, lights or the camera only): the flags at most (O(meshes) to check).
+    if (built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ && edges == ids_) {
+        if (mesh_flags(scene) != mesh_flags_) refresh_flags(Input(scene, edges));
+        return done(Update::Reused);
+    }
     const std::vector<Edge>& all = scene.edges();
     const size_t n = edges.size();
     // The same edges (the same ends, faces and kinds) in the same groups: the same tree.
@@ -411,22 +435,16 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
                            bitwise_equal(leaf.n0, in.n0[i]) && bitwise_equal(leaf.n1, in.n1[i]));
         flags = flags || leaf.dark_behind != (in.dark_behind[i] != 0) || leaf.emissive != (in.emissive[i] != 0);
     }
-    Update what = Update::Reused;
     if (!same) {
         build(scene, in, group);
-        built_ = true;
-        ++stats_.builds;
-        what = Update::Built;
-    } else if (moved) {
-        refit(in);
-        ++stats_.refits;
-        what = Update::Refit;
-    } else {
-        if (flags) refresh_flags(in);
-        ++stats_.reuses;
+        return done(Update::Built);
     }
-    build_ms_ = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
-    return what;
+    if (moved) {
+        refit(in);
+        return done(Update::Refit);
+    }
+    if (flags) refresh_flags(in);
+    return done(Update::Reused);
 }
 
 void EdgeHierarchy::refit(const Input& in) {

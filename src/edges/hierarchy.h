@@ -229,6 +229,12 @@ private:
     size_t group_ = 0;
     std::vector<Edge> kept_edges_;
     std::vector<int32_t> order_;
+    // The scene and its geometry version (Scene::geometry_version) the leaves were last set
+    // from, and per mesh what the flags depend on (mesh_flags()).
+    const Scene* scene_ = nullptr;
+    uint64_t version_ = 0;
+    std::vector<uint8_t> mesh_flags_;
+    static std::vector<uint8_t> mesh_flags(const Scene& scene);
     Stats stats_;
 };
 

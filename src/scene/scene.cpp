@@ -316,6 +316,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
     if (what != Update::Reused || !same_shading) {
         // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use.
         edges_ready_.store(false, std::memory_order_relaxed);
+        ++geometry_version_;
         kept_.resize(n);
         for (size_t i = 0; i < n; ++i) {
             const MeshDesc& md = desc.meshes[i];

@@ -212,6 +212,9 @@ public:
         uint64_t builds = 0, refits = 0, reuses = 0;  // edge_hierarchy() calls
     };
     const HierarchyStats& hierarchy_stats() const { return hierarchy_stats_; }
+    // Changes whenever update() finds that vertices, uvs, normals or the topology may have
+    // changed (the edge list is then built anew on use); the same otherwise.
+    uint64_t geometry_version() const { return geometry_version_; }
 
 private:
     Scene() = default;
@@ -237,6 +240,7 @@ private:
     struct KeptHierarchies;
     mutable std::unique_ptr<KeptHierarchies> hierarchies_;
     mutable HierarchyStats hierarchy_stats_;
+    uint64_t geometry_version_ = 0;
 };
 
 }  // namespace edgepath

@@ -358,7 +358,9 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
         g.meshes[0].vertices.grad = gt.data();
         render_gradients(*twin, opt, adjoint.data(), g);
         EXPECT_EQ(ga, gt);
-        if (!refit) EXPECT_EQ(ga, gb);
+        if (!refit) {
+            EXPECT_EQ(ga, gb);
+        }
     };
     SceneDesc d = describe(kd);
     const std::shared_ptr<Scene> scene = build_scene(d);
