@@ -8,7 +8,12 @@ sphere on a floor under a lamp).
    core scene is reused (its build counts are printed: no build after the first step).
 2. Eight views of one scene: eight ep.render calls (each on a scene of its own, so each builds;
    and on one kept scene, cameras swapped) against one call with cameras=[...] (one build).
-   Forward only, and render + backward with respect to the vertices.
+   Forward only, and render + backward with respect to the vertices (the edge hierarchy, which
+   samples the edges seen from path vertices, is built once and shared by the views of a call
+   and by the calls on a kept scene: its counts are printed).
+3. Vertex steps: render + backward with respect to the vertices, which move between steps (a
+   one-pixel crop window, so that what is rebuilt shows): a new ep.Scene every step (BVH, edge
+   list and edge hierarchy built) against one kept scene (BVH and edge hierarchy refitted).
 
 Configurations alternate within each run (each first in turn), so all see the same machine
 load; the figures are medians over runs, in wall time.
@@ -175,6 +180,32 @@ def main():
         print(f"    one call, cameras=[...]         {t['one']:7.3f} s")
         print(f"    ratio {args.views} calls / one call: {t['fresh'] / t['one']:.2f}x (a scene each), "
               f"{t['kept'] / t['one']:.2f}x (kept scene)")
+    print(f"  kept scene: builds {kept.build_counts()}, edge hierarchy {kept.edge_hierarchy_counts()}")
+
+    # 3. Vertex steps.
+    meshes[0].vertices = original.clone().requires_grad_()
+    kept = ep.Scene(pixel, meshes)
+
+    def vertex_step(scene, k):
+        with torch.no_grad():
+            meshes[0].vertices.mul_(1.0 + 1e-4 * ((-1) ** k))
+        image = ep.render(scene, spp=1)
+        image.mean().backward()
+        meshes[0].vertices.grad = None
+
+    vertex_step(kept, 0)
+    vertex_step(kept, 1)  # the first move: a refittable BVH
+    before = kept.edge_hierarchy_counts()
+    fresh_times, kept_times = [], []
+    for run in range(args.runs):
+        fresh_times.append(timed(lambda: vertex_step(ep.Scene(pixel, meshes), 2 * run)))
+        kept_times.append(timed(lambda: vertex_step(kept, 2 * run + 1)))
+    after = kept.edge_hierarchy_counts()
+    fresh_t, kept_t = statistics.median(fresh_times), statistics.median(kept_times)
+    print(f"\nvertex step (one-pixel render + backward w.r.t. the moved vertices), {args.runs} steps each:")
+    print(f"  new scene every step (all built)          {fresh_t * 1e3:8.1f} ms/step")
+    print(f"  kept scene (BVH and hierarchy refitted)   {kept_t * 1e3:8.1f} ms/step   edge hierarchy "
+          + ", ".join(f"{k} {after[k] - before[k]}" for k in after))
 
 
 if __name__ == "__main__":

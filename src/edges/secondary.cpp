@@ -57,7 +57,7 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         if (has_wanted_set_)
             for (int32_t e : all_.edges)
                 if (!mesh_wanted(scene.edges()[size_t(e)].mesh)) order.push_back(e);
-        hierarchy_ = &scene.edge_hierarchy(order, has_wanted_set_ ? wanted_.edges.size() : 0);
+        hierarchy_ = scene.edge_hierarchy(order, has_wanted_set_ ? wanted_.edges.size() : 0);
         wanted_root_ = has_wanted_set_ ? hierarchy_->group_root() : 0;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.

@@ -18,6 +18,7 @@
 // opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
 // instead (the baseline).
 #pragma once
+#include <memory>
 #include <vector>
 #include "edges/hierarchy.h"
 #include "sampling/rng.h"
@@ -101,7 +102,7 @@ private:
     // The hierarchy over every edge, the wanted meshes' edges under a node of their own
     // (wanted_root_) when not every mesh is wanted: one build serves both sets. Kept by the
     // scene across calls and views (Scene::edge_hierarchy).
-    const EdgeHierarchy* hierarchy_ = nullptr;
+    std::shared_ptr<const EdgeHierarchy> hierarchy_;
     int32_t wanted_root_ = 0;
     bool has_wanted_set_ = false;
     double total_ = 0.0;

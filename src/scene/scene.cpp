@@ -196,27 +196,38 @@ const std::vector<Edge>& Scene::edges() const {
 
 struct Scene::KeptHierarchies {
     static constexpr size_t kKept = 2;
-    EdgeHierarchy kept[kKept];
+    std::mutex mutex;
+    std::shared_ptr<EdgeHierarchy> kept[kKept];
     uint64_t used[kKept] = {0, 0};  // when each was last used (a count of calls)
     uint64_t calls = 0;
 };
 
-const EdgeHierarchy& Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
-    if (!hierarchies_) hierarchies_ = std::make_unique<KeptHierarchies>();
+std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
     KeptHierarchies& h = *hierarchies_;
+    std::lock_guard<std::mutex> lock(h.mutex);
     // The one built for these arguments, or else the one used least recently.
     size_t pick = 0;
     for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
         if (h.used[k] < h.used[pick]) pick = k;
     for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
-        if (h.used[k] > 0 && h.kept[k].built_for(edges, group)) pick = k;
+        if (h.kept[k] && h.kept[k]->built_for(edges, group)) pick = k;
     h.used[pick] = ++h.calls;
-    switch (h.kept[pick].update(*this, edges, group)) {
+    std::shared_ptr<EdgeHierarchy>& kept = h.kept[pick];
+    if (!kept)
+        kept = std::make_shared<EdgeHierarchy>();
+    else if (kept.use_count() > 1)
+        kept = std::make_shared<EdgeHierarchy>(*kept);  // a pass in another thread still reads it
+    switch (kept->update(*this, edges, group)) {
         case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
         case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;
         case EdgeHierarchy::Update::Reused: ++hierarchy_stats_.reuses; break;
     }
-    return h.kept[pick];
+    return kept;
+}
+
+Scene::HierarchyStats Scene::hierarchy_stats() const {
+    std::lock_guard<std::mutex> lock(hierarchies_->mutex);
+    return hierarchy_stats_;
 }
 
 Scene::~Scene() {
@@ -280,6 +291,7 @@ bool embree_triangle(const Mesh& m, int64_t t, uint32_t* out) {
 
 std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     std::shared_ptr<Scene> s(new Scene());
+    s->hierarchies_ = std::make_unique<KeptHierarchies>();
     s->update(desc);
     return s;
 }

@@ -205,13 +205,13 @@ public:
     // The edge hierarchy (edges/hierarchy.h) over `edges` (indices into edges()), the first
     // `group` of them under a subtree of their own, kept across calls and views: the kept one
     // for these arguments brought up to date (EdgeHierarchy::update: rebuilt, refit or reused).
-    // Two are kept (the views of one call may want different things: each keeps its own). The
-    // reference holds until the next call of this or of update(). Not thread-safe, as update().
-    const EdgeHierarchy& edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const;
+    // Two are kept (the views of one call may want different things: each keeps its own).
+    // Thread-safe: a tree still held by a pass is copied before it is changed for another.
+    std::shared_ptr<const EdgeHierarchy> edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const;
     struct HierarchyStats {
         uint64_t builds = 0, refits = 0, reuses = 0;  // edge_hierarchy() calls
     };
-    const HierarchyStats& hierarchy_stats() const { return hierarchy_stats_; }
+    HierarchyStats hierarchy_stats() const;
     // Changes whenever update() finds that vertices, uvs, normals or the topology may have
     // changed (the edge list is then built anew on use); the same otherwise.
     uint64_t geometry_version() const { return geometry_version_; }
