@@ -191,8 +191,9 @@ public:
     };
 
 private:
-    Coarse coarse(const Query& q, const Node& n) const;
-    Coarse coarse_memo(const Query& q, int32_t index) const;
+    void coarse(const Query& q, const Node& n, Coarse& out) const;
+    // The memo's entry, or `scratch` filled in.
+    const Coarse& coarse_memo(const Query& q, int32_t index, Coarse& scratch) const;
     // Node `index`'s importance under both strategies: its own bounds, or its children's where
     // they are tighter, or for a subtree of at most kExactLeaves edges the sum of its leaves.
     // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
