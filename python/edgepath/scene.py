@@ -121,7 +121,10 @@ class Mesh:
     ``normals`` (K, 3) shading normals with ``normal_indices`` (M, 3) (or one per vertex),
     ``material`` (default: diffuse 0.5, or black diffuse if the mesh emits), ``emission``:
     radiance, constant (3,) or texture (H, W, 3) over the uvs, which makes the mesh an area
-    light emitting on the side of its face normal (both sides if ``two_sided_emission``)."""
+    light emitting on the side of its face normal (both sides if ``two_sided_emission``).
+    ``colors``: (N, 3) vertex colours, non-negative, one row per vertex (indexed by
+    ``indices``); interpolated by the barycentrics, they multiply the material's diffuse
+    reflectance (constant or texture) and are differentiable."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
@@ -129,7 +132,8 @@ class Mesh:
                  normal_indices: Optional[torch.Tensor] = None,
                  material: Optional[Material] = None,
                  emission: Optional[Constant] = None,
-                 two_sided_emission: bool = False):
+                 two_sided_emission: bool = False,
+                 colors: Optional[torch.Tensor] = None):
         self.vertices = vertices
         self.indices = indices
         self.uvs = uvs
@@ -139,6 +143,7 @@ class Mesh:
         self.material = material
         self.emission = emission
         self.two_sided_emission = two_sided_emission
+        self.colors = colors
 
     def __repr__(self):
         n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"

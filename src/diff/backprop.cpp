@@ -70,7 +70,7 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
                 const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir) {
     const Mesh& m = *g.mesh;
     float b[3] = {1.f - g.th.b1 - g.th.b2, g.th.b1, g.th.b2};
-    float db1 = 0.f, db2 = 0.f;
+    float db1 = a.db.x, db2 = a.db.y;
     Vec3f dv[3] = {Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
     // uv = sum b_i uv_i   (or uv = (b1, b2) without uvs)
     if (m.uvs) {
@@ -86,6 +86,17 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
     } else {
         db1 += a.duv.x;
         db2 += a.duv.y;
+    }
+    // colour = sum b_i c_i
+    if (m.colors && !is_black(a.dcolor)) {
+        Vec3f c[3];
+        for (int k = 0; k < 3; ++k) {
+            c[k] = Vec3f::load(m.colors + 3 * int64_t(g.tri[k]));
+            if (ms && ms->colors.wanted())
+                sink.add3(ms->colors, g.tri[k], a.dcolor.x * b[k], a.dcolor.y * b[k], a.dcolor.z * b[k]);
+        }
+        db1 += dot(a.dcolor, c[1] - c[0]);
+        db2 += dot(a.dcolor, c[2] - c[0]);
     }
     // Shading normal.
     if (m.normals) {
@@ -125,6 +136,21 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
     dv[2] += dt.v2;
     if (ms && ms->vertices.wanted())
         for (int k = 0; k < 3; ++k) sink.add3(ms->vertices, g.tri[k], dv[k].x, dv[k].y, dv[k].z);
+}
+
+void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
+               GradSink& sink, HitAdjoint& ha) {
+    const size_t material = size_t(g.mesh->material);
+    const Texture& tex = scene.materials[material].diffuse;
+    const GradSlot& slot = material < slots.materials.size() ? slots.materials[material].diffuse : kNoSlot;
+    Vec3f d = dval;
+    if (g.mesh->colors) {
+        // diffuse = T(uv) c: dT = dval c, dc = dval T(uv)
+        d = dval * g.mesh->color(g.sp.prim, g.sp.b1, g.sp.b2);
+        ha.dcolor += dval * eval_texture3(tex, g.sp.uv);
+    }
+    const float d3[3] = {d.x, d.y, d.z};
+    d_texture(tex, slot, g.sp.uv, d3, sink, &ha.duv);
 }
 
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
@@ -281,10 +307,9 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         // Material parameters at uv.
         {
-            float dd[3] = {db.diffuse.x, db.diffuse.y, db.diffuse.z};
             float ds[3] = {db.specular.x, db.specular.y, db.specular.z};
             float dr[1] = {eval_texture1(mat.roughness, sp.uv) > kMinRoughness ? db.alpha : 0.f};
-            d_texture(mat.diffuse, mats ? mats->diffuse : kNoSlot, sp.uv, dd, sink, &ha.duv);
+            d_diffuse(scene, g, slots, db.diffuse, sink, ha);
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
             if (mat.kind == MaterialKind::Dielectric) {

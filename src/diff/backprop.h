@@ -35,9 +35,11 @@ struct VertexGeometry {
 // Adjoints of the quantities derived from a hit.
 struct HitAdjoint {
     Vec3f dp, dn, dng;  // position, shading normal (unbent), geometric normal
+    Vec3f dcolor;       // interpolated vertex colour (Mesh::color)
     Vec2f duv;          // texture coordinates
+    Vec2f db;           // barycentrics (b1, b2)
     float dt = 0.f;     // distance along the ray
-    HitAdjoint() : dp(0.f), dn(0.f), dng(0.f), duv(0.f, 0.f) {}
+    HitAdjoint() : dp(0.f), dn(0.f), dng(0.f), dcolor(0.f), duv(0.f, 0.f), db(0.f, 0.f) {}
 };
 
 // Sends the adjoints `a` of a hit to the mesh's buffers (`ms`, may be null) and adds the
@@ -47,6 +49,12 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
 
 // Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
 void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv);
+
+// Adjoint of the diffuse reflectance at g's hit, diffuse(uv) times the vertex colour
+// (Scene::bsdf_params), for material `material`: texels into its slot, the colour's adjoint
+// into ha.dcolor and the uv's into ha.duv.
+void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
+               GradSink& sink, HitAdjoint& ha);
 
 // The slots of mesh `mesh`, or null when none were given.
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh);

@@ -46,6 +46,9 @@ struct MeshDesc {
     const float* normals = nullptr;      // (num_normals, 3) shading normals, or null
     int64_t num_normals = 0;
     const int32_t* normal_indices = nullptr;  // (num_triangles, 3), or null: use `indices`
+    // (num_vertices, 3) vertex colours, or null: interpolated by the barycentrics (indexed by
+    // `indices`), they multiply the material's diffuse reflectance.
+    const float* colors = nullptr;
     int material = 0;                    // index into SceneDesc::materials
     TextureDesc emission;                // 3 channels; empty: not an emitter
     bool two_sided_emission = false;     // false: emits on the side of the face normal only

@@ -21,7 +21,7 @@ struct GradSlot {
 
 struct SceneGradients {
     struct MeshSlots {
-        GradSlot vertices, uvs, normals, emission;
+        GradSlot vertices, uvs, normals, emission, colors;
     };
     struct MaterialSlots {
         GradSlot diffuse, specular, roughness, ior;
@@ -38,7 +38,7 @@ inline void number_slots(SceneGradients& g) {
     uint32_t key = 0;
     for (GradSlot* s : {&g.camera, &g.envmap, &g.envmap_rotation}) s->key = key++;
     for (auto& m : g.meshes)
-        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission}) s->key = key++;
+        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission, &m.colors}) s->key = key++;
     for (auto& m : g.materials)
         for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness}) s->key = key++;
 }

@@ -159,6 +159,10 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     } else if (m.normal_indices) {
         fail(f + ".normal_indices", "given without normals");
     }
+    if (m.colors) {
+        check_finite(m.colors, m.num_vertices * 3, f + ".colors");
+        check_non_negative(m.colors, m.num_vertices * 3, f + ".colors");
+    }
     if (m.material < 0 || m.material >= num_materials)
         fail(f + ".material", "index " + str(m.material) + " out of range for " + str(num_materials) + " materials");
     if (!m.emission.empty()) {
@@ -185,6 +189,7 @@ const std::vector<Edge>& Scene::edges() const {
             d.normal_indices = m.normal_indices;
             d.uvs = m.uvs;
             d.uv_indices = m.uv_indices;
+            d.colors = m.colors;
             build_mesh_edges(d, int32_t(i), edges_);
         }
         edges_ready_.store(true, std::memory_order_release);
@@ -274,7 +279,8 @@ Scene::Update Scene::update(const SceneDesc& desc) {
         if (!same_topology) break;
         same_vertices = same_vertices && same(k.vertices, md.vertices, 3 * md.num_vertices);
         same_shading = same_shading && same(k.uvs, md.uvs, 2 * md.num_uvs) &&
-                       same(k.normals, md.normals, 3 * md.num_normals);
+                       same(k.normals, md.normals, 3 * md.num_normals) &&
+                       same(k.colors, md.colors, 3 * md.num_vertices);
     }
     set_views(desc);
     Update what = Update::Reused;
@@ -302,6 +308,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.uvs = copy_of(md.uvs, 2 * md.num_uvs);
             k.num_normals = md.normals ? md.num_normals : -1;
             k.normals = copy_of(md.normals, 3 * md.num_normals);
+            k.colors = copy_of(md.colors, 3 * md.num_vertices);
         }
     }
     build_lights();
@@ -346,6 +353,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.uv_indices = md.uvs ? (md.uv_indices ? md.uv_indices : md.indices) : nullptr;
         m.normals = md.normals;
         m.normal_indices = md.normals ? (md.normal_indices ? md.normal_indices : md.indices) : nullptr;
+        m.colors = md.colors;
         m.material = md.material;
         m.emission = Texture(md.emission);
         m.two_sided_emission = md.two_sided_emission;
@@ -535,6 +543,8 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     const Material& m = materials[meshes[sp.mesh].material];
     BsdfParams p;
     p.diffuse = eval_texture3(m.diffuse, sp.uv);
+    const Mesh& mesh = meshes[sp.mesh];
+    if (mesh.colors) p.diffuse = p.diffuse * mesh.color(sp.prim, sp.b1, sp.b2);
     p.specular = eval_texture3(m.specular, sp.uv);
     p.alpha = std::max(eval_texture1(m.roughness, sp.uv), kMinRoughness);
     p.two_sided = m.two_sided;

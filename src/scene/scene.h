@@ -56,6 +56,7 @@ struct Mesh {
     const int32_t* uv_indices = nullptr;
     const float* normals = nullptr;
     const int32_t* normal_indices = nullptr;
+    const float* colors = nullptr;  // (num_vertices, 3), or null
     int material = 0;
     Texture emission;
     bool two_sided_emission = false;
@@ -70,6 +71,13 @@ struct Mesh {
         return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
     }
     bool is_emitter() const { return !emission.empty(); }
+    // The vertex colour at barycentrics (b1, b2) of triangle f; 1 without colours.
+    Vec3f color(int64_t f, float b1, float b2) const {
+        if (!colors) return Vec3f(1.f);
+        const int32_t* t = indices + 3 * f;
+        return Vec3f::load(colors + 3 * int64_t(t[0])) * (1.f - b1 - b2) + Vec3f::load(colors + 3 * int64_t(t[1])) * b1 +
+               Vec3f::load(colors + 3 * int64_t(t[2])) * b2;
+    }
     // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
     bool is_degenerate(int64_t f) const {
         const int32_t* t = indices + 3 * f;
@@ -134,7 +142,7 @@ public:
     // pointers into the memory `desc` views), rebuilding only what its contents changed, found
     // by comparing them with copies kept from the last build: the Embree BVH and the edge list
     // when the topology changes (mesh count, vertex counts, the index arrays, whether uvs and
-    // normals are given); an Embree refit when only vertex positions move (the first time, a
+    // normals are given); the edge list alone when uvs, normals or vertex colours change; an Embree refit when only vertex positions move (the first time, a
     // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
     // one); nothing for materials, textures, emission, lights, the environment and the camera,
     // which are only views. Returns what it did. Not thread-safe: no other call may use the
@@ -213,7 +221,7 @@ private:
     // normals count -1 when not given).
     struct Kept {
         int64_t num_vertices = 0, num_uvs = -1, num_normals = -1;
-        std::vector<float> vertices, uvs, normals;
+        std::vector<float> vertices, uvs, normals, colors;
         std::vector<int32_t> indices, uv_indices, normal_indices;
     };
     std::vector<Kept> kept_;
