@@ -138,6 +138,7 @@ edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std:
     m.two_sided = scalar<bool>(d, "two_sided", f);
     if (has(d, "kind")) m.kind = static_cast<edgepath::MaterialKind>(scalar<int>(d, "kind", f));
     if (has(d, "ior")) m.ior = texture(views, item(d, "ior", f), f + ".ior");
+    if (has(d, "normal_map")) m.normal_map = texture(views, d["normal_map"], f + ".normal_map");
     return m;
 }
 
@@ -418,7 +419,8 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
 // ---- gradient slots --------------------------------------------------------------------------
 // `slots` mirrors the scene: {"camera": a, "envmap": a, "envmap_rotation": a,
 // "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a, "colors": a} or None, ...],
-// "materials": [{"diffuse": a, "specular": a, "roughness": a} or None, ...]}, any entry None or
+// "materials": [{"diffuse": a, "specular": a, "roughness": a, "ior": a, "normal_map": a} or None,
+// ...]}, any entry None or
 // absent. Reverse mode: writable buffers the gradients are added into; forward mode: directions.
 // Each array must have exactly as many values as the parameter it stands for.
 using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
@@ -489,6 +491,7 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.materials[i].specular = views.slot(m, "specular", md.specular.num_values(), f);
             g.materials[i].roughness = views.slot(m, "roughness", md.roughness.num_values(), f);
             g.materials[i].ior = views.slot(m, "ior", md.ior.num_values(), f);
+            g.materials[i].normal_map = views.slot(m, "normal_map", md.normal_map.num_values(), f);
         }
     }
     return g;

@@ -48,6 +48,7 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
         }
     }
     Vec3f d_origin(0.f), d_dir(0.f);
+    d_normal_map(scene, g, slots, sink, ha);
     finish_hit(g, ha, mesh_slots(slots, hit.mesh), sink, ray.origin, ray.dir, d_origin, d_dir);
     if (slots.camera.wanted()) {
         float cam[kCameraParams] = {};

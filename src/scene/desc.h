@@ -31,6 +31,9 @@ struct MaterialDesc {
     TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
     TextureDesc roughness;  // 1 channel, GGX alpha
     TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric only)
+    // 3 channels, tangent-space normal map (scene/normal_map.h); empty: none. Needs no uvs (the
+    // barycentrics stand in) but follows them where given.
+    TextureDesc normal_map;
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false; // false: black seen from the back (as Mitsuba's BSDFs)
 };

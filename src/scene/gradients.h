@@ -24,7 +24,7 @@ struct SceneGradients {
         GradSlot vertices, uvs, normals, emission, colors;
     };
     struct MaterialSlots {
-        GradSlot diffuse, specular, roughness, ior;
+        GradSlot diffuse, specular, roughness, ior, normal_map;
     };
     std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
     std::vector<MaterialSlots> materials; // one per material
@@ -40,7 +40,7 @@ inline void number_slots(SceneGradients& g) {
     for (auto& m : g.meshes)
         for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission, &m.colors}) s->key = key++;
     for (auto& m : g.materials)
-        for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness}) s->key = key++;
+        for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness, &m.ior, &m.normal_map}) s->key = key++;
 }
 
 inline void atomic_add(float* p, float v) {

@@ -8,6 +8,7 @@
 #include <string>
 
 #include "scene/geometry.h"
+#include "scene/normal_map.h"
 
 namespace edgepath {
 
@@ -212,6 +213,7 @@ void validate(const SceneDesc& desc) {
         check_texture(desc.materials[i].specular, 3, f + ".specular", true);
         check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
         const MaterialDesc& md = desc.materials[i];
+        if (!md.normal_map.empty()) check_texture(md.normal_map, 3, f + ".normal_map", false);
         if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Dielectric))
             fail(f + ".kind", "unknown material kind " + str(int(md.kind)));
         if (md.kind == MaterialKind::Dielectric) {
@@ -337,6 +339,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.roughness = Texture(md.roughness);
         m.kind = md.kind;
         if (md.kind == MaterialKind::Dielectric) m.ior = Texture(md.ior);
+        m.normal_map = Texture(md.normal_map);
         m.two_sided = md.two_sided || md.kind == MaterialKind::Dielectric;
         materials.push_back(m);
     }
@@ -536,7 +539,40 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     } else {
         sp.uv = Vec2f(b1, b2);
     }
+    const Texture& normal_map = materials[size_t(m.material)].normal_map;
+    if (!normal_map.empty()) {
+        Vec3f dpdu;
+        const bool has_dpdu = triangle_dpdu(mesh, prim, dpdu);
+        sp.ns = map_normal(sp.ns, has_dpdu, dpdu, eval_texture3(normal_map, sp.uv));
+    }
     return sp;
+}
+
+Vec3f Scene::unmapped_normal(int mesh, int64_t prim, float b1, float b2) const {
+    const Mesh& m = meshes[size_t(mesh)];
+    const int32_t* tri = m.indices + 3 * prim;
+    const Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
+    const Vec3f ng = normalize(cross(v1 - v0, v2 - v0));
+    if (!m.normals) return ng;
+    const int32_t* ni = m.normal_indices + 3 * prim;
+    const Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * (1.f - b1 - b2) + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
+                    Vec3f::load(m.normals + 3 * ni[2]) * b2;
+    const float l = length(n);
+    return l > 0.f ? n / l : ng;
+}
+
+bool Scene::triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const {
+    const Mesh& m = meshes[size_t(mesh)];
+    const int32_t* tri = m.indices + 3 * prim;
+    const Vec3f v0 = m.vertex(tri[0]);
+    Vec2f d1(1.f, 0.f), d2(0.f, 1.f);  // without uvs: uv = (b1, b2)
+    if (m.uvs) {
+        const int32_t* ti = m.uv_indices + 3 * prim;
+        const float *t0 = m.uvs + 2 * ti[0], *t1 = m.uvs + 2 * ti[1], *t2 = m.uvs + 2 * ti[2];
+        d1 = Vec2f(t1[0] - t0[0], t1[1] - t0[1]);
+        d2 = Vec2f(t2[0] - t0[0], t2[1] - t0[1]);
+    }
+    return edgepath::triangle_dpdu(m.vertex(tri[1]) - v0, m.vertex(tri[2]) - v0, d1, d2, dpdu);
 }
 
 BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {

@@ -88,6 +88,7 @@ struct Mesh {
 struct Material {
     Texture diffuse, specular, roughness;
     Texture ior;  // Dielectric only
+    Texture normal_map;  // empty: none
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false;
 };
@@ -103,7 +104,7 @@ struct SurfacePoint {
     Vec3f p;
     Vec3f p_error;  // bound on p's rounding error, per component (math/ray.h)
     Vec3f ng;  // geometric normal, cross(v1 - v0, v2 - v0) normalised
-    Vec3f ns;  // shading normal (interpolated normals, or ng)
+    Vec3f ns;  // shading normal (interpolated normals, or ng; then the material's normal map)
     Vec2f uv;  // interpolated uvs, or the barycentrics (b1, b2) when the mesh has none
     int mesh = -1;
     int64_t prim = -1;
@@ -183,6 +184,10 @@ public:
     bool occluded(const Ray& ray) const;
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
+    // The shading normal before the normal map (interpolated normals, or ng) at barycentrics
+    // (b1, b2) of triangle `prim`, and the triangle's dp/du for the normal map (false: none).
+    Vec3f unmapped_normal(int mesh, int64_t prim, float b1, float b2) const;
+    bool triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const;
     SurfacePoint surface_point(const Hit& h) const { return surface_point(h.mesh, h.prim, h.b1, h.b2); }
     BsdfParams bsdf_params(const SurfacePoint& sp) const;
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).

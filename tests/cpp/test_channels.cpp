@@ -252,6 +252,79 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     }
 }
 
+// A tangent-space normal map: the shading normal's adjoint in the map's texels, the vertices,
+// normals and uvs (the tangent dp/du depends on them) equals the central difference, with and
+// without normals and uvs (then the barycentrics stand in for the uvs).
+TEST(Channels, NormalMapAdjointMatchesFiniteDifferences) {
+    const std::vector<float> map = {0.9f, 0.3f, 0.8f, 0.7f, 0.8f, 0.7f, 0.85f, 0.6f, 0.9f, 0.75f, 0.2f, 0.8f};
+    for (bool attributes : {true, false}) {
+        MeshData tri;
+        tri.vertices = {-0.8f, -0.6f, 0.1f, 0.9f, -0.4f, -0.3f, -0.1f, 0.8f, 0.2f};
+        tri.indices = {0, 1, 2};
+        if (attributes) {
+            tri.normals = {0.1f, 0.0f, 1.0f, 0.3f, 0.2f, 0.9f, -0.2f, 0.1f, 1.0f};
+            tri.uvs = {0.1f, 0.2f, 0.8f, 0.3f, 0.4f, 0.9f};
+        }
+        std::mt19937 gen(11);
+        std::uniform_real_distribution<float> u(-1.f, 1.f);
+        std::vector<float> dv(9), dn(9), duv(6), dmap(map.size());
+        for (auto* dir : {&dv, &dn, &duv, &dmap})
+            for (float& x : *dir) x = u(gen);
+        const ChannelLayout layout({Channel::ShadingNormal});
+        const float film_x = 11.3f, film_y = 10.6f;
+        auto values = [&](float eps, float* out) {
+            MeshData m = tri;
+            std::vector<float> t = map;
+            for (int i = 0; i < 9; ++i) m.vertices[size_t(i)] += eps * dv[size_t(i)];
+            for (size_t i = 0; i < m.normals.size(); ++i) m.normals[i] += eps * dn[i];
+            for (size_t i = 0; i < m.uvs.size(); ++i) m.uvs[i] += eps * duv[i];
+            for (size_t i = 0; i < t.size(); ++i) t[i] += eps * dmap[i];
+            SceneArrays a(m, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
+            a.desc.materials[0].normal_map = texture(t, 2, 2, 3);
+            auto scene = build_scene(a.desc);
+            const Ray ray = scene->camera.generate_ray(film_x, film_y);
+            const FirstHit first = first_hit(*scene, ray);
+            ASSERT_TRUE(first.found);
+            eval_hit_channels(*scene, layout, ray, true, first.hit, out);
+        };
+        float plus[3], minus[3], base[3];
+        const float eps = 1e-3f;
+        values(eps, plus);
+        values(-eps, minus);
+        values(0.f, base);
+
+        SceneArrays a(tri, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
+        a.desc.materials[0].normal_map = texture(map, 2, 2, 3);
+        auto scene = build_scene(a.desc);
+        // The map bends the normal away from the unmapped one.
+        const Ray ray = scene->camera.generate_ray(film_x, film_y);
+        const FirstHit first = first_hit(*scene, ray);
+        ASSERT_TRUE(first.found);
+        const Vec3f unmapped = scene->unmapped_normal(first.hit.mesh, first.hit.prim, first.hit.b1, first.hit.b2);
+        EXPECT_LT(dot(unmapped, Vec3f(base[0], base[1], base[2])), 0.99f);
+        EXPECT_NEAR(length(Vec3f(base[0], base[1], base[2])), 1.f, 1e-5f);
+        SceneGradients dirs;
+        dirs.meshes.resize(1);
+        dirs.meshes[0].vertices.dir = dv.data();
+        if (attributes) {
+            dirs.meshes[0].normals.dir = dn.data();
+            dirs.meshes[0].uvs.dir = duv.data();
+        }
+        dirs.materials.resize(1);
+        dirs.materials[0].normal_map.dir = dmap.data();
+        GradSink sink(true);
+        for (int j = 0; j < 3; ++j) {
+            float e[kMaxChannelValues] = {};
+            e[j] = 1.f;
+            d_hit_channels(*scene, layout, dirs, Vec2f(film_x, film_y), Vec2f(kLensCentre, kLensCentre), ray, first.hit, e,
+                           sink);
+            const double got = sink.take_projection(), fd = (double(plus[j]) - minus[j]) / (2.0 * eps);
+            EXPECT_NEAR(got, fd, 2e-3 + 5e-3 * std::abs(fd)) << "attributes " << attributes << ", value " << j;
+            EXPECT_GT(std::abs(fd), 1e-2) << "value " << j << ": nothing is tested";
+        }
+    }
+}
+
 TEST(Channels, RadianceChannelIsRenderAndIdsAreThePixelCentres) {
     MeshData sphere = make_sphere(Vec3f(0.f, 0.f, 0.f), 0.6f, 12, 24);
     MeshData lamp = make_quad(Vec3f(-1.f, 2.f, -1.f), Vec3f(2.f, 0.f, 0.f), Vec3f(0.f, 0.f, 2.f));  // facing down
