@@ -35,7 +35,7 @@ MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
 # A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
 # ("meshes", i, "vertices" | "uvs" | "normals" | "emission" | "colors"),
-# ("materials", i, "diffuse" | "specular" | "roughness" | "ior").
+# ("materials", i, "diffuse" | "specular" | "roughness" | "ior" | "normal_map").
 Slot = Tuple
 
 
@@ -715,6 +715,10 @@ def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict
     for name, channels in fields:
         value = v.texture(getattr(material, name), f"{f}.{name}", channels)
         out[name] = _param(flat, ("materials", i, name), value)
+    normal_map = getattr(material, "normal_map", None)
+    if normal_map is not None:
+        normal_map = v.float_tensor(normal_map, f + ".normal_map", ("H", "W", 3))
+        out["normal_map"] = _param(flat, ("materials", i, "normal_map"), normal_map)
     return out
 
 
@@ -871,7 +875,7 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
         for mesh in scene.meshes:
             m = swap(mesh, ("vertices", "uvs", "normals", "emission", "colors"))
             if isinstance(mesh, Mesh):
-                m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior"))
+                m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior", "normal_map"))
             meshes.append(m)
     envmap = swap(scene.envmap, ("values", "to_world", "scale"))
     if not found:

@@ -98,17 +98,24 @@ class Material:
     (H, W)); two-sided; ``diffuse``, ``specular`` and ``roughness`` are unused.
 
     ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs). Every tensor
-    is differentiable, ``ior`` included."""
+    is differentiable, ``ior`` included.
+
+    ``normal_map``: None or a texture (H, W, 3), a tangent-space normal map as Mitsuba's
+    ``normalmap``: a texel value v is the direction 2 v - 1 in the frame of the shading normal
+    whose first axis is the triangle's dp/du (from its uvs, or its barycentrics without uvs);
+    differentiable in its texels, and in the vertices, normals and uvs through the frame."""
 
     def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
                  roughness: Constant = 0.5, two_sided: bool = False,
-                 kind: str = "standard", ior: Constant = 1.5):
+                 kind: str = "standard", ior: Constant = 1.5,
+                 normal_map: Optional[torch.Tensor] = None):
         self.diffuse = diffuse
         self.specular = specular
         self.roughness = roughness
         self.two_sided = two_sided
         self.kind = kind
         self.ior = ior
+        self.normal_map = normal_map
 
     def __repr__(self):
         return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"

@@ -1,0 +1,146 @@
+"""Tangent-space normal maps (``Material(normal_map=...)``): the frame against its closed form,
+derivative images against finite differences, and recovering a bump from shading under three coloured lamps.
+
+The scenes are a square in the plane z = 0 facing an orthographic camera, with u along +x: the
+frame of the map is s = +x (dp/du), n = +z, t = cross(n, s) = +y (Mitsuba's normalmap), so a
+texel value v maps the normal to normalize(2 v - 1) in world coordinates.
+"""
+
+import math
+
+import pytest
+import torch
+
+import edgepath as ep
+
+import conformance as C
+
+ERROR_MEAN, ERROR_MAX = 0.02, 0.3
+
+
+def ortho_camera(resolution):
+    return ep.Camera(position=torch.tensor([0.0, 0.0, 2.0]), look_at=torch.tensor([0.0, 0.0, 0.0]),
+                     up=torch.tensor([0.0, 1.0, 0.0]), camera_type="orthographic", ortho_scale=1.0,
+                     resolution=resolution)
+
+
+def square(normal_map, uv_scale=1.0):
+    """A square bigger than the view, uvs u = (x + 1.5) / 3 and v = (1.5 - y) / 3 (v down, as an
+    image's rows) times uv_scale."""
+    v = torch.tensor([[-1.5, -1.5, 0.0], [1.5, -1.5, 0.0], [1.5, 1.5, 0.0], [-1.5, 1.5, 0.0]])
+    uv = torch.tensor([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]) * uv_scale
+    return ep.Mesh(v, torch.tensor([[0, 1, 2], [0, 2, 3]]), uvs=uv,
+                   material=ep.Material(diffuse=0.8, normal_map=normal_map))
+
+
+def lamp(direction, colour, distance=4.0, half=0.25):
+    """A small square emitter towards `direction` from the origin, facing it."""
+    n = torch.nn.functional.normalize(torch.tensor(direction), dim=0)
+    a = torch.nn.functional.normalize(torch.linalg.cross(n, torch.tensor([0.0, 0.0, 1.0]) if abs(float(n[2])) < 0.9
+                                                         else torch.tensor([1.0, 0.0, 0.0]), dim=0), dim=0)
+    b = torch.linalg.cross(n, a, dim=0)
+    c = n * distance
+    v = torch.stack([c - a * half - b * half, c + a * half - b * half, c + a * half + b * half,
+                     c - a * half + b * half])
+    return ep.Mesh(v, torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor(colour),
+                   two_sided_emission=True)
+
+
+def coloured_lamps():
+    """A red lamp towards +x, a green one towards +y, a blue one towards -x -y, all above the
+    square and outside the view: the three colours of a white diffuse surface measure its
+    normal's direction."""
+    return [lamp([1.0, 0.0, 0.6], [80.0, 0.0, 0.0]), lamp([0.0, 1.0, 0.6], [0.0, 80.0, 0.0]),
+            lamp([-0.7, -0.7, 0.8], [0.0, 0.0, 80.0])]
+
+
+@pytest.mark.parametrize("texel, expected", [((0.8, 0.5, 0.9), (0.6, 0.0, 0.8)),
+                                             ((0.5, 0.8, 0.9), (0.0, 0.6, 0.8)),
+                                             ((0.5, 0.5, 1.0), (0.0, 0.0, 1.0))])
+def test_a_constant_map_tilts_the_shading_normal_in_the_tangent_frame(texel, expected):
+    normal_map = torch.tensor(texel).reshape(1, 1, 3)
+    scene = ep.Scene(ortho_camera((4, 4)), [square(normal_map)])
+    out = ep.render_channels(scene, ["shading_normal", "geometry_normal"], spp=4)
+    assert torch.allclose(out["shading_normal"], torch.tensor(expected).expand(4, 4, 3), atol=1e-6)
+    assert bool((out["geometry_normal"] == torch.tensor([0.0, 0.0, 1.0])).all())
+    assert torch.equal(normal_map, torch.tensor(texel).reshape(1, 1, 3))  # not modified
+
+
+def bump_map(n):
+    """An n x n map of a bump: normals tilted away from the centre."""
+    c = (torch.arange(n) + 0.5) / n - 0.5
+    y, x = torch.meshgrid(c, c, indexing="ij")
+    m = torch.stack([1.2 * x, -1.2 * y, torch.ones_like(x)], -1)  # rows go down: v = -y
+    m = m / m.norm(dim=-1, keepdim=True)
+    return 0.5 * (m + 1)
+
+
+# The derivative images sample the lamps only (sampling="light"): a direction drawn from the
+# BSDF turns with the normal, so that the same random numbers may hit a lamp on one side of a
+# finite difference and miss it on the other, a jump that swamps the difference at a few pixels
+# (the derivative holds sampled directions fixed; both agree in expectation).
+def test_radiance_derivative_in_the_texels_matches_finite_differences():
+    normal_map = bump_map(4)
+    scene = ep.Scene(ortho_camera((10, 10)), [square(normal_map)] + coloured_lamps())
+    direction = torch.rand(normal_map.shape, generator=torch.Generator().manual_seed(3)) - 0.5
+    fd = ep.finite_difference_image(scene, normal_map, direction, eps=2e-3, spp=64, seed=4, sampling="light")
+    d = ep.derivative_image(scene, normal_map, direction, spp=64, seed=4, sampling="light")
+    scale = float(fd.abs().max())
+    mean_err, max_err = C.image_error(d / scale, fd / scale, C.GRADIENT_FLOOR)
+    print(f"normal map texels: mean err {mean_err:.4f}, max err {max_err:.4f}")
+    assert scale > 0.1 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
+
+
+def test_radiance_derivative_in_the_uvs_matches_finite_differences():
+    """The map's frame and lookup move with the uvs (the interior term; the uvs move no edge)."""
+    scene = ep.Scene(ortho_camera((10, 10)), [square(bump_map(4), uv_scale=0.8)] + coloured_lamps())
+    uvs = scene.meshes[0].uvs
+    direction = torch.tensor([[0.2, -0.1], [0.3, 0.2], [-0.2, 0.25], [0.1, -0.3]])
+    fd = ep.finite_difference_image(scene, uvs, direction, eps=2e-3, spp=64, seed=4, sampling="light")
+    d = ep.derivative_image(scene, uvs, direction, spp=64, seed=4, sampling="light")
+    scale = float(fd.abs().max())
+    mean_err, max_err = C.image_error(d / scale, fd / scale, C.GRADIENT_FLOOR)
+    print(f"uvs: mean err {mean_err:.4f}, max err {max_err:.4f}")
+    assert scale > 0.1 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
+
+
+def mapped_normals(texels):
+    m = 2 * texels - 1
+    return m / m.norm(dim=-1, keepdim=True)
+
+
+def test_recover_a_bump_from_shading():
+    """From a flat map, gradient descent on the image under the coloured sky finds the bump:
+    the mean angle between the recovered and the true normals shrinks to a fifth."""
+    target_map = bump_map(4)
+    camera = ortho_camera((16, 16))
+    target = ep.render(ep.Scene(camera, [square(target_map)] + coloured_lamps()), spp=32, seed=1,
+                       sampling="light")
+    texels = torch.tensor([0.5, 0.5, 1.0]).expand(4, 4, 3).clone().requires_grad_(True)
+    scene = ep.Scene(camera, [square(texels)] + coloured_lamps())
+    optimiser = torch.optim.Adam([texels], lr=0.02)
+
+    def angle():
+        cos = (mapped_normals(texels.detach()) * mapped_normals(target_map)).sum(-1).clamp(-1, 1)
+        return float(torch.acos(cos).mean())
+
+    start = angle()
+    for step in range(60):
+        loss = (ep.render(scene, spp=4, seed=step, sampling="light") - target).square().sum()
+        optimiser.zero_grad()
+        loss.backward()
+        optimiser.step()
+    end = angle()
+    print(f"mean normal angle {math.degrees(start):.2f} -> {math.degrees(end):.2f} degrees")
+    assert end < 0.2 * start, (start, end)
+
+
+def test_normal_map_errors_name_the_field():
+    scene = ep.Scene(ortho_camera((4, 4)), [square(torch.ones(2, 2))])
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.normal_map: expected shape \(H, W, 3\)"):
+        ep.render(scene, spp=1)
+    bad = torch.full((2, 2, 3), 0.5)
+    bad[1, 0, 2] = float("inf")
+    scene = ep.Scene(ortho_camera((4, 4)), [square(bad)])
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.normal_map: value inf at flat index 8 is not finite"):
+        ep.render(scene, spp=1)
