@@ -24,10 +24,10 @@ def ortho_camera(resolution):
                      resolution=resolution)
 
 
-def square(normal_map, uv_scale=1.0):
-    """A square bigger than the view, uvs u = (x + 1.5) / 3 and v = (1.5 - y) / 3 (v down, as an
-    image's rows) times uv_scale."""
-    v = torch.tensor([[-1.5, -1.5, 0.0], [1.5, -1.5, 0.0], [1.5, 1.5, 0.0], [-1.5, 1.5, 0.0]])
+def square(normal_map, uv_scale=1.0, half=1.5):
+    """A square of half side `half` (the view's is 1), uvs u = (x + half) / (2 half) and
+    v = (half - y) / (2 half) (v down, as an image's rows) times uv_scale."""
+    v = torch.tensor([[-1.0, -1.0, 0.0], [1.0, -1.0, 0.0], [1.0, 1.0, 0.0], [-1.0, 1.0, 0.0]]) * half
     uv = torch.tensor([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]]) * uv_scale
     return ep.Mesh(v, torch.tensor([[0, 1, 2], [0, 2, 3]]), uvs=uv,
                    material=ep.Material(diffuse=0.8, normal_map=normal_map))
@@ -104,32 +104,56 @@ def test_radiance_derivative_in_the_uvs_matches_finite_differences():
     assert scale > 0.1 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
 
 
+def test_radiance_derivative_in_the_vertices_matches_finite_differences():
+    """Turning the square in its plane (its outline stays outside the view) turns dp/du, the
+    map's frame and so the mapped normals with it (a map without rotational symmetry, unlike
+    the bump, whose turned image is the same)."""
+    gen = torch.Generator().manual_seed(7)
+    ripples = torch.cat([0.5 + 0.4 * (torch.rand(4, 4, 2, generator=gen) - 0.5), torch.full((4, 4, 1), 0.9)], -1)
+    scene = ep.Scene(ortho_camera((10, 10)), [square(ripples)] + coloured_lamps())
+    v = scene.meshes[0].vertices
+    direction = torch.stack([-v[:, 1], v[:, 0], torch.zeros(4)], 1)  # a rotation about z
+    fd = ep.finite_difference_image(scene, v, direction, eps=2e-3, spp=64, seed=4, sampling="light")
+    d = ep.derivative_image(scene, v, direction, spp=64, seed=4, sampling="light")
+    scale = float(fd.abs().max())
+    mean_err, max_err = C.image_error(d / scale, fd / scale, C.GRADIENT_FLOOR)
+    print(f"vertices: mean err {mean_err:.4f}, max err {max_err:.4f}")
+    assert scale > 0.1 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
+
+
 def mapped_normals(texels):
     m = 2 * texels - 1
     return m / m.norm(dim=-1, keepdim=True)
 
 
 def test_recover_a_bump_from_shading():
-    """From a flat map, gradient descent on the image under the coloured sky finds the bump:
-    the mean angle between the recovered and the true normals shrinks to a fifth."""
+    """From a flat map, gradient descent on the image under the coloured lamps finds the bump:
+    the mean angle between the recovered and the true normals shrinks to a fifth (measured:
+    23.8 to 3.7 degrees). The loss multiplies the differences of two independent renders, an
+    unbiased estimate of the squared difference of their expectation: the square of one noisy
+    render would add its variance, which depends on the normals, and pull them off."""
     target_map = bump_map(4)
     camera = ortho_camera((16, 16))
-    target = ep.render(ep.Scene(camera, [square(target_map)] + coloured_lamps()), spp=32, seed=1,
+    target = ep.render(ep.Scene(camera, [square(target_map, half=1.0)] + coloured_lamps()), spp=256, seed=1,
                        sampling="light")
     texels = torch.tensor([0.5, 0.5, 1.0]).expand(4, 4, 3).clone().requires_grad_(True)
-    scene = ep.Scene(camera, [square(texels)] + coloured_lamps())
+    scene = ep.Scene(camera, [square(texels, half=1.0)] + coloured_lamps())
     optimiser = torch.optim.Adam([texels], lr=0.02)
+    schedule = torch.optim.lr_scheduler.ExponentialLR(optimiser, gamma=0.97)
 
     def angle():
         cos = (mapped_normals(texels.detach()) * mapped_normals(target_map)).sum(-1).clamp(-1, 1)
         return float(torch.acos(cos).mean())
 
     start = angle()
-    for step in range(60):
-        loss = (ep.render(scene, spp=4, seed=step, sampling="light") - target).square().sum()
+    for step in range(100):
+        one = ep.render(scene, spp=4, seed=2 * step + 10, sampling="light")
+        two = ep.render(scene, spp=4, seed=2 * step + 11, sampling="light")
+        loss = ((one - target) * (two - target)).sum()
         optimiser.zero_grad()
         loss.backward()
         optimiser.step()
+        schedule.step()
     end = angle()
     print(f"mean normal angle {math.degrees(start):.2f} -> {math.degrees(end):.2f} degrees")
     assert end < 0.2 * start, (start, end)
