@@ -169,27 +169,29 @@ def test_radiance_derivative_at_a_colour_seam_matches_finite_differences():
     assert scale > 0.5 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
 
 
-@pytest.mark.parametrize("name", ["barycentrics", "roughness", "specular"])
+@pytest.mark.parametrize("name", ["barycentrics", "vertex_color", "roughness", "specular"])
 def test_new_channels_derivatives_match_finite_differences(name):
-    """The barycentrics in the vertices of a triangle inside the view (interior term and its
-    outline's boundary term); roughness and specular in their textures (interior only)."""
+    """The barycentrics and the vertex colour in the vertices of a triangle inside the view
+    (interior term and its outline's boundary term); roughness and specular in their textures
+    (interior only)."""
     v = torch.tensor([[-0.7, -0.6, 0.0], [0.8, -0.5, 0.1], [-0.1, 0.75, -0.1]])
     rough = torch.tensor([[[0.2], [0.6]], [[0.4], [0.9]]])
     spec = torch.tensor([[[0.3, 0.1, 0.2], [0.05, 0.4, 0.15]], [[0.25, 0.35, 0.1], [0.2, 0.3, 0.45]]])
     mesh = ep.Mesh(v, torch.tensor([[0, 1, 2]]), uvs=torch.tensor([[0.1, 0.2], [0.8, 0.3], [0.4, 0.9]]),
-                   material=ep.Material(roughness=rough, specular=spec))
+                   colors=BIG_COLORS, material=ep.Material(roughness=rough, specular=spec))
     scene = ep.Scene(ortho_camera((10, 10)), [mesh])
     gen = torch.Generator().manual_seed(5)
-    param = {"barycentrics": v, "roughness": rough, "specular": spec}[name]
+    param = {"barycentrics": v, "vertex_color": v, "roughness": rough, "specular": spec}[name]
     direction = torch.rand(param.shape, generator=gen) - 0.5
-    if name == "barycentrics":
+    geometric = name in ("barycentrics", "vertex_color")
+    if geometric:
         direction[:, 2] = 0.0
     # The outline's finite difference needs many samples; the textures' values are linear in
     # their texels, so there the same samples give the same mean.
-    fd_spp = 65536 if name == "barycentrics" else 1024
+    fd_spp = 65536 if geometric else 1024
     fd = ep.finite_difference_channels(scene, param, direction, channels=[name], eps=1e-2,
                                        spp=fd_spp, seed=2)[name]
-    spp, seed = (16, 1) if name == "barycentrics" else (fd_spp, 2)
+    spp, seed = (16, 1) if geometric else (fd_spp, 2)
     d = ep.derivative_channels(scene, param, direction, channels=[name], spp=spp, seed=seed,
                                edge_samples=200000)[name]
     scale = float(fd.abs().max())
