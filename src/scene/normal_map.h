@@ -1,6 +1,8 @@
-// Tangent-space normal maps, as Mitsuba's `normalmap`: a texture value v gives the direction
-// m = 2 v - 1 in the frame (s, t, n) of the shading normal n, with s the triangle's dp/du made
-// orthogonal to n and t = cross(n, s); the shading normal becomes normalize(m.x s + m.y t + m.z n).
+// Tangent-space normal maps, as Mitsuba 3 renders its `normalmap` (checked against its images):
+// a texture value v gives the direction m = 2 v - 1 in the frame (s, t, n) of the shading
+// normal n, with s the triangle's dp/du made orthogonal to n and t = cross(n, s) (against dp/dv
+// where the uvs are not mirrored: towards the image's upper rows); the shading normal becomes
+// normalize(m.x s + m.y t + m.z n).
 // dp/du is constant over a triangle (from its positions and uvs), so the mapped normal may jump
 // across edges where it changes. With the adjoint, for the gradient pass.
 #pragma once
