@@ -138,6 +138,7 @@ edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std:
     m.two_sided = scalar<bool>(d, "two_sided", f);
     if (has(d, "kind")) m.kind = static_cast<edgepath::MaterialKind>(scalar<int>(d, "kind", f));
     if (has(d, "ior")) m.ior = texture(views, item(d, "ior", f), f + ".ior");
+    if (has(d, "normal_map")) m.normal_map = texture(views, d["normal_map"], f + ".normal_map");
     return m;
 }
 
@@ -171,6 +172,13 @@ edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string&
         if (normal_indices.shape(0) != indices.shape(0))
             fail(f + ".normal_indices", "must have as many rows as indices");
         m.normal_indices = normal_indices.data();
+    }
+    if (has(d, "colors")) {
+        const FloatView colors = float_view(views, d["colors"], f + ".colors", 2, 3);
+        if (int64_t(colors.shape(0)) != m.num_vertices)
+            fail(f + ".colors", "has " + std::to_string(colors.shape(0)) + " rows but there are " +
+                                    std::to_string(m.num_vertices) + " vertices");
+        m.colors = colors.data();
     }
     m.material = scalar<int>(d, "material", f);
     if (has(d, "emission")) m.emission = texture(views, d["emission"], f + ".emission");
@@ -410,8 +418,9 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
 
 // ---- gradient slots --------------------------------------------------------------------------
 // `slots` mirrors the scene: {"camera": a, "envmap": a, "envmap_rotation": a,
-// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a} or None, ...],
-// "materials": [{"diffuse": a, "specular": a, "roughness": a} or None, ...]}, any entry None or
+// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a, "colors": a} or None, ...],
+// "materials": [{"diffuse": a, "specular": a, "roughness": a, "ior": a, "normal_map": a} or None,
+// ...]}, any entry None or
 // absent. Reverse mode: writable buffers the gradients are added into; forward mode: directions.
 // Each array must have exactly as many values as the parameter it stands for.
 using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
@@ -465,6 +474,7 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.meshes[i].uvs = views.slot(m, "uvs", md.uvs ? md.num_uvs * 2 : 0, f);
             g.meshes[i].normals = views.slot(m, "normals", md.normals ? md.num_normals * 3 : 0, f);
             g.meshes[i].emission = views.slot(m, "emission", md.emission.num_values(), f);
+            g.meshes[i].colors = views.slot(m, "colors", md.colors ? md.num_vertices * 3 : 0, f);
         }
     }
     if (has(d, "materials")) {
@@ -481,6 +491,7 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.materials[i].specular = views.slot(m, "specular", md.specular.num_values(), f);
             g.materials[i].roughness = views.slot(m, "roughness", md.roughness.num_values(), f);
             g.materials[i].ior = views.slot(m, "ior", md.ior.num_values(), f);
+            g.materials[i].normal_map = views.slot(m, "normal_map", md.normal_map.num_values(), f);
         }
     }
     return g;

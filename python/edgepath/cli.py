@@ -368,8 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="samples per pixel per chunk (default 16; chunk k uses seed + k)")
     r.add_argument("--channels", metavar="NAMES", type=_channels, default=None,
                    help="also write these output channels, comma-separated (alpha, depth, "
-                        "position, geometry_normal, shading_normal, uv, albedo, mesh_id, "
-                        "triangle_id), each as OUTPUT_STEM.NAME.exr; ids as floats, -1 = no hit")
+                        "position, geometry_normal, shading_normal, uv, albedo, barycentrics, "
+                        "vertex_color, roughness, specular, mesh_id, triangle_id, material_id), "
+                        "each as OUTPUT_STEM.NAME.exr; ids as floats, -1 = no hit")
     r.set_defaults(run=_cmd_render)
 
     g = commands.add_parser(

@@ -180,6 +180,7 @@ _PLY_TYPES = {"char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1", "short":
               "uint": "u4", "uint32": "u4", "float": "f4", "float32": "f4", "double": "f8",
               "float64": "f8"}
 _PLY_UV_NAMES = (("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+_PLY_COLOR_NAMES = (("red", "green", "blue"), ("r", "g", "b"))
 
 
 def _ply_header(path: str, data: bytes):
@@ -360,13 +361,15 @@ def load_ply(path: PathLike) -> Mesh:
     file has them, one per vertex; polygons are split into triangle fans, triangle strips
     (``element tristrips`` with a ``vertex_indices`` list, -1 between strips) into their
     triangles. uvs are kept as
-    stored (v = 0 is the top row of a texture, as Mitsuba reads PLY files). Other elements and
-    properties are skipped."""
+    stored (v = 0 is the top row of a texture, as Mitsuba reads PLY files). Vertex colours
+    (red, green, blue; or r, g, b) become the mesh's ``colors``: integer values divided by their
+    type's largest value (255 for uchar), floats as stored, both taken as linear (no sRGB
+    decoding). Other elements and properties are skipped."""
     path = _existing(path, "PLY file")
     with open(path, "rb") as f:
         data = f.read()
     fmt, elements, pos = _ply_header(path, data)
-    per_vertex = {"x", "y", "z", "nx", "ny", "nz"}.union(*_PLY_UV_NAMES)
+    per_vertex = {"x", "y", "z", "nx", "ny", "nz"}.union(*_PLY_UV_NAMES, *_PLY_COLOR_NAMES)
     for element, _, props in elements:
         for prop, _, item in props:
             if element == "vertex" and prop in per_vertex and item is not None:
@@ -432,8 +435,21 @@ def load_ply(path: PathLike) -> Mesh:
         if u in vertex and v in vertex:
             uvs = torch.from_numpy(np.stack([vertex[u], vertex[v]], 1).astype(np.float32))
             break
+    colors = None
+    for names in _PLY_COLOR_NAMES:
+        if all(k in vertex for k in names):
+            # The declared type (ASCII rows are read as float64).
+            types = {p[0]: np.dtype(p[1]) for e in elements if e[0] == "vertex" for p in e[2]}
+            columns = []
+            for k in names:
+                t = types[k]
+                scale = float(np.iinfo(t).max) if t.kind in "iu" else 1.0
+                columns.append(np.asarray(vertex[k], dtype=np.float64) / scale)
+            colors = torch.from_numpy(np.stack(columns, 1).astype(np.float32))
+            break
     return Mesh(vertices=torch.from_numpy(vertices),
-                indices=torch.from_numpy(indices.astype(np.int32)), uvs=uvs, normals=normals)
+                indices=torch.from_numpy(indices.astype(np.int32)), uvs=uvs, normals=normals,
+                colors=colors)
 
 
 # ---- writing OBJ -----------------------------------------------------------------------------

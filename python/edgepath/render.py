@@ -34,8 +34,8 @@ MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
 # A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
-# ("meshes", i, "vertices" | "uvs" | "normals" | "emission"),
-# ("materials", i, "diffuse" | "specular" | "roughness" | "ior").
+# ("meshes", i, "vertices" | "uvs" | "normals" | "emission" | "colors"),
+# ("materials", i, "diffuse" | "specular" | "roughness" | "ior" | "normal_map").
 Slot = Tuple
 
 
@@ -350,8 +350,9 @@ def finite_difference_image(scene: Scene, param: torch.Tensor, direction: torch.
 
 # Name -> number of values per pixel (docs/conventions.md, "Output channels").
 CHANNELS = {"radiance": 3, "alpha": 1, "depth": 1, "position": 3, "geometry_normal": 3,
-            "shading_normal": 3, "uv": 2, "albedo": 3, "mesh_id": 1, "triangle_id": 1}
-ID_CHANNELS = ("mesh_id", "triangle_id")
+            "shading_normal": 3, "uv": 2, "albedo": 3, "mesh_id": 1, "triangle_id": 1,
+            "barycentrics": 2, "vertex_color": 3, "roughness": 1, "specular": 3, "material_id": 1}
+ID_CHANNELS = ("mesh_id", "triangle_id", "material_id")
 
 
 def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int = 1,
@@ -363,9 +364,10 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
     """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
     (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
     the same options, bit for bit; "alpha", "depth", "position", "geometry_normal",
-    "shading_normal", "uv" and "albedo" are float32, averaged over the same camera samples
-    (filtered like radiance); "mesh_id" and "triangle_id" are int32 (-1 where nothing is hit),
-    those of the ray through the pixel centre. Meanings and units: docs/conventions.md.
+    "shading_normal", "uv", "albedo", "barycentrics", "vertex_color", "roughness" and "specular"
+    are float32, averaged over the same camera samples (filtered like radiance); "mesh_id",
+    "triangle_id" and "material_id" are int32 (-1 where nothing is hit), those of the ray through
+    the pixel centre. Meanings and units: docs/conventions.md.
 
     Differentiable like ``render`` (same options): a loss on any continuous channel
     backpropagates into the scene, including the boundary terms of silhouettes (alpha, depth,
@@ -386,7 +388,22 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
         slots = [slot for slot, _ in attached]
         values, ids = _ChannelsFunction.apply(flat, names, options, grad_options, slots,
                                               *[t for _, t in attached])
-    return _split_channels(names, values, ids)
+    out = _split_channels(names, values, ids)
+    if "material_id" in out:
+        out["material_id"] = _material_ids(scene, out["material_id"])
+    return out
+
+
+def _material_ids(scene: Scene, core_ids: torch.Tensor) -> torch.Tensor:
+    """The core numbers materials per mesh (material i is mesh i's); a material id is the
+    index of the distinct ``Material`` object in the order the meshes first use it (meshes that
+    share one object share its id; each mesh without one has its own)."""
+    table, seen = [], {}
+    for i, mesh in enumerate(scene.meshes):
+        key = ("mesh", i) if mesh.material is None else id(mesh.material)
+        table.append(seen.setdefault(key, len(seen)))
+    lookup = torch.tensor(table + [-1], dtype=torch.int32)  # index -1: no hit
+    return lookup[core_ids.long()]
 
 
 def render_channels_flat(flat: FlatScene, names: List[str],
@@ -698,6 +715,10 @@ def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict
     for name, channels in fields:
         value = v.texture(getattr(material, name), f"{f}.{name}", channels)
         out[name] = _param(flat, ("materials", i, name), value)
+    normal_map = getattr(material, "normal_map", None)
+    if normal_map is not None:
+        normal_map = v.float_tensor(normal_map, f + ".normal_map", ("H", "W", 3))
+        out["normal_map"] = _param(flat, ("materials", i, "normal_map"), normal_map)
     return out
 
 
@@ -716,6 +737,7 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "normals": None,
         "normal_indices": None,
         "emission": None,
+        "colors": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
         "material": i,
     }
@@ -731,6 +753,10 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
     if mesh.emission is not None:
         emission = v.texture(mesh.emission, f + ".emission", 3)
         out["emission"] = _param(flat, ("meshes", i, "emission"), emission)
+    colors = getattr(mesh, "colors", None)
+    if colors is not None:
+        colors = v.float_tensor(colors, f + ".colors", (vertices.shape[0], 3))
+        out["colors"] = _param(flat, ("meshes", i, "colors"), colors)
     material = _flatten_material(mesh.material, i, mesh.emission is not None, flat)
     flat.meshes.append(out)
     flat.materials.append(material)
@@ -847,9 +873,9 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
     if isinstance(meshes, (list, tuple)):
         meshes = []
         for mesh in scene.meshes:
-            m = swap(mesh, ("vertices", "uvs", "normals", "emission"))
+            m = swap(mesh, ("vertices", "uvs", "normals", "emission", "colors"))
             if isinstance(mesh, Mesh):
-                m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior"))
+                m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior", "normal_map"))
             meshes.append(m)
     envmap = swap(scene.envmap, ("values", "to_world", "scale"))
     if not found:

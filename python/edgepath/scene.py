@@ -98,17 +98,24 @@ class Material:
     (H, W)); two-sided; ``diffuse``, ``specular`` and ``roughness`` are unused.
 
     ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs). Every tensor
-    is differentiable, ``ior`` included."""
+    is differentiable, ``ior`` included.
+
+    ``normal_map``: None or a texture (H, W, 3), a tangent-space normal map as Mitsuba's
+    ``normalmap``: a texel value v is the direction 2 v - 1 in the frame of the shading normal
+    whose first axis is the triangle's dp/du (from its uvs, or its barycentrics without uvs);
+    differentiable in its texels, and in the vertices, normals and uvs through the frame."""
 
     def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
                  roughness: Constant = 0.5, two_sided: bool = False,
-                 kind: str = "standard", ior: Constant = 1.5):
+                 kind: str = "standard", ior: Constant = 1.5,
+                 normal_map: Optional[torch.Tensor] = None):
         self.diffuse = diffuse
         self.specular = specular
         self.roughness = roughness
         self.two_sided = two_sided
         self.kind = kind
         self.ior = ior
+        self.normal_map = normal_map
 
     def __repr__(self):
         return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"
@@ -121,7 +128,10 @@ class Mesh:
     ``normals`` (K, 3) shading normals with ``normal_indices`` (M, 3) (or one per vertex),
     ``material`` (default: diffuse 0.5, or black diffuse if the mesh emits), ``emission``:
     radiance, constant (3,) or texture (H, W, 3) over the uvs, which makes the mesh an area
-    light emitting on the side of its face normal (both sides if ``two_sided_emission``)."""
+    light emitting on the side of its face normal (both sides if ``two_sided_emission``).
+    ``colors``: (N, 3) vertex colours, non-negative, one row per vertex (indexed by
+    ``indices``); interpolated by the barycentrics, they multiply the material's diffuse
+    reflectance (constant or texture) and are differentiable."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
@@ -129,7 +139,8 @@ class Mesh:
                  normal_indices: Optional[torch.Tensor] = None,
                  material: Optional[Material] = None,
                  emission: Optional[Constant] = None,
-                 two_sided_emission: bool = False):
+                 two_sided_emission: bool = False,
+                 colors: Optional[torch.Tensor] = None):
         self.vertices = vertices
         self.indices = indices
         self.uvs = uvs
@@ -139,6 +150,7 @@ class Mesh:
         self.material = material
         self.emission = emission
         self.two_sided_emission = two_sided_emission
+        self.colors = colors
 
     def __repr__(self):
         n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"

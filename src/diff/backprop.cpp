@@ -6,6 +6,7 @@
 #include "edges/secondary.h"
 #include "scene/bsdf_diff.h"
 #include "scene/geometry.h"
+#include "scene/normal_map.h"
 #include "scene/specular.h"
 
 namespace edgepath {
@@ -70,22 +71,33 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
                 const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir) {
     const Mesh& m = *g.mesh;
     float b[3] = {1.f - g.th.b1 - g.th.b2, g.th.b1, g.th.b2};
-    float db1 = 0.f, db2 = 0.f;
-    Vec3f dv[3] = {Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
+    float db1 = a.db.x, db2 = a.db.y;
+    Vec3f dv[3] = {a.dtri[0], a.dtri[1], a.dtri[2]};
     // uv = sum b_i uv_i   (or uv = (b1, b2) without uvs)
     if (m.uvs) {
         const int32_t* ti = m.uv_indices + 3 * (g.tri - m.indices) / 3;
         const float* t[3] = {m.uvs + 2 * ti[0], m.uvs + 2 * ti[1], m.uvs + 2 * ti[2]};
         if (ms && ms->uvs.wanted())
             for (int k = 0; k < 3; ++k) {
-                sink.add(ms->uvs, 2 * int64_t(ti[k]), b[k] * a.duv.x);
-                sink.add(ms->uvs, 2 * int64_t(ti[k]) + 1, b[k] * a.duv.y);
+                sink.add(ms->uvs, 2 * int64_t(ti[k]), b[k] * a.duv.x + a.dtri_uv[k].x);
+                sink.add(ms->uvs, 2 * int64_t(ti[k]) + 1, b[k] * a.duv.y + a.dtri_uv[k].y);
             }
         db1 += a.duv.x * (t[1][0] - t[0][0]) + a.duv.y * (t[1][1] - t[0][1]);
         db2 += a.duv.x * (t[2][0] - t[0][0]) + a.duv.y * (t[2][1] - t[0][1]);
     } else {
         db1 += a.duv.x;
         db2 += a.duv.y;
+    }
+    // colour = sum b_i c_i
+    if (m.colors && !is_black(a.dcolor)) {
+        Vec3f c[3];
+        for (int k = 0; k < 3; ++k) {
+            c[k] = Vec3f::load(m.colors + 3 * int64_t(g.tri[k]));
+            if (ms && ms->colors.wanted())
+                sink.add3(ms->colors, g.tri[k], a.dcolor.x * b[k], a.dcolor.y * b[k], a.dcolor.z * b[k]);
+        }
+        db1 += dot(a.dcolor, c[1] - c[0]);
+        db2 += dot(a.dcolor, c[2] - c[0]);
     }
     // Shading normal.
     if (m.normals) {
@@ -125,6 +137,63 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
     dv[2] += dt.v2;
     if (ms && ms->vertices.wanted())
         for (int k = 0; k < 3; ++k) sink.add3(ms->vertices, g.tri[k], dv[k].x, dv[k].y, dv[k].z);
+}
+
+void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
+               GradSink& sink, HitAdjoint& ha) {
+    const size_t material = size_t(g.mesh->material);
+    const Texture& tex = scene.materials[material].diffuse;
+    const GradSlot& slot = material < slots.materials.size() ? slots.materials[material].diffuse : kNoSlot;
+    Vec3f d = dval;
+    if (g.mesh->colors) {
+        // diffuse = T(uv) c: dT = dval c, dc = dval T(uv)
+        d = dval * g.mesh->color(g.sp.prim, g.sp.b1, g.sp.b2);
+        ha.dcolor += dval * eval_texture3(tex, g.sp.uv);
+    }
+    const float d3[3] = {d.x, d.y, d.z};
+    d_texture(tex, slot, g.sp.uv, d3, sink, &ha.duv);
+}
+
+void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, GradSink& sink,
+                  HitAdjoint& ha) {
+    const size_t material = size_t(g.mesh->material);
+    const Texture& map = scene.materials[material].normal_map;
+    if (map.empty() || is_black(ha.dn)) return;
+    const int mesh = g.sp.mesh;
+    const int64_t prim = g.sp.prim;
+    const Vec3f n = scene.unmapped_normal(mesh, prim, g.sp.b1, g.sp.b2);
+    Vec3f dpdu(0.f);
+    const bool has_dpdu = scene.triangle_dpdu(mesh, prim, dpdu);
+    Vec3f dn(0.f), ddpdu(0.f), dv(0.f);
+    d_map_normal(n, has_dpdu, dpdu, eval_texture3(map, g.sp.uv), ha.dn, dn, ddpdu, dv);
+    ha.dn = dn;
+    const GradSlot& slot = material < slots.materials.size() ? slots.materials[material].normal_map : kNoSlot;
+    const float d3[3] = {dv.x, dv.y, dv.z};
+    d_texture(map, slot, g.sp.uv, d3, sink, &ha.duv);
+    if (!has_dpdu || is_black(ddpdu)) return;
+    // dp/du from the triangle's edges and uv differences (Scene::triangle_dpdu).
+    const Mesh& m = *g.mesh;
+    Vec2f d1(1.f, 0.f), d2(0.f, 1.f);
+    if (m.uvs) {
+        const int32_t* ti = m.uv_indices + 3 * prim;
+        const float *t0 = m.uvs + 2 * ti[0], *t1 = m.uvs + 2 * ti[1], *t2 = m.uvs + 2 * ti[2];
+        d1 = Vec2f(t1[0] - t0[0], t1[1] - t0[1]);
+        d2 = Vec2f(t2[0] - t0[0], t2[1] - t0[1]);
+    }
+    Vec3f de1(0.f), de2(0.f);
+    Vec2f dd1(0.f, 0.f), dd2(0.f, 0.f);
+    d_triangle_dpdu(g.v[1] - g.v[0], g.v[2] - g.v[0], d1, d2, ddpdu, de1, de2, dd1, dd2);
+    ha.dtri[1] += de1;
+    ha.dtri[2] += de2;
+    ha.dtri[0] -= de1 + de2;
+    if (m.uvs) {
+        ha.dtri_uv[1].x += dd1.x;
+        ha.dtri_uv[1].y += dd1.y;
+        ha.dtri_uv[2].x += dd2.x;
+        ha.dtri_uv[2].y += dd2.y;
+        ha.dtri_uv[0].x -= dd1.x + dd2.x;
+        ha.dtri_uv[0].y -= dd1.y + dd2.y;
+    }
 }
 
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
@@ -281,10 +350,9 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         // Material parameters at uv.
         {
-            float dd[3] = {db.diffuse.x, db.diffuse.y, db.diffuse.z};
             float ds[3] = {db.specular.x, db.specular.y, db.specular.z};
             float dr[1] = {eval_texture1(mat.roughness, sp.uv) > kMinRoughness ? db.alpha : 0.f};
-            d_texture(mat.diffuse, mats ? mats->diffuse : kNoSlot, sp.uv, dd, sink, &ha.duv);
+            d_diffuse(scene, g, slots, db.diffuse, sink, ha);
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
             if (mat.kind == MaterialKind::Dielectric) {
@@ -322,6 +390,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         dwo += db.wo;
 
         Vec3f d_origin(0.f), d_dir(0.f);
+        d_normal_map(scene, g, slots, sink, ha);
         finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir);
         // wo = -d: the adjoint of the direction of the ray that found this vertex.
         d_dir -= dwo;

@@ -35,9 +35,18 @@ struct VertexGeometry {
 // Adjoints of the quantities derived from a hit.
 struct HitAdjoint {
     Vec3f dp, dn, dng;  // position, shading normal (unbent), geometric normal
+    Vec3f dcolor;       // interpolated vertex colour (Mesh::color)
     Vec2f duv;          // texture coordinates
+    Vec2f db;           // barycentrics (b1, b2)
     float dt = 0.f;     // distance along the ray
-    HitAdjoint() : dp(0.f), dn(0.f), dng(0.f), duv(0.f, 0.f) {}
+    // Direct adjoints of the triangle's three vertex positions and three uvs (the normal map's
+    // tangent depends on them, not through the hit point).
+    Vec3f dtri[3];
+    Vec2f dtri_uv[3];
+    HitAdjoint()
+        : dp(0.f), dn(0.f), dng(0.f), dcolor(0.f), duv(0.f, 0.f), db(0.f, 0.f),
+          dtri{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)},
+          dtri_uv{Vec2f(0.f, 0.f), Vec2f(0.f, 0.f), Vec2f(0.f, 0.f)} {}
 };
 
 // Sends the adjoints `a` of a hit to the mesh's buffers (`ms`, may be null) and adds the
@@ -47,6 +56,18 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
 
 // Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
 void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv);
+
+// Adjoint of the diffuse reflectance at g's hit, diffuse(uv) times the vertex colour
+// (Scene::bsdf_params), for material `material`: texels into its slot, the colour's adjoint
+// into ha.dcolor and the uv's into ha.duv.
+void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
+               GradSink& sink, HitAdjoint& ha);
+
+// Adjoint of the material's normal map at g's hit (Scene::surface_point): turns ha.dn, the
+// adjoint of the mapped shading normal, into that of the normal before the map, and sends the
+// rest to the map's texels (its slot), ha.duv, ha.dtri and ha.dtri_uv. Nothing without a map.
+void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, GradSink& sink,
+                  HitAdjoint& ha);
 
 // The slots of mesh `mesh`, or null when none were given.
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh);

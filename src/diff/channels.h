@@ -1,6 +1,7 @@
 // The adjoint of the output channels' first-hit values (render/channels.h): what the gradient
-// pass adds for a loss on depth, position, normals, uv or albedo. It lives here rather than
-// beside eval_hit_channels because it reuses the adjoint sweep's pieces (diff/backprop.h).
+// pass adds for a loss on depth, position, normals, uv, albedo, barycentrics, vertex colour,
+// roughness or specular. It lives here rather than beside eval_hit_channels because it reuses
+// the adjoint sweep's pieces (diff/backprop.h).
 #pragma once
 #include "math/ray.h"
 #include "render/channels.h"

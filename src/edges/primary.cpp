@@ -166,8 +166,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     const int nv = layout.num_values;
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
-    // The geometric normal jumps across every edge between faces at an angle.
-    const bool smooth_edges_jump = layout.has(Channel::GeometryNormal);
+    // The geometric normal jumps across every edge between faces at an angle, the barycentrics
+    // across every edge.
+    const bool smooth_edges_jump = layout.has(Channel::GeometryNormal) || layout.has(Channel::Barycentrics);
 
     // The film window whose pixels the filter reaches: the output, widened by the filter's
     // reach beyond a pixel.

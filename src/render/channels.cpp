@@ -16,7 +16,9 @@ struct ChannelInfo {
 constexpr ChannelInfo kChannelInfo[kNumChannels] = {
     {"radiance", 3, false},       {"alpha", 1, false},  {"depth", 1, false},   {"position", 3, false},
     {"geometry_normal", 3, false}, {"shading_normal", 3, false}, {"uv", 2, false}, {"albedo", 3, false},
-    {"mesh_id", 1, true},          {"triangle_id", 1, true},
+    {"mesh_id", 1, true},          {"triangle_id", 1, true},     {"barycentrics", 2, false},
+    {"vertex_color", 3, false},    {"roughness", 1, false},      {"specular", 3, false},
+    {"material_id", 1, true},
 };
 
 const ChannelInfo& info(Channel c) { return kChannelInfo[int(c)]; }
@@ -70,6 +72,8 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
         return;
     }
     const SurfacePoint sp = scene.surface_point(hit);
+    const Mesh& mesh = scene.meshes[size_t(hit.mesh)];
+    const Material& m = scene.materials[size_t(mesh.material)];
     for (Channel c : layout.channels) {
         const int o = layout.offset[int(c)];
         switch (c) {
@@ -82,21 +86,33 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
                 values[o] = sp.uv.x;
                 values[o + 1] = sp.uv.y;
                 break;
-            case Channel::Albedo: {
-                // The Lambertian reflectance: none for a mirror or glass.
-                const Material& m = scene.materials[size_t(scene.meshes[size_t(hit.mesh)].material)];
-                store(values, o, m.kind == MaterialKind::Standard ? eval_texture3(m.diffuse, sp.uv) : Vec3f(0.f));
+            case Channel::Albedo:
+                // The Lambertian reflectance (as the BSDF sees it): none for a mirror or glass.
+                store(values, o, m.kind == MaterialKind::Standard ? scene.bsdf_params(sp).diffuse : Vec3f(0.f));
                 break;
-            }
+            case Channel::Barycentrics:
+                values[o] = sp.b1;
+                values[o + 1] = sp.b2;
+                break;
+            case Channel::VertexColor: store(values, o, mesh.color(hit.prim, sp.b1, sp.b2)); break;
+            case Channel::Roughness:
+                // GGX alpha as given (the BSDF clamps it below at kMinRoughness); mirrors and glass are smooth.
+                values[o] = m.kind == MaterialKind::Standard ? eval_texture1(m.roughness, sp.uv) : 0.f;
+                break;
+            case Channel::Specular:
+                store(values, o, m.kind != MaterialKind::Dielectric ? eval_texture3(m.specular, sp.uv) : Vec3f(0.f));
+                break;
             default: break;  // radiance and ids: elsewhere
         }
     }
 }
 
-void eval_hit_ids(const ChannelLayout& layout, bool found, const Hit& hit, int32_t* ids) {
+void eval_hit_ids(const Scene& scene, const ChannelLayout& layout, bool found, const Hit& hit, int32_t* ids) {
     if (layout.has(Channel::MeshId)) ids[layout.offset[int(Channel::MeshId)]] = found ? int32_t(hit.mesh) : -1;
     if (layout.has(Channel::TriangleId))
         ids[layout.offset[int(Channel::TriangleId)]] = found ? int32_t(hit.prim) : -1;
+    if (layout.has(Channel::MaterialId))
+        ids[layout.offset[int(Channel::MaterialId)]] = found ? int32_t(scene.meshes[size_t(hit.mesh)].material) : -1;
 }
 
 }  // namespace edgepath

@@ -1,5 +1,5 @@
 // Output channels: besides radiance, what the camera ray of each sample meets first (coverage,
-// depth, position, normals, uv, albedo, ids). Continuous channels are filtered like radiance
+// depth, position, normals, uv, barycentrics, material values, ids). Continuous channels are filtered like radiance
 // (the mean over the pixel's camera samples, each drawn from the pixel filter) and are
 // differentiable (diff/channels.h); ids are those of the ray through the pixel centre. Units
 // and conventions: docs/conventions.md, "Output channels".
@@ -24,13 +24,18 @@ enum class Channel : int {
     GeometryNormal,  // 3: unit face normal, by the triangle's winding (0 on a miss)
     ShadingNormal,   // 3: unit interpolated normal (the face normal without normals; 0 on a miss)
     Uv,              // 2: interpolated uv, or the barycentrics (b1, b2) without uvs (0 on a miss)
-    Albedo,          // 3: the material's diffuse reflectance at the hit (0 on a miss)
+    Albedo,          // 3: the diffuse reflectance at the hit, texture times vertex colour (0 on a miss)
     MeshId,          // 1, int32: mesh index, -1 on a miss
     TriangleId,      // 1, int32: triangle index within its mesh, -1 on a miss
+    Barycentrics,    // 2: (b1, b2) of vertices 1 and 2 in the triangle hit (0 on a miss)
+    VertexColor,     // 3: interpolated vertex colour, 1 on a mesh without colours (0 on a miss)
+    Roughness,       // 1: the material's roughness (GGX alpha) at the hit; 0 for a mirror or glass
+    Specular,        // 3: the material's specular reflectance at the hit; 0 for glass
+    MaterialId,      // 1, int32: the mesh's material index, -1 on a miss
 };
-constexpr int kNumChannels = 10;
+constexpr int kNumChannels = 15;
 // Floats per pixel when every continuous channel is asked for.
-constexpr int kMaxChannelValues = 19;
+constexpr int kMaxChannelValues = 28;
 
 int channel_width(Channel c);
 bool channel_is_id(Channel c);
@@ -61,6 +66,6 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
                        float* values);
 
 // The ids of the ray's first intersection, at their offsets in `ids`.
-void eval_hit_ids(const ChannelLayout& layout, bool found, const Hit& hit, int32_t* ids);
+void eval_hit_ids(const Scene& scene, const ChannelLayout& layout, bool found, const Hit& hit, int32_t* ids);
 
 }  // namespace edgepath

@@ -83,7 +83,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                 const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
                 const FirstHit first = first_hit(scene, ray, opt.hide_emitters);
                 ++c.camera;
-                eval_hit_ids(layout, first.found, first.hit, ids + (int64_t(y) * scene.out_width + x) * ni);
+                eval_hit_ids(scene, layout, first.found, first.hit, ids + (int64_t(y) * scene.out_width + x) * ni);
             }
         tally.add(c);
     });

@@ -31,6 +31,9 @@ struct MaterialDesc {
     TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
     TextureDesc roughness;  // 1 channel, GGX alpha
     TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric only)
+    // 3 channels, tangent-space normal map (scene/normal_map.h); empty: none. Needs no uvs (the
+    // barycentrics stand in) but follows them where given.
+    TextureDesc normal_map;
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false; // false: black seen from the back (as Mitsuba's BSDFs)
 };
@@ -46,6 +49,9 @@ struct MeshDesc {
     const float* normals = nullptr;      // (num_normals, 3) shading normals, or null
     int64_t num_normals = 0;
     const int32_t* normal_indices = nullptr;  // (num_triangles, 3), or null: use `indices`
+    // (num_vertices, 3) vertex colours, or null: interpolated by the barycentrics (indexed by
+    // `indices`), they multiply the material's diffuse reflectance.
+    const float* colors = nullptr;
     int material = 0;                    // index into SceneDesc::materials
     TextureDesc emission;                // 3 channels; empty: not an emitter
     bool two_sided_emission = false;     // false: emits on the side of the face normal only

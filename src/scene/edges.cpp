@@ -113,17 +113,25 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 }
             }
             // uvs that differ across the edge (a seam, a pole's fan): textures may jump there.
-            bool uv_jump = false;
+            bool value_jump = false;
             if (m.uvs) {
                 for (int32_t v : {h0.a, h0.b}) {
                     int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
                     const Vec2f a = face_uv(m, h0.face, v), b = face_uv(m, h1.face, w);
-                    if (a.x != b.x || a.y != b.y) uv_jump = true;
+                    if (a.x != b.x || a.y != b.y) value_jump = true;
                 }
             }
-            shading_jump = shading_jump || uv_jump;
+            // Vertex colours that differ across the edge (welded positions, different colours):
+            // the diffuse reflectance jumps there, as at a uv seam.
+            if (m.colors)
+                for (int32_t v : {h0.a, h0.b}) {
+                    int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
+                    for (int c = 0; c < 3; ++c)
+                        if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c]) value_jump = true;
+                }
+            shading_jump = shading_jump || value_jump;
             const bool coplanar = dot(n0, n1) > 1.f - 1e-6f;
-            if (!coplanar || uv_jump || (shading_jump && m.normals != nullptr)) {
+            if (!coplanar || value_jump || (shading_jump && m.normals != nullptr)) {
                 Edge e;
                 e.mesh = mesh_index;
                 e.v0 = h0.a;

@@ -1,5 +1,5 @@
 // The edges where visibility can change, built from the meshes (Scene::edges: on first use, and
-// again after an update that moved vertices or changed uvs, normals or topology), for the
+// again after an update that moved vertices or changed uvs, normals, colours or topology), for the
 // boundary terms of the gradient (edge sampling, see the docs).
 //
 // Faces are made adjacent by welding vertices that share a POSITION (the exact float triple), not
@@ -7,15 +7,15 @@
 // Kinds of edges kept:
 //   boundary  - one face (open meshes): a silhouette from every point that sees it;
 //   crease    - two faces at an angle in a mesh without shading normals, or two faces whose
-//               shading normals or uvs differ along the edge (split normals, a uv seam, the fan
-//               of a sphere's pole): the shading or the texture may jump across it, so it is a
-//               discontinuity seen from everywhere (and a silhouette where one face is
-//               front-facing and the other is not);
+//               shading normals, uvs or vertex colours differ along the edge (split normals,
+//               a uv seam, the fan of a sphere's pole, a colour seam): the shading or the
+//               texture may jump across it, so it is a discontinuity seen from everywhere (and
+//               a silhouette where one face is front-facing and the other is not);
 //   smooth    - two faces at an angle in a mesh with shading normals: a silhouette only;
 //   shared    - more than two faces (non-manifold): kept once per pair of consecutive faces
 //               around it, each pair treated as a two-face edge (never assumed away).
-// Edges between two coplanar faces of the same orientation, shading and uvs are dropped (never
-// a silhouette, never a shading discontinuity); degenerate edges (both ends at one position) too.
+// Edges between two coplanar faces of the same orientation, shading, uvs and colours are
+// dropped (never a silhouette, never a shading discontinuity); degenerate edges (both ends at one position) too.
 #pragma once
 #include <cstdint>
 #include <vector>

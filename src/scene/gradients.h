@@ -21,10 +21,10 @@ struct GradSlot {
 
 struct SceneGradients {
     struct MeshSlots {
-        GradSlot vertices, uvs, normals, emission;
+        GradSlot vertices, uvs, normals, emission, colors;
     };
     struct MaterialSlots {
-        GradSlot diffuse, specular, roughness, ior;
+        GradSlot diffuse, specular, roughness, ior, normal_map;
     };
     std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
     std::vector<MaterialSlots> materials; // one per material
@@ -38,9 +38,9 @@ inline void number_slots(SceneGradients& g) {
     uint32_t key = 0;
     for (GradSlot* s : {&g.camera, &g.envmap, &g.envmap_rotation}) s->key = key++;
     for (auto& m : g.meshes)
-        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission}) s->key = key++;
+        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission, &m.colors}) s->key = key++;
     for (auto& m : g.materials)
-        for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness}) s->key = key++;
+        for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness, &m.ior, &m.normal_map}) s->key = key++;
 }
 
 inline void atomic_add(float* p, float v) {

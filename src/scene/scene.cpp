@@ -10,6 +10,7 @@
 #include <string>
 
 #include "scene/geometry.h"
+#include "scene/normal_map.h"
 
 namespace edgepath {
 
@@ -161,6 +162,10 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
     } else if (m.normal_indices) {
         fail(f + ".normal_indices", "given without normals");
     }
+    if (m.colors) {
+        check_finite(m.colors, m.num_vertices * 3, f + ".colors");
+        check_non_negative(m.colors, m.num_vertices * 3, f + ".colors");
+    }
     if (m.material < 0 || m.material >= num_materials)
         fail(f + ".material", "index " + str(m.material) + " out of range for " + str(num_materials) + " materials");
     if (!m.emission.empty()) {
@@ -187,6 +192,7 @@ const std::vector<Edge>& Scene::edges() const {
             d.normal_indices = m.normal_indices;
             d.uvs = m.uvs;
             d.uv_indices = m.uv_indices;
+            d.colors = m.colors;
             build_mesh_edges(d, int32_t(i), edges_);
         }
         edges_ready_.store(true, std::memory_order_release);
@@ -245,6 +251,7 @@ void validate(const SceneDesc& desc) {
         check_texture(desc.materials[i].specular, 3, f + ".specular", true);
         check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
         const MaterialDesc& md = desc.materials[i];
+        if (!md.normal_map.empty()) check_texture(md.normal_map, 3, f + ".normal_map", false);
         if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Dielectric))
             fail(f + ".kind", "unknown material kind " + str(int(md.kind)));
         if (md.kind == MaterialKind::Dielectric) {
@@ -313,7 +320,8 @@ Scene::Update Scene::update(const SceneDesc& desc) {
         if (!same_topology) break;
         same_vertices = same_vertices && same(k.vertices, md.vertices, 3 * md.num_vertices);
         same_shading = same_shading && same(k.uvs, md.uvs, 2 * md.num_uvs) &&
-                       same(k.normals, md.normals, 3 * md.num_normals);
+                       same(k.normals, md.normals, 3 * md.num_normals) &&
+                       same(k.colors, md.colors, 3 * md.num_vertices);
     }
     set_views(desc);
     Update what = Update::Reused;
@@ -342,6 +350,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.uvs = copy_of(md.uvs, 2 * md.num_uvs);
             k.num_normals = md.normals ? md.num_normals : -1;
             k.normals = copy_of(md.normals, 3 * md.num_normals);
+            k.colors = copy_of(md.colors, 3 * md.num_vertices);
         }
     }
     build_lights();
@@ -370,6 +379,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.roughness = Texture(md.roughness);
         m.kind = md.kind;
         if (md.kind == MaterialKind::Dielectric) m.ior = Texture(md.ior);
+        m.normal_map = Texture(md.normal_map);
         m.two_sided = md.two_sided || md.kind == MaterialKind::Dielectric;
         materials.push_back(m);
     }
@@ -386,6 +396,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.uv_indices = md.uvs ? (md.uv_indices ? md.uv_indices : md.indices) : nullptr;
         m.normals = md.normals;
         m.normal_indices = md.normals ? (md.normal_indices ? md.normal_indices : md.indices) : nullptr;
+        m.colors = md.colors;
         m.material = md.material;
         m.emission = Texture(md.emission);
         m.two_sided_emission = md.two_sided_emission;
@@ -568,13 +579,48 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     } else {
         sp.uv = Vec2f(b1, b2);
     }
+    const Texture& normal_map = materials[size_t(m.material)].normal_map;
+    if (!normal_map.empty()) {
+        Vec3f dpdu;
+        const bool has_dpdu = triangle_dpdu(mesh, prim, dpdu);
+        sp.ns = map_normal(sp.ns, has_dpdu, dpdu, eval_texture3(normal_map, sp.uv));
+    }
     return sp;
+}
+
+Vec3f Scene::unmapped_normal(int mesh, int64_t prim, float b1, float b2) const {
+    const Mesh& m = meshes[size_t(mesh)];
+    const int32_t* tri = m.indices + 3 * prim;
+    const Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
+    const Vec3f ng = normalize(cross(v1 - v0, v2 - v0));
+    if (!m.normals) return ng;
+    const int32_t* ni = m.normal_indices + 3 * prim;
+    const Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * (1.f - b1 - b2) + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
+                    Vec3f::load(m.normals + 3 * ni[2]) * b2;
+    const float l = length(n);
+    return l > 0.f ? n / l : ng;
+}
+
+bool Scene::triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const {
+    const Mesh& m = meshes[size_t(mesh)];
+    const int32_t* tri = m.indices + 3 * prim;
+    const Vec3f v0 = m.vertex(tri[0]);
+    Vec2f d1(1.f, 0.f), d2(0.f, 1.f);  // without uvs: uv = (b1, b2)
+    if (m.uvs) {
+        const int32_t* ti = m.uv_indices + 3 * prim;
+        const float *t0 = m.uvs + 2 * ti[0], *t1 = m.uvs + 2 * ti[1], *t2 = m.uvs + 2 * ti[2];
+        d1 = Vec2f(t1[0] - t0[0], t1[1] - t0[1]);
+        d2 = Vec2f(t2[0] - t0[0], t2[1] - t0[1]);
+    }
+    return edgepath::triangle_dpdu(m.vertex(tri[1]) - v0, m.vertex(tri[2]) - v0, d1, d2, dpdu);
 }
 
 BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     const Material& m = materials[meshes[sp.mesh].material];
     BsdfParams p;
     p.diffuse = eval_texture3(m.diffuse, sp.uv);
+    const Mesh& mesh = meshes[sp.mesh];
+    if (mesh.colors) p.diffuse = p.diffuse * mesh.color(sp.prim, sp.b1, sp.b2);
     p.specular = eval_texture3(m.specular, sp.uv);
     p.alpha = std::max(eval_texture1(m.roughness, sp.uv), kMinRoughness);
     p.two_sided = m.two_sided;

@@ -56,6 +56,7 @@ struct Mesh {
     const int32_t* uv_indices = nullptr;
     const float* normals = nullptr;
     const int32_t* normal_indices = nullptr;
+    const float* colors = nullptr;  // (num_vertices, 3), or null
     int material = 0;
     Texture emission;
     bool two_sided_emission = false;
@@ -70,6 +71,13 @@ struct Mesh {
         return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
     }
     bool is_emitter() const { return !emission.empty(); }
+    // The vertex colour at barycentrics (b1, b2) of triangle f; 1 without colours.
+    Vec3f color(int64_t f, float b1, float b2) const {
+        if (!colors) return Vec3f(1.f);
+        const int32_t* t = indices + 3 * f;
+        return Vec3f::load(colors + 3 * int64_t(t[0])) * (1.f - b1 - b2) + Vec3f::load(colors + 3 * int64_t(t[1])) * b1 +
+               Vec3f::load(colors + 3 * int64_t(t[2])) * b2;
+    }
     // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
     bool is_degenerate(int64_t f) const {
         const int32_t* t = indices + 3 * f;
@@ -80,6 +88,7 @@ struct Mesh {
 struct Material {
     Texture diffuse, specular, roughness;
     Texture ior;  // Dielectric only
+    Texture normal_map;  // empty: none
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false;
 };
@@ -95,7 +104,7 @@ struct SurfacePoint {
     Vec3f p;
     Vec3f p_error;  // bound on p's rounding error, per component (math/ray.h)
     Vec3f ng;  // geometric normal, cross(v1 - v0, v2 - v0) normalised
-    Vec3f ns;  // shading normal (interpolated normals, or ng)
+    Vec3f ns;  // shading normal (interpolated normals, or ng; then the material's normal map)
     Vec2f uv;  // interpolated uvs, or the barycentrics (b1, b2) when the mesh has none
     int mesh = -1;
     int64_t prim = -1;
@@ -136,7 +145,7 @@ public:
     // pointers into the memory `desc` views), rebuilding only what its contents changed, found
     // by comparing them with copies kept from the last build: the Embree BVH and the edge list
     // when the topology changes (mesh count, vertex counts, the index arrays, whether uvs and
-    // normals are given); an Embree refit when only vertex positions move (the first time, a
+    // normals are given); the edge list alone when uvs, normals or vertex colours change; an Embree refit when only vertex positions move (the first time, a
     // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
     // one); nothing for materials, textures, emission, lights, the environment and the camera,
     // which are only views. Returns what it did. Not thread-safe: no other call may use the
@@ -177,6 +186,10 @@ public:
     bool occluded(const Ray& ray) const;
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
+    // The shading normal before the normal map (interpolated normals, or ng) at barycentrics
+    // (b1, b2) of triangle `prim`, and the triangle's dp/du for the normal map (false: none).
+    Vec3f unmapped_normal(int mesh, int64_t prim, float b1, float b2) const;
+    bool triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const;
     SurfacePoint surface_point(const Hit& h) const { return surface_point(h.mesh, h.prim, h.b1, h.b2); }
     BsdfParams bsdf_params(const SurfacePoint& sp) const;
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
@@ -229,7 +242,7 @@ private:
     // normals count -1 when not given).
     struct Kept {
         int64_t num_vertices = 0, num_uvs = -1, num_normals = -1;
-        std::vector<float> vertices, uvs, normals;
+        std::vector<float> vertices, uvs, normals, colors;
         std::vector<int32_t> indices, uv_indices, normal_indices;
     };
     std::vector<Kept> kept_;

@@ -20,9 +20,10 @@
 namespace edgepath {
 namespace {
 
-const std::vector<Channel> kContinuous = {Channel::Alpha,          Channel::Depth,          Channel::Position,
+const std::vector<Channel> kContinuous = {Channel::Alpha,          Channel::Depth,         Channel::Position,
                                           Channel::GeometryNormal, Channel::ShadingNormal, Channel::Uv,
-                                          Channel::Albedo};
+                                          Channel::Albedo,         Channel::Barycentrics,  Channel::VertexColor,
+                                          Channel::Roughness,      Channel::Specular};
 
 TextureDesc texture(const std::vector<float>& v, int height, int width, int channels) {
     TextureDesc t;
@@ -146,13 +147,24 @@ TEST(Channels, SphereHitValuesMatchTheClosedForm) {
                 EXPECT_NEAR(v[o(Channel::ShadingNormal) + k], normal[k], 2 * band / r_in);
                 EXPECT_NEAR(v[o(Channel::GeometryNormal) + k], normal[k], chord + 2 * band / r_in);
                 EXPECT_FLOAT_EQ(v[o(Channel::Albedo) + k], arrays.diffuse[size_t(k)]);
+                EXPECT_EQ(v[o(Channel::VertexColor) + k], 1.f);  // no colours
+                EXPECT_EQ(v[o(Channel::Specular) + k], 0.f);
+            }
+            EXPECT_EQ(v[o(Channel::Roughness)], 0.5f);
+            // The barycentrics of the hit: position = sum b_i v_i.
+            const float b1 = v[o(Channel::Barycentrics)], b2 = v[o(Channel::Barycentrics) + 1];
+            const int32_t* tri = sphere.indices.data() + 3 * first.hit.prim;
+            for (int k = 0; k < 3; ++k) {
+                const auto x = [&](int j) { return sphere.vertices[size_t(3 * tri[j] + k)]; };
+                EXPECT_NEAR(v[o(Channel::Position) + k], (1 - b1 - b2) * x(0) + b1 * x(1) + b2 * x(2), 1e-5);
             }
         }
     EXPECT_GT(tested, 40);
 }
 
-// d_hit_channels projected on a direction in the vertices, normals, uvs, a diffuse texture and
-// the camera equals the central difference of eval_hit_channels.
+// d_hit_channels projected on a direction in the vertices, normals, uvs, vertex colours, the
+// diffuse, specular and roughness textures and the camera equals the central difference of
+// eval_hit_channels.
 TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     MeshData tri;
     tri.vertices = {-0.8f, -0.6f, 0.1f, 0.9f, -0.4f, -0.3f, -0.1f, 0.8f, 0.2f};
@@ -160,10 +172,14 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     tri.uvs = {0.1f, 0.2f, 0.8f, 0.3f, 0.4f, 0.9f};
     tri.indices = {0, 1, 2};
     std::vector<float> tex = {0.1f, 0.5f, 0.9f, 0.7f, 0.2f, 0.4f, 0.3f, 0.8f, 0.6f, 0.9f, 0.1f, 0.2f};
-    std::mt19937 gen(3);
+    std::vector<float> spec = {0.3f, 0.1f, 0.2f, 0.05f, 0.4f, 0.15f, 0.25f, 0.35f, 0.1f, 0.2f, 0.3f, 0.45f};
+    std::vector<float> rough = {0.2f, 0.6f, 0.4f, 0.8f};
+    std::vector<float> colors = {0.9f, 0.2f, 0.5f, 0.3f, 0.7f, 1.2f, 0.6f, 0.4f, 0.1f};
+    std::mt19937 gen(5);
     std::uniform_real_distribution<float> u(-1.f, 1.f);
-    std::vector<float> dv(9), dn(9), duv(6), dtex(tex.size()), dcam(kCameraParams);
-    for (auto* dir : {&dv, &dn, &duv, &dtex, &dcam})
+    std::vector<float> dv(9), dn(9), duv(6), dtex(tex.size()), dspec(spec.size()), drough(rough.size()),
+        dcol(colors.size()), dcam(kCameraParams);
+    for (auto* dir : {&dv, &dn, &duv, &dtex, &dspec, &drough, &dcol, &dcam})
         for (float& x : *dir) x = u(gen);
     dcam[10] = 0.f;  // ortho_scale: no effect on a perspective camera
 
@@ -171,13 +187,19 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     const float film_x = 13.3f, film_y = 9.6f;
     auto values = [&](float eps, float* out) {
         MeshData m = tri;
-        std::vector<float> t = tex;
+        std::vector<float> t = tex, sp = spec, r = rough, c = colors;
+        for (size_t i = 0; i < sp.size(); ++i) sp[i] += eps * dspec[i];
+        for (size_t i = 0; i < r.size(); ++i) r[i] += eps * drough[i];
+        for (size_t i = 0; i < c.size(); ++i) c[i] += eps * dcol[i];
         for (int i = 0; i < 9; ++i) m.vertices[size_t(i)] += eps * dv[size_t(i)];
         for (int i = 0; i < 9; ++i) m.normals[size_t(i)] += eps * dn[size_t(i)];
         for (int i = 0; i < 6; ++i) m.uvs[size_t(i)] += eps * duv[size_t(i)];
         for (size_t i = 0; i < t.size(); ++i) t[i] += eps * dtex[i];
         SceneArrays a(m, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
         a.desc.materials[0].diffuse = texture(t, 2, 2, 3);
+        a.desc.materials[0].specular = texture(sp, 2, 2, 3);
+        a.desc.materials[0].roughness = texture(r, 2, 2, 1);
+        a.desc.meshes[0].colors = c.data();
         for (int k = 0; k < 3; ++k) {
             a.desc.camera.position[k] += eps * dcam[size_t(k)];
             a.desc.camera.look_at[k] += eps * dcam[size_t(3 + k)];
@@ -197,6 +219,9 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
 
     SceneArrays a(tri, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
     a.desc.materials[0].diffuse = texture(tex, 2, 2, 3);
+    a.desc.materials[0].specular = texture(spec, 2, 2, 3);
+    a.desc.materials[0].roughness = texture(rough, 2, 2, 1);
+    a.desc.meshes[0].colors = colors.data();
     auto scene = build_scene(a.desc);
     SceneGradients dirs;
     dirs.meshes.resize(1);
@@ -205,6 +230,9 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     dirs.meshes[0].uvs.dir = duv.data();
     dirs.materials.resize(1);
     dirs.materials[0].diffuse.dir = dtex.data();
+    dirs.materials[0].specular.dir = dspec.data();
+    dirs.materials[0].roughness.dir = drough.data();
+    dirs.meshes[0].colors.dir = dcol.data();
     dirs.camera.dir = dcam.data();
     const Ray ray = scene->camera.generate_ray(film_x, film_y);
     const FirstHit first = first_hit(*scene, ray);
@@ -224,12 +252,86 @@ TEST(Channels, HitAdjointMatchesFiniteDifferences) {
     }
 }
 
+// A tangent-space normal map: the shading normal's adjoint in the map's texels, the vertices,
+// normals and uvs (the tangent dp/du depends on them) equals the central difference, with and
+// without normals and uvs (then the barycentrics stand in for the uvs).
+TEST(Channels, NormalMapAdjointMatchesFiniteDifferences) {
+    const std::vector<float> map = {0.9f, 0.3f, 0.8f, 0.7f, 0.8f, 0.7f, 0.85f, 0.6f, 0.9f, 0.75f, 0.2f, 0.8f};
+    for (bool attributes : {true, false}) {
+        MeshData tri;
+        tri.vertices = {-0.8f, -0.6f, 0.1f, 0.9f, -0.4f, -0.3f, -0.1f, 0.8f, 0.2f};
+        tri.indices = {0, 1, 2};
+        if (attributes) {
+            tri.normals = {0.1f, 0.0f, 1.0f, 0.3f, 0.2f, 0.9f, -0.2f, 0.1f, 1.0f};
+            tri.uvs = {0.1f, 0.2f, 0.8f, 0.3f, 0.4f, 0.9f};
+        }
+        std::mt19937 gen(11);
+        std::uniform_real_distribution<float> u(-1.f, 1.f);
+        std::vector<float> dv(9), dn(9), duv(6), dmap(map.size());
+        for (auto* dir : {&dv, &dn, &duv, &dmap})
+            for (float& x : *dir) x = u(gen);
+        const ChannelLayout layout({Channel::ShadingNormal});
+        const float film_x = 11.3f, film_y = 10.6f;
+        auto values = [&](float eps, float* out) {
+            MeshData m = tri;
+            std::vector<float> t = map;
+            for (int i = 0; i < 9; ++i) m.vertices[size_t(i)] += eps * dv[size_t(i)];
+            for (size_t i = 0; i < m.normals.size(); ++i) m.normals[i] += eps * dn[i];
+            for (size_t i = 0; i < m.uvs.size(); ++i) m.uvs[i] += eps * duv[i];
+            for (size_t i = 0; i < t.size(); ++i) t[i] += eps * dmap[i];
+            SceneArrays a(m, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
+            a.desc.materials[0].normal_map = texture(t, 2, 2, 3);
+            auto scene = build_scene(a.desc);
+            const Ray ray = scene->camera.generate_ray(film_x, film_y);
+            const FirstHit first = first_hit(*scene, ray);
+            ASSERT_TRUE(first.found);
+            eval_hit_channels(*scene, layout, ray, true, first.hit, out);
+        };
+        float plus[3], minus[3], base[3];
+        const float eps = 1e-3f;
+        values(eps, plus);
+        values(-eps, minus);
+        values(0.f, base);
+
+        SceneArrays a(tri, Vec3f(0.2f, 0.1f, 3.f), 24, 20, 40.f);
+        a.desc.materials[0].normal_map = texture(map, 2, 2, 3);
+        auto scene = build_scene(a.desc);
+        // The map bends the normal away from the unmapped one.
+        const Ray ray = scene->camera.generate_ray(film_x, film_y);
+        const FirstHit first = first_hit(*scene, ray);
+        ASSERT_TRUE(first.found);
+        const Vec3f unmapped = scene->unmapped_normal(first.hit.mesh, first.hit.prim, first.hit.b1, first.hit.b2);
+        EXPECT_LT(dot(unmapped, Vec3f(base[0], base[1], base[2])), 0.99f);
+        EXPECT_NEAR(length(Vec3f(base[0], base[1], base[2])), 1.f, 1e-5f);
+        SceneGradients dirs;
+        dirs.meshes.resize(1);
+        dirs.meshes[0].vertices.dir = dv.data();
+        if (attributes) {
+            dirs.meshes[0].normals.dir = dn.data();
+            dirs.meshes[0].uvs.dir = duv.data();
+        }
+        dirs.materials.resize(1);
+        dirs.materials[0].normal_map.dir = dmap.data();
+        GradSink sink(true);
+        for (int j = 0; j < 3; ++j) {
+            float e[kMaxChannelValues] = {};
+            e[j] = 1.f;
+            d_hit_channels(*scene, layout, dirs, Vec2f(film_x, film_y), Vec2f(kLensCentre, kLensCentre), ray, first.hit, e,
+                           sink);
+            const double got = sink.take_projection(), fd = (double(plus[j]) - minus[j]) / (2.0 * eps);
+            EXPECT_NEAR(got, fd, 2e-3 + 5e-3 * std::abs(fd)) << "attributes " << attributes << ", value " << j;
+            EXPECT_GT(std::abs(fd), 1e-2) << "value " << j << ": nothing is tested";
+        }
+    }
+}
+
 TEST(Channels, RadianceChannelIsRenderAndIdsAreThePixelCentres) {
     MeshData sphere = make_sphere(Vec3f(0.f, 0.f, 0.f), 0.6f, 12, 24);
     MeshData lamp = make_quad(Vec3f(-1.f, 2.f, -1.f), Vec3f(2.f, 0.f, 0.f), Vec3f(0.f, 0.f, 2.f));  // facing down
     SceneArrays a(sphere, Vec3f(0.f, 0.5f, 3.f), 14, 10, 40.f);
     std::vector<float> white{5.f, 5.f, 5.f};
-    MeshDesc light = lamp.desc(0);
+    a.desc.materials.push_back(a.desc.materials[0]);
+    MeshDesc light = lamp.desc(1);  // material 1
     light.emission = texture(white, 1, 1, 3);
     a.desc.meshes.push_back(light);
     auto scene = build_scene(a.desc);
@@ -237,10 +339,12 @@ TEST(Channels, RadianceChannelIsRenderAndIdsAreThePixelCentres) {
     opt.spp = 3;
     opt.seed = 11;
     std::vector<float> image(14 * 10 * 3), values(14 * 10 * 5);
-    std::vector<int32_t> ids(14 * 10 * 2);
+    std::vector<int32_t> ids(14 * 10 * 3);
     render(*scene, opt, image.data());
-    const ChannelLayout layout({Channel::MeshId, Channel::Alpha, Channel::Radiance, Channel::Depth, Channel::TriangleId});
+    const ChannelLayout layout({Channel::MeshId, Channel::Alpha, Channel::Radiance, Channel::Depth, Channel::TriangleId,
+                                Channel::MaterialId});
     ASSERT_EQ(layout.num_values, 5);
+    ASSERT_EQ(layout.num_ids, 3);
     render_channels(*scene, opt, layout, values.data(), ids.data());
     double radiance = 0.0;
     for (int p = 0; p < 14 * 10; ++p) {
@@ -250,8 +354,9 @@ TEST(Channels, RadianceChannelIsRenderAndIdsAreThePixelCentres) {
         }
         const Ray ray = scene->camera.generate_ray(float(p % 14) + 0.5f, float(p / 14) + 0.5f);
         const FirstHit f = first_hit(*scene, ray);
-        EXPECT_EQ(ids[size_t(2 * p)], f.found ? f.hit.mesh : -1);
-        EXPECT_EQ(ids[size_t(2 * p + 1)], f.found ? int32_t(f.hit.prim) : -1);
+        EXPECT_EQ(ids[size_t(3 * p)], f.found ? f.hit.mesh : -1);
+        EXPECT_EQ(ids[size_t(3 * p + 1)], f.found ? int32_t(f.hit.prim) : -1);
+        EXPECT_EQ(ids[size_t(3 * p + 2)], f.found ? f.hit.mesh : -1);  // mesh i has material i
     }
     EXPECT_GT(radiance, 0.0);
     EXPECT_THROW(render_channels(*scene, opt, layout, values.data(), nullptr), std::invalid_argument);

@@ -141,6 +141,10 @@ UNSUPPORTED = [
      '</bsdf></shape>', "nonlinear=true is not supported"),
     ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="diffuse"/>'
      '</bsdf></shape>', "twosided takes exactly one BSDF"),
+    ('<shape type="rectangle"><bsdf type="normalmap"><bsdf type="diffuse"/></bsdf></shape>',
+     'normalmap needs a <texture name="normalmap">'),
+    ('<shape type="rectangle"><bsdf type="normalmap"><rgb name="normalmap" value="0.5, 0.5, 1"/>'
+     '<bsdf type="diffuse"/><bsdf type="diffuse"/></bsdf></shape>', "normalmap takes exactly one BSDF"),
     ('<shape type="rectangle"><transform name="to_world"><shear value="1"/></transform></shape>',
      "unsupported transform operation"),
     ('<shape type="rectangle"><emitter type="spot"/></shape>', "unsupported emitter type 'spot'"),
@@ -466,6 +470,43 @@ def test_bsdfs(tmp_path):
     # Shapes a and b share one BSDF: its tensors are listed once, under its id.
     assert not any(name.startswith(("a.bsdf", "b.bsdf")) for name in names)
     assert len({id(t) for t in names.values()}) == len(names)
+
+
+def test_normalmap(tmp_path):
+    """A normalmap around a BSDF is that BSDF's material with the bitmap as its normal_map, loaded
+    as Mitsuba loads it (raw: 8-bit values as stored), under Mitsuba's parameter names; inside
+    twosided too."""
+    texels = torch.rand(4, 6, 3, generator=torch.Generator().manual_seed(1))
+    ep.imwrite(texels, tmp_path / "normals.exr")
+    ep.imwrite(texels, tmp_path / "normals.png")
+    body = """
+    <shape type="rectangle" id="a"><bsdf type="normalmap" id="bumpy">
+        <texture type="bitmap" name="normalmap"><string name="filename" value="normals.exr"/></texture>
+        <bsdf type="roughplastic"><string name="distribution" value="ggx"/><float name="alpha" value="0.3"/></bsdf>
+    </bsdf></shape>
+    <shape type="rectangle" id="b"><bsdf type="twosided"><bsdf type="normalmap">
+        <texture type="bitmap" name="normalmap"><string name="filename" value="normals.png"/>
+            <boolean name="raw" value="true"/></texture>
+        <bsdf type="diffuse"><rgb name="reflectance" value="0.2, 0.4, 0.6"/></bsdf>
+    </bsdf></bsdf></shape>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    bumpy = s.bsdfs["bumpy"]
+    assert torch.equal(bumpy.normal_map, ep.imread(tmp_path / "normals.exr"))
+    assert bumpy.roughness == pytest.approx(0.3) and bumpy.kind == "standard" and not bumpy.two_sided
+    b = s.shapes["b"].material
+    assert b.two_sided and torch.allclose(b.diffuse, torch.tensor([0.2, 0.4, 0.6]))
+    # raw: the 8-bit values as stored (imwrite encoded the linear texels as sRGB)
+    assert torch.allclose(b.normal_map, ep.to_srgb(texels), atol=0.5 / 255 + 1e-6)
+    names = s.parameters()
+    assert names["bumpy.normalmap.data"] is bumpy.normal_map
+    assert names["bumpy.nested_bsdf.diffuse_reflectance.value"] is bumpy.diffuse
+    assert names["b.bsdf.brdf_0.normalmap.data"] is b.normal_map
+    assert names["b.bsdf.brdf_0.nested_bsdf.reflectance.value"] is b.diffuse
+    # The map is used: the shading normals differ from the face's.
+    out = ep.render_channels(s.scene, ["shading_normal", "geometry_normal", "mesh_id"], spp=1)
+    hit = out["mesh_id"][..., 0] >= 0
+    assert bool(hit.any())
+    assert not torch.allclose(out["shading_normal"][hit], out["geometry_normal"][hit], atol=1e-3)
 
 
 def test_beckmann_is_rendered_as_ggx_with_a_warning(tmp_path):

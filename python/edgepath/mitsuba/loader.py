@@ -85,7 +85,7 @@ class MitsubaScene:
             material = mesh.material
             prefix = bsdf_names.get(id(material), f"{sid}.bsdf")
             keys = self.bsdf_keys.get(id(material), DIFFUSE_KEYS)
-            for name in ("diffuse", "specular", "roughness", "ior"):
+            for name in ("diffuse", "specular", "roughness", "ior", "normal_map"):
                 mitsuba = keys.get(name)
                 put(f"{prefix}.{mitsuba or name}", getattr(material, name, None),
                     texture_suffix=mitsuba is not None and name != "ior")

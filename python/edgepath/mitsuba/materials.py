@@ -1,5 +1,5 @@
 """BSDFs of Mitsuba scene files (diffuse, conductor, roughconductor, roughplastic, dielectric,
-twosided), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
+twosided, normalmap), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
 approximately where Mitsuba's model differs (see docs/scene-files.md)."""
 
 from __future__ import annotations
@@ -66,9 +66,12 @@ def load_bsdf(ctx: Reader, node: Node) -> Material:
         props.pop(inner[0].attrs.get("name"), None)
         ctx.leftovers(node, props, "bsdf")
         material = Material(diffuse=base.diffuse, specular=base.specular,
-                            roughness=base.roughness, two_sided=True, kind=base.kind)
+                            roughness=base.roughness, two_sided=True, kind=base.kind,
+                            normal_map=base.normal_map)
         ctx.result.bsdf_keys[id(material)] = {
             k: "brdf_0." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
+    elif kind == "normalmap":
+        material = normal_mapped(ctx, node, props, nested)
     else:
         for child in nested:
             if child.tag != "texture" and child.tag != "ref":
@@ -83,6 +86,38 @@ def load_bsdf(ctx: Reader, node: Node) -> Material:
     ctx.bsdf_cache[id(node)] = material
     if "id" in node.attrs:
         ctx.result.bsdfs[node.attrs["id"]] = material
+    return material
+
+
+def normal_mapped(ctx: Reader, node: Node, props: Dict[str, Node], nested) -> Material:
+    """<bsdf type="normalmap">: its one nested BSDF with the texture `normalmap` as the
+    material's normal_map (a bitmap, loaded as Mitsuba loads it: give raw="true" to keep 8-bit
+    values as stored)."""
+    if "normalmap" not in props:
+        ctx.fail(node, "normalmap needs a <texture name=\"normalmap\">")
+    normal_map = colour(ctx, props.pop("normalmap"), channels=3)
+    if normal_map.dim() == 1:
+        normal_map = normal_map.reshape(1, 1, 3)
+    inner = []
+    for child in nested:
+        target = ctx.deref(child, ("bsdf", "texture"))
+        if target.tag == "bsdf":
+            inner.append(target)
+            props.pop(child.attrs.get("name"), None)
+        elif child.attrs.get("name") != "normalmap":
+            ctx.fail(child, "unexpected texture inside normalmap (expected one named 'normalmap')")
+    if len(inner) != 1:
+        ctx.fail(node, "normalmap takes exactly one BSDF")
+    base = load_bsdf(ctx, inner[0])
+    if base.normal_map is not None:
+        ctx.fail(node, "a normalmap inside a normalmap is not supported")
+    ctx.leftovers(node, props, "bsdf")
+    material = Material(diffuse=base.diffuse, specular=base.specular, roughness=base.roughness,
+                        two_sided=base.two_sided, kind=base.kind, ior=base.ior,
+                        normal_map=normal_map)
+    keys = {k: "nested_bsdf." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
+    keys["normal_map"] = "normalmap"
+    ctx.result.bsdf_keys[id(material)] = keys
     return material
 
 
@@ -195,4 +230,4 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
         ctx.leftovers(node, props, "bsdf")
         return Material(diffuse=diffuse, specular=specular.contiguous(), roughness=alpha)
     ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, conductor, "
-                   "roughconductor, roughplastic, dielectric, twosided)")
+                   "roughconductor, roughplastic, dielectric, twosided, normalmap)")
