@@ -22,8 +22,18 @@ def sphere(center: Sequence[float] = (0.0, 0.0, 0.0), radius: float = 1.0, rings
         raise ValueError(f"sphere: needs rings >= 2 and segments >= 3, got {rings}, {segments}")
     theta = torch.linspace(0, math.pi, rings + 1, dtype=torch.float64)
     phi = torch.linspace(0, 2 * math.pi, segments + 1, dtype=torch.float64)
+    # The seam's two columns and each pole's copies must be the same positions exactly (the
+    # edges are found by welding equal positions): sin(pi) and sin(2 pi) are not zero in floating
+    # point, so they are set.
+    sin_t, cos_t = torch.sin(theta), torch.cos(theta)
+    sin_t[0] = sin_t[-1] = 0.0
+    cos_t[0], cos_t[-1] = 1.0, -1.0
+    sin_p, cos_p = torch.sin(phi), torch.cos(phi)
+    sin_p[-1], cos_p[-1] = sin_p[0], cos_p[0]
     t, p = torch.meshgrid(theta, phi, indexing="ij")
-    n = torch.stack([torch.sin(t) * torch.sin(p), torch.cos(t), torch.sin(t) * torch.cos(p)], -1)
+    st, ct = sin_t[:, None], cos_t[:, None]
+    sp, cp = sin_p[None, :], cos_p[None, :]
+    n = torch.stack([st * sp, ct.expand_as(t), st * cp], -1)
     n = n.reshape(-1, 3)
     vertices = torch.tensor(center, dtype=torch.float64) + radius * n
     uvs = torch.stack([p / (2 * math.pi), t / math.pi], -1).reshape(-1, 2)

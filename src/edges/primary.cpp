@@ -4,6 +4,7 @@
 #include <cmath>
 #include <tbb/enumerable_thread_specific.h>
 #include "edges/sides.h"
+#include "sampling/warp.h"
 #include "render/path.h"
 #include "render/tiles.h"
 
@@ -15,7 +16,18 @@ namespace {
 struct FilmEdge {
     size_t edge;  // in Scene::edges()
     double ax, ay, bx, by;
+    double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
 };
+
+// The share of the samples per unit film length given to a smooth edge that does not fold: the
+// angle between its faces over pi. Such an edge is a step only where the mesh shadows itself
+// along it, for the light arriving between the two faces' planes: a range of directions as wide
+// as that angle. (Any positive density is unbiased; this one puts the samples where the steps
+// are likely.)
+double smooth_edge_weight(const Mesh& m, const Edge& e) {
+    const float c = dot(normalize(m.face_normal(e.f0)), normalize(m.face_normal(e.f1)));
+    return std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
+}
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
 // aperture. Seen from a lens point, the camera is a pinhole at that point whose film is shifted
@@ -193,13 +205,18 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (uniform) {
             len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
         } else {
-            // Folds and creases (shading or texture jumps); smooth edges that do not fold
-            // separate different values in the geometric normal, and where the mesh shadows
-            // itself along them (not sampled yet: docs/gradients.md, known limitations).
+            // Folds and creases (shading or texture jumps) at full density. A smooth edge that
+            // does not fold separates different values of the geometric normal, and steps where
+            // the mesh shadows itself along it (the light between its faces' planes reaches one
+            // face and not the other, while the smooth normals give both a weight): sampled in
+            // proportion to the angle between its faces, the weight dividing the sample's.
             const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
-            if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) continue;
+            if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
+                fe.weight = smooth_edge_weight(m, e);
+                if (!(fe.weight > 0.0)) continue;
+            }
             if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
-            len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay);
+            len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
         }
         fe.edge = size_t(&e - scene.edges().data());
         if (!(len > 0.0)) continue;
@@ -240,7 +257,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
             float x, y;
-            double point_weight = sample_weight;
+            double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
             if (uniform) {
@@ -273,8 +290,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             EdgeEye side_eye = camera_eye;
             side_eye.origin = eye.position;
-            // From a thin lens's point, a smooth edge that does not fold there has no jump.
-            if (thin_lens && edge.kind == EdgeKind::Smooth && !smooth_edges_jump && !is_fold(side_eye, m, edge)) continue;
 
             // The side function at the sample and its film-space gradient.
             Vec3f o, d;

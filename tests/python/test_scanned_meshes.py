@@ -44,20 +44,46 @@ def assert_agrees(d, d_se, f, f_se):
     assert se < 0.02 * abs(f)
 
 
-# Bunny (smooth normals computed on load), 128^2, crop (20, 44, 12, 36), 8 seeds x 256 spp
-# against FD 8 x 1024 spp, step 1e-3: 17,859 +- 170 against 17,402 +- 168 (1.026); side rays a
-# fixed step either side of the edge gave 20,748 +- 150 (1.19).
-@pytest.mark.slow
-def test_bunny_outline_derivative_matches_finite_differences():
+def bunny_along_x(crop):
     path = SHARED / "data" / "bunny_silhouette.xml"
     if not path.exists():
         pytest.skip(f"test data not found: {path}")
     loaded = ep.load_mitsuba(path, res=128)
-    loaded.scene.camera.crop_window = (20, 44, 12, 36)
+    loaded.scene.camera.crop_window = crop
     vertices = loaded.shapes["bunny"].vertices
     along_x = torch.zeros_like(vertices)
     along_x[:, 0] = 1.0
-    assert_agrees(*outline_check(loaded.scene, vertices, along_x, seeds=8, spp=256, fd_spp=1024, eps=1e-3))
+    return loaded.scene, vertices, along_x
+
+
+# Bunny (smooth normals computed on load), 128^2, crop (20, 44, 12, 36), 8 seeds x 256 spp
+# against FD 8 x 1024 spp, step 1e-3. Side rays a fixed step either side of the edge gave
+# 20,748 +- 150 (1.19); the limit construction 17,859 +- 170 against 17,402 +- 168 (1.026), which
+# agreed only because two errors cancelled: the smooth edges' self-shadowing steps were not
+# sampled (about -1,650 in this crop, right: see the next test), and the band of rows 56-68, where
+# the chin hides the chest, lacks about +1,000 with or without them (x 16-28 of that band: 16,408
+# +- 62 at 4 x 4096 spp against an FD of 17,480 +- 54; secondary edges give +2,150 there, the
+# chin's shadow on the chest). With the steps sampled the crop is 16,433 +- 132 (32 seeds): 0.944.
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="the band where the chin hides the chest lacks about 6% of "
+                   "this crop's derivative (docs/gradients.md, known limitations)")
+def test_bunny_outline_derivative_matches_finite_differences():
+    scene, vertices, along_x = bunny_along_x((20, 44, 12, 36))
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=8, spp=256, fd_spp=1024, eps=1e-3))
+
+
+# The bunny's nose (x 16-28, y 44-56) and the body along its outline (x 28-36, y 44-80), where the
+# smooth edges' self-shadowing steps are most of the error: 16 seeds x 256 spp against FD 8 x
+# 2048 / 8 x 1024 spp, step 1e-3 (for the body the FD at step 5e-4 is -39,863 +- 123, at 2e-3
+# -39,494 +- 133):
+#   nose: 5,198 +- 77 against 5,181 +- 30; without the steps 5,603 +- 56 (+8%);
+#   body: -39,988 +- 179 against -39,771 +- 126; without them -38,597 +- 167 (-3%, 5 se).
+# The test: 8 seeds x 512 spp against FD 8 x 2048.
+@pytest.mark.slow
+@pytest.mark.parametrize("crop", [(16, 44, 12, 12), (28, 44, 8, 36)], ids=["nose", "body"])
+def test_bunny_smooth_shading_derivative_matches_finite_differences(crop):
+    scene, vertices, along_x = bunny_along_x(crop)
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=8, spp=512, fd_spp=2048, eps=1e-3))
 
 
 def rough_sphere(rings, segments, roughness, seed):
@@ -125,3 +151,48 @@ def test_rough_sphere_shadow_derivative_matches_finite_differences():
     along_x = torch.zeros_like(vertices)
     along_x[:, 0] = 1.0
     assert_agrees(*outline_check(scene, vertices, along_x, seeds=6, spp=64, fd_spp=256, eps=2e-3))
+
+
+def vertex_normals(vertices, indices):
+    """Area-weighted vertex normals."""
+    idx = indices.long()
+    p = [vertices[idx[:, k]].double() for k in range(3)]
+    fn = torch.linalg.cross(p[1] - p[0], p[2] - p[0])
+    n = torch.zeros(vertices.shape, dtype=torch.float64).index_add_(0, idx.reshape(-1), fn.repeat_interleave(3, 0))
+    return torch.nn.functional.normalize(n, dim=1).float()
+
+
+# Smooth shading on a faceted surface: across a smooth edge that does not fold the shading
+# normal is continuous, but the geometric normal is not, and where light arrives between the two
+# faces' planes one face shadows itself and the other does not. The camera sees a step along the
+# edge that moves with it.
+#
+# A sphere of 12,640 triangles roughened radially by 5%, smooth normals, the outline crop of
+# rough_sphere_scene: 6 seeds x 128 spp against FD 6 x 512 spp, step 2e-3: 10,000 +- 24 against
+# 10,033 +- 58; without the steps 9,701 +- 16 (0.967).
+@pytest.mark.slow
+def test_bumpy_smooth_sphere_outline_derivative_matches_finite_differences():
+    vertices, indices = rough_sphere(40, 80, 0.05, seed=3)
+    scene = rough_sphere_scene(vertices, indices)
+    scene.meshes[0].normals = vertex_normals(vertices, indices)
+    along_x = torch.zeros_like(vertices)
+    along_x[:, 0] = 1.0
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=6, spp=128, fd_spp=512, eps=2e-3))
+
+
+# A smooth sphere of 224 triangles lit from the side by a quad, the crop on its terminator:
+# 4 seeds x 128 spp against FD 4 x 512, step 2e-3: -209.3 +- 0.3 against -207.3 +- 2.8; without
+# the steps -118.8 +- 0.6.
+def test_terminator_of_a_low_poly_smooth_sphere_matches_finite_differences():
+    v, i, _, n = shapes.sphere(radius=1.0, rings=8, segments=16)
+    sphere = ep.Mesh(vertices=v, indices=i, normals=n,
+                     material=ep.Material(diffuse=torch.full((3,), 0.7), specular=0.0))
+    lv, li = shapes.quad([[3, -0.5, -0.5], [3, -0.5, 0.5], [3, 0.5, 0.5], [3, 0.5, -0.5]])
+    light = ep.Mesh(vertices=lv, indices=li, material=ep.Material(diffuse=0.0, specular=0.0),
+                    emission=torch.full((3,), 60.0))
+    camera = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3), fov=40.0,
+                       resolution=(48, 48), crop_window=(16, 12, 16, 24))
+    scene = ep.Scene(camera=camera, meshes=[sphere, light])
+    along_x = torch.zeros_like(v)
+    along_x[:, 0] = 1.0
+    assert_agrees(*outline_check(scene, sphere.vertices, along_x, seeds=4, spp=128, fd_spp=512, eps=2e-3))
