@@ -114,6 +114,43 @@ class Material:
         return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"
 
 
+class Spot:
+    """A spot light's angular profile, as Mitsuba's ``spot``: emission is scaled by 1 within
+    ``beam_width`` degrees of the axis ``direction`` (a (3,) tensor, any length), by 0 beyond
+    ``cutoff_angle`` degrees, and linearly in the angle between (a continuous falloff, so its
+    derivatives need no boundary terms). ``beam_width`` defaults to three quarters of
+    ``cutoff_angle`` (as Mitsuba); 0 <= beam_width < cutoff_angle <= 180. Every value is
+    differentiable (a tensor with ``requires_grad``)."""
+
+    def __init__(self, direction: torch.Tensor, cutoff_angle: Constant = 20.0,
+                 beam_width: Optional[Constant] = None):
+        self.direction = direction
+        self.cutoff_angle = cutoff_angle
+        self.beam_width = beam_width
+
+    def __repr__(self):
+        return f"Spot(cutoff_angle={self.cutoff_angle}, beam_width={self.beam_width})"
+
+
+class PointLight:
+    """A light at a point (Mitsuba's ``point``, or its ``spot`` with ``spot``): radiant
+    ``intensity`` (W/sr; a float, or (3,) / (1,)) from ``position`` (3,) in every direction, or
+    scaled by a ``Spot`` profile. A delta light: found by next-event estimation only, it casts
+    hard shadows whose moving outlines have no boundary terms (as in Mitsuba), so derivatives
+    of the image where a shadow edge moves are missing; the shading it gives (intensity,
+    position, the spot's profile, the lit surfaces) is differentiated exactly. For shadows
+    with derivatives, give the light a radius (``edgepath.lights``)."""
+
+    def __init__(self, position: torch.Tensor, intensity: Constant = 1.0,
+                 spot: Optional[Spot] = None):
+        self.position = position
+        self.intensity = intensity
+        self.spot = spot
+
+    def __repr__(self):
+        return f"PointLight(intensity={self.intensity}, spot={self.spot!r})"
+
+
 class Mesh:
     """A triangle mesh. ``vertices`` (N, 3) float, ``indices`` (M, 3) int32/int64.
 
@@ -121,7 +158,8 @@ class Mesh:
     ``normals`` (K, 3) shading normals with ``normal_indices`` (M, 3) (or one per vertex),
     ``material`` (default: diffuse 0.5, or black diffuse if the mesh emits), ``emission``:
     radiance, constant (3,) or texture (H, W, 3) over the uvs, which makes the mesh an area
-    light emitting on the side of its face normal (both sides if ``two_sided_emission``)."""
+    light emitting on the side of its face normal (both sides if ``two_sided_emission``).
+    ``spot``: a ``Spot`` profile that scales the emission by the direction it leaves in."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
@@ -129,7 +167,8 @@ class Mesh:
                  normal_indices: Optional[torch.Tensor] = None,
                  material: Optional[Material] = None,
                  emission: Optional[Constant] = None,
-                 two_sided_emission: bool = False):
+                 two_sided_emission: bool = False,
+                 spot: Optional[Spot] = None):
         self.vertices = vertices
         self.indices = indices
         self.uvs = uvs
@@ -139,6 +178,7 @@ class Mesh:
         self.material = material
         self.emission = emission
         self.two_sided_emission = two_sided_emission
+        self.spot = spot
 
     def __repr__(self):
         n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"
@@ -163,13 +203,16 @@ class EnvironmentMap:
 
 
 class Scene:
-    """A camera, a list of meshes (some of them emitters), and an optional environment map."""
+    """A camera, a list of meshes (some of them emitters), an optional environment map, and
+    a list of ``PointLight``s (lights at a point, without a radius)."""
 
     def __init__(self, camera: Camera, meshes: Sequence[Mesh],
-                 envmap: Optional[EnvironmentMap] = None):
+                 envmap: Optional[EnvironmentMap] = None,
+                 point_lights: Sequence[PointLight] = ()):
         self.camera = camera
         self.meshes = meshes
         self.envmap = envmap
+        self.point_lights = point_lights
         # The renderer's own scene (ray-tracing BVH, edge list), kept across renders and
         # updated from what changed (edgepath.render); never copied with the scene.
         self._core_cache = None

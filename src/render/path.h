@@ -80,6 +80,23 @@ inline bool same_surface(const FirstHit& a, const FirstHit& b) {
     return a.found == b.found && (!a.found || (a.hit.mesh == b.hit.mesh && a.hit.prim == b.hit.prim));
 }
 
+// Point light `light` seen from sp: the unit direction towards it, the squared distance, and
+// whether it lights sp (in front of it, within its spot profile, nothing in between).
+// `counters` counts the shadow ray, if one is traced.
+inline bool see_point_light(const Scene& scene, const SurfacePoint& sp, const PointLightDesc& light, Vec3f& dir,
+                            float& dist2, RayCounters* counters = nullptr) {
+    const Vec3f to = Vec3f::load(light.position) - sp.p;
+    dist2 = length_squared(to);
+    if (!(dist2 > 0.f)) return false;
+    const float dist = std::sqrt(dist2);
+    dir = to / dist;
+    if (!(Scene::spot_scale(light.spot, light.spot_profile, -dir) > 0.f)) return false;
+    Ray shadow = spawn_ray(sp, dir);
+    shadow.tmax = length(Vec3f::load(light.position) - shadow.origin) * (1.f - kShadowEpsilon);
+    if (counters) ++counters->shadow;
+    return !scene.occluded(shadow);
+}
+
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When
 // `record` is given, also records the path for the gradient pass; when `first` is given, it is
 // the ray's intersection (not traced again), found by first_hit with opt.hide_emitters.

@@ -49,6 +49,20 @@ struct MeshDesc {
     int material = 0;                    // index into SceneDesc::materials
     TextureDesc emission;                // 3 channels; empty: not an emitter
     bool two_sided_emission = false;     // false: emits on the side of the face normal only
+    // Emission scaled in each outgoing direction by a spot profile (scene/spot.h): its axis,
+    // cutoff angle and beam width (radians), when `spot` is set.
+    bool spot = false;
+    float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
+};
+
+// A light at a point (a delta light, as Mitsuba's `point` and `spot`): it radiates `intensity`
+// (W/sr) in every direction, or in a spot profile (scene/spot.h) when `spot` is set. Found only
+// by next-event estimation; its shadows have no boundary terms.
+struct PointLightDesc {
+    float position[3] = {0, 0, 0};
+    float intensity[3] = {1, 1, 1};
+    bool spot = false;
+    float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
 };
 
 // The ranges the kernels (and Embree, whose rays must stay within about 1.8e18) assume, checked
@@ -107,6 +121,7 @@ struct SceneDesc {
     std::vector<MeshDesc> meshes;
     bool has_envmap = false;
     EnvmapDesc envmap;
+    std::vector<PointLightDesc> point_lights;
 };
 
 enum class LightSampling { MIS = 0, LightOnly = 1, BSDFOnly = 2 };

@@ -53,6 +53,16 @@ void check_texture(const TextureDesc& t, int channels, const std::string& field,
     if (non_negative) check_non_negative(t.data, n, field);
 }
 
+// A spot profile (scene/spot.h): a finite, nonzero axis and 0 <= beam width < cutoff <= pi.
+void check_spot(const float* p, const std::string& field) {
+    check_finite(p, kSpotParams, field);
+    if (!(length(Vec3f(p[0], p[1], p[2])) > 0.f)) fail(field, "the axis is zero");
+    if (!(p[3] > 0.f && p[3] <= 3.14159265f))
+        fail(field, "the cutoff angle must be in (0, pi] radians, got " + str(p[3]));
+    if (!(p[4] >= 0.f && p[4] < p[3]))
+        fail(field, "the beam width must be in [0, cutoff angle) radians, got " + str(p[4]));
+}
+
 void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, const std::string& field,
                    const std::string& what) {
     for (int64_t i = 0; i < num_triangles * 3; ++i)
@@ -165,6 +175,7 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
         check_texture(m.emission, 3, f + ".emission", true);
         check_radiance(m.emission, 1.f, f + ".emission");
     }
+    if (m.spot) check_spot(m.spot_profile, f + ".spot_profile");
 }
 
 }  // namespace
@@ -199,6 +210,20 @@ Scene::~Scene() {
 namespace {
 
 void validate(const SceneDesc& desc) {
+    for (size_t i = 0; i < desc.point_lights.size(); ++i) {
+        const PointLightDesc& l = desc.point_lights[i];
+        const std::string f = "point_lights[" + str(i) + "]";
+        check_finite(l.position, 3, f + ".position");
+        for (int k = 0; k < 3; ++k)
+            if (!(std::abs(l.position[k]) <= kMaxCoordinate))
+                fail(f + ".position", "value " + str(l.position[k]) + " is beyond " + str(kMaxCoordinate));
+        check_finite(l.intensity, 3, f + ".intensity");
+        check_non_negative(l.intensity, 3, f + ".intensity");
+        for (int k = 0; k < 3; ++k)
+            if (!(l.intensity[k] <= kMaxRadiance))
+                fail(f + ".intensity", "value " + str(l.intensity[k]) + " is beyond " + str(kMaxRadiance));
+        if (l.spot) check_spot(l.spot_profile, f + ".spot_profile");
+    }
     validate_camera(desc.camera);
     if (desc.meshes.empty()) fail("meshes", "the scene has no meshes");
     for (size_t i = 0; i < desc.materials.size(); ++i) {
@@ -349,7 +374,10 @@ void Scene::set_views(const SceneDesc& desc) {
         m.material = md.material;
         m.emission = Texture(md.emission);
         m.two_sided_emission = md.two_sided_emission;
+        m.spot = md.spot;
+        std::copy(md.spot_profile, md.spot_profile + kSpotParams, m.spot_profile);
     }
+    point_lights = desc.point_lights;
 
     has_envmap = desc.has_envmap;
     envmap = Envmap();
@@ -550,7 +578,7 @@ Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
     // normal would switch emission off along curves inside triangles near silhouettes, which
     // move with the geometry but lie on no edge.
     if (!m.two_sided_emission && dot(sp.ng, w) <= 0.f) return Vec3f(0.f);
-    return eval_texture3(m.emission, sp.uv);
+    return eval_texture3(m.emission, sp.uv) * spot_scale(m.spot, m.spot_profile, w);
 }
 
 bool Scene::sample_env(float u1, float u2, LightSample& ls) const {

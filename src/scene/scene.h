@@ -18,6 +18,7 @@
 #include "scene/desc.h"
 #include "scene/envmap.h"
 #include "scene/geometry.h"
+#include "scene/spot.h"
 #include "scene/texture.h"
 
 namespace edgepath {
@@ -59,6 +60,8 @@ struct Mesh {
     int material = 0;
     Texture emission;
     bool two_sided_emission = false;
+    bool spot = false;         // emission scaled by the spot profile spot_profile (scene/spot.h)
+    float spot_profile[5] = {0, 0, 1, 0, 0};
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
@@ -164,6 +167,8 @@ public:
         float area;
     };
     std::vector<EmissiveTriangle> lights;
+    // Delta lights (desc.h): next-event estimation only, every one at every vertex.
+    std::vector<PointLightDesc> point_lights;
     Distribution1D light_distribution;
     bool env_sampled = false;  // the environment has light to sample (not black)
 
@@ -181,6 +186,10 @@ public:
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
 
     bool has_lights() const { return light_distribution.valid() || env_sampled; }
+    // Radiance (or, for a point light, intensity) scale of a spot profile in direction w.
+    static float spot_scale(bool spot, const float* profile, const Vec3f& w) {
+        return spot ? spot_falloff(profile, w) : 1.f;
+    }
     // Next-event estimation samples both kinds of emitters separately, each with its own
     // sample: picking one of them at random would multiply a small lamp's nearly noiseless
     // estimate by a random 0 or 1/p.
