@@ -229,3 +229,51 @@ def test_bad_spot_names_the_field(spot, message):
                                         spot=ep.Spot(**spot))]
     with pytest.raises(ValueError, match=message):
         ep.render(scene, spp=1)
+
+
+def recover(make, truth, start, steps, lr, spp):
+    """Adam from ``start`` towards the image of ``truth``: the mean of the last 20 iterates,
+    and the losses at the start and there (with the same samples)."""
+    target = ep.render(make(truth), spp=256, seed=100)
+    x = start.clone().requires_grad_()
+    optimizer = torch.optim.Adam([x], lr=lr)
+    history = []
+    for step in range(steps):
+        optimizer.zero_grad()
+        loss = (ep.render(make(x), spp=spp, seed=step) - target).square().mean()
+        loss.backward()
+        optimizer.step()
+        history.append(x.detach().clone())
+    estimate = torch.stack(history[-20:]).mean(0)
+    with torch.no_grad():
+        before, after = (float((ep.render(make(t), spp=64, seed=7) - target).square().mean())
+                         for t in (start, estimate))
+    return estimate, before, after
+
+
+def test_recover_the_direction_of_a_delta_spot_from_its_lit_region():
+    """A spot of radius 0 aimed 0.53 radians away: its direction is recovered from the ellipse
+    it lights on the floor (measured: 0.010 radians off, in 60 steps; loss 5.4e-3 -> 4.3e-6)."""
+    truth = torch.tensor([0.2, -1.0, 0.1], dtype=torch.float64)
+    start = torch.tensor([-0.25, -1.0, -0.2], dtype=torch.float64)
+    estimate, before, after = recover(lambda x: spot_scene(direction=x), truth, start, 60, 0.03, 4)
+    angle = lambda a: float(torch.acos((a / a.norm()) @ (truth / truth.norm())))
+    print(f"loss {before:.4g} -> {after:.4g}; direction {angle(start):.3f} -> {angle(estimate):.4f} rad")
+    assert after < 0.05 * before
+    assert angle(estimate) < 0.05 * angle(start)
+
+
+def test_recover_the_position_of_a_spot_sphere_from_its_lit_region():
+    """A spot of radius 0.1 moved 0.5 sideways: its position (x and z) is recovered from the
+    ellipse it lights, the gradient coming from the boundary terms of its outline seen from the
+    floor (measured: 0.008 off, in 100 steps; loss 2.0e-3 -> 1.6e-4)."""
+    truth = torch.tensor([0.3, 0.1], dtype=torch.float64)
+    start = torch.tensor([-0.1, 0.4], dtype=torch.float64)
+
+    def make(x):
+        return spot_scene(position=torch.stack([x[0], torch.full_like(x[0], 2.0), x[1]]), radius=0.1)
+    estimate, before, after = recover(make, truth, start, 100, 0.02, 8)
+    error, start_error = float((estimate - truth).norm()), float((start - truth).norm())
+    print(f"loss {before:.4g} -> {after:.4g}; position error {start_error:.3f} -> {error:.4f}")
+    assert after < 0.2 * before
+    assert error < 0.15 * start_error
