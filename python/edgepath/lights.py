@@ -119,8 +119,8 @@ def sphere_light(position: Sequence[float] | torch.Tensor, intensity: Number | S
     Mitsuba's ``point`` has the same parameter) averaged over directions is ``intensity``: seen
     from outside, as a point light of that intensity, within the polyhedron's departure from a
     sphere (its projected area varies with the direction by a few percent). ``radius`` must be
-    positive: a point light of radius zero, which would have no boundary terms (as in
-    Mitsuba), is not available. The tessellation is coarse on purpose: the derivative of the
+    positive: ``point_light`` with radius 0 gives a delta light, whose shadows have no
+    boundary terms (as in Mitsuba). The tessellation is coarse on purpose: the derivative of the
     light's position comes from its outline's edges seen from the lit surfaces, and today's side
     rays bias it more the finer the outline (docs/gradients.md).
 
