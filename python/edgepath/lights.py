@@ -198,9 +198,9 @@ def _vector(value, name: str) -> torch.Tensor:
 
 
 def _intensity(value, name: str):
-    t = value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float32)
-    t = t.reshape(-1)
-    if t.numel() not in (1, 3) or not bool(torch.isfinite(t.detach()).all()) or \
-            bool((t.detach() < 0).any()):
+    """``value`` checked (1 or 3 numbers >= 0) and returned as given: a tensor stays the one the
+    light holds, to optimise."""
+    t = torch.as_tensor(value).detach().reshape(-1).double()
+    if t.numel() not in (1, 3) or not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
         raise ValueError(f"{name}: intensity must be 1 or 3 finite numbers >= 0, got {value!r}")
-    return t.expand(3)
+    return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float32)

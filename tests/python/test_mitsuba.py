@@ -422,11 +422,15 @@ def test_point_and_spot_emitters_of_radius_zero_are_delta_lights(tmp_path):
     # A spot shines along its to_world's z axis, from its translation.
     assert torch.allclose(spot.position.float(), torch.tensor([1.0, 2, 3]))
     assert torch.allclose(spot.spot.direction.float(), torch.tensor([0.0, 0, -1]), atol=1e-6)
-    assert (spot.spot.cutoff_angle, spot.spot.beam_width) == (40.0, 30.0)
+    assert (float(spot.spot.cutoff_angle), float(spot.spot.beam_width)) == (40.0, 30.0)
+    names = s.parameters()
+    assert names["bulb.intensity.value"] is bulb.intensity and names["bulb.position"] is bulb.position
+    assert names["spot_1.cutoff_angle"] is spot.spot.cutoff_angle
+    assert names["spot_1.direction"] is spot.spot.direction
     # Without a radius, a small sphere with the profile (the default cutoff angle 20 degrees).
     round_spot = s.shapes["round"]
-    assert round_spot.spot is not None and round_spot.spot.cutoff_angle == 20.0
-    assert round_spot.spot.beam_width == 5.0
+    assert round_spot.spot is not None and float(round_spot.spot.cutoff_angle) == 20.0
+    assert float(round_spot.spot.beam_width) == 5.0
     _assert_emitter_errors(tmp_path, "spot", [
         ('<point name="position" value="0 0 1"/>', "a spot is placed by to_world"),
         ('<float name="cutoff_angle" value="0"/>', "cutoff_angle 0.0"),

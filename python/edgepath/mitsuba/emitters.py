@@ -156,7 +156,8 @@ def load_spot(ctx: Reader, node: Node, index: int) -> PointLight:
     radius = _radius(ctx, node, props)
     ctx.leftovers(node, props, "emitter")
     return PointLight(node.attrs.get("id", f"spot_{index}"), m[:3, 3].clone(), intensity, radius,
-                      (direction.clone(), cutoff, beam))
+                      (direction.clone(), torch.tensor(cutoff, dtype=torch.float64),
+                       torch.tensor(beam, dtype=torch.float64)))
 
 
 def load_directional(ctx: Reader, node: Node, index: int) -> Sun:

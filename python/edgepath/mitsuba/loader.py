@@ -58,7 +58,9 @@ class MitsubaScene:
         ``mi.traverse`` names them where Mitsuba has the same quantity: ``sensor.to_world``,
         ``sensor.x_fov``, ``sensor.aperture_radius`` and ``sensor.focus_distance`` (a thin
         lens), ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
-        (area lights), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
+        (area lights), ``LIGHT.position``, ``LIGHT.intensity.value``, ``LIGHT.cutoff_angle``,
+        ``LIGHT.beam_width`` (point and spot lights of radius 0; edgepath's ``LIGHT.direction``,
+        a spot's axis, where Mitsuba has its to_world), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
         ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
         in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
         ``BSDF.specular`` (the GGX lobe's F0, which Mitsuba derives from eta/k or the IOR),
@@ -94,6 +96,13 @@ class MitsubaScene:
                     texture_suffix=mitsuba is not None and name != "ior")
         if self.scene.envmap is not None:
             put("envmap.data", self.scene.envmap.values)
+        for sid, light in self.point_lights.items():
+            put(f"{sid}.position", light.position)
+            put(f"{sid}.intensity.value", light.intensity)
+            if light.spot is not None:
+                put(f"{sid}.direction", light.spot.direction)
+                put(f"{sid}.cutoff_angle", light.spot.cutoff_angle)
+                put(f"{sid}.beam_width", light.spot.beam_width)
         return out
 
     def direction(self, name: str, values: Sequence[float]) -> Tuple[torch.Tensor, torch.Tensor]:
