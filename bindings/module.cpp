@@ -188,6 +188,7 @@ edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string&
         m.spot = true;
         floats(d, "spot_profile", f, m.spot_profile, edgepath::kSpotParams);
     }
+    if (has(d, "sample_solid_angle")) m.sample_solid_angle = scalar<bool>(d, "sample_solid_angle", f);
     return m;
 }
 

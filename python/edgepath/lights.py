@@ -124,6 +124,9 @@ def sphere_light(position: Sequence[float] | torch.Tensor, intensity: Number | S
     light's position comes from its outline's edges seen from the lit surfaces, and today's side
     rays bias it more the finer the outline (docs/gradients.md).
 
+    Light samples find it by solid angle (``light_sampling="solid_angle"``): uniformly in the
+    cone of directions it subtends, so that they land on the side it shows.
+
     ``position``, ``intensity`` and ``radius`` may be tensors with ``requires_grad``; as for
     ``sun``, gradients reach them, and its shadows have boundary terms. ``spot``: a ``Spot``
     profile scaling the radiance by the direction it leaves in (see ``spot_light``)."""
@@ -147,7 +150,8 @@ def sphere_light(position: Sequence[float] | torch.Tensor, intensity: Number | S
     area = float(torch.linalg.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]).norm(dim=-1).sum()) / 2
     radiance = (i / (area / 4 * r.reshape(()) ** 2)).expand(3)
     return Mesh(vertices=vertices.float(), indices=indices, emission=radiance.float(),
-                material=Material(diffuse=0.0, specular=0.0), spot=spot)
+                material=Material(diffuse=0.0, specular=0.0), spot=spot,
+                light_sampling="solid_angle")
 
 
 def _is_zero(radius: Number, name: str) -> bool:

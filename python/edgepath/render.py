@@ -31,6 +31,7 @@ EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
 MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
+LIGHT_SAMPLING = {"area": False, "solid_angle": True}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
@@ -726,6 +727,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "normal_indices": None,
         "emission": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
+        "sample_solid_angle": v.choice(getattr(mesh, "light_sampling", "area"), f + ".light_sampling",
+                                       LIGHT_SAMPLING),
         "material": i,
     }
     if mesh.uvs is not None:

@@ -159,7 +159,12 @@ class Mesh:
     ``material`` (default: diffuse 0.5, or black diffuse if the mesh emits), ``emission``:
     radiance, constant (3,) or texture (H, W, 3) over the uvs, which makes the mesh an area
     light emitting on the side of its face normal (both sides if ``two_sided_emission``).
-    ``spot``: a ``Spot`` profile that scales the emission by the direction it leaves in."""
+    ``spot``: a ``Spot`` profile that scales the emission by the direction it leaves in.
+    ``light_sampling``: how next-event estimation samples an emitting mesh: "area" (a triangle
+    by power, a point uniformly on it) or "solid_angle" (a direction uniformly in the cone of
+    the mesh's bounding sphere, towards the first of its triangles along it: for small convex
+    lights around a point, such as ``lights.sphere_light``, whose visible side it samples
+    evenly)."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
@@ -168,7 +173,8 @@ class Mesh:
                  material: Optional[Material] = None,
                  emission: Optional[Constant] = None,
                  two_sided_emission: bool = False,
-                 spot: Optional[Spot] = None):
+                 spot: Optional[Spot] = None,
+                 light_sampling: str = "area"):
         self.vertices = vertices
         self.indices = indices
         self.uvs = uvs
@@ -179,6 +185,7 @@ class Mesh:
         self.emission = emission
         self.two_sided_emission = two_sided_emission
         self.spot = spot
+        self.light_sampling = light_sampling
 
     def __repr__(self):
         n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"

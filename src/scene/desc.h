@@ -53,6 +53,12 @@ struct MeshDesc {
     // cutoff angle and beam width (radians), when `spot` is set.
     bool spot = false;
     float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
+    // An emitter sampled by solid angle: uniformly in the cone of directions of its bounding
+    // sphere (the box's centre, the farthest vertex), towards its first triangle along the
+    // direction. Meant for small convex lights around a point (a sphere light): from outside,
+    // every sample lands on the side it shows. Otherwise (and from inside the sphere, where
+    // it is not sampled) by area, triangle by triangle.
+    bool sample_solid_angle = false;
 };
 
 // A light at a point (a delta light, as Mitsuba's `point` and `spot`): it radiates `intensity`

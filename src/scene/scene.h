@@ -62,6 +62,9 @@ struct Mesh {
     bool two_sided_emission = false;
     bool spot = false;         // emission scaled by the spot profile spot_profile (scene/spot.h)
     float spot_profile[5] = {0, 0, 1, 0, 0};
+    bool solid_angle = false;  // sampled by the solid angle of its bounding sphere (desc.h)
+    Vec3f sphere_center;       // that sphere, when solid_angle (set by Scene::build_lights)
+    float sphere_radius = 0.f;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
@@ -161,6 +164,7 @@ public:
     bool has_envmap = false;
     Envmap envmap;
 
+    // A light to pick: a triangle, or (prim -1) a whole mesh sampled by solid angle.
     struct EmissiveTriangle {
         int mesh;
         int64_t prim;
@@ -215,6 +219,9 @@ private:
     void build_geometry(bool refittable);
     bool refit_geometry();  // false: it cannot (a build is needed)
     void build_lights();
+    // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and
+    // 1 - cos of its half angle; false if p is inside the sphere.
+    bool light_cone(const Mesh& m, const Vec3f& p, Vec3f& axis, float& one_minus_cos) const;
 
     RTCScene rtc_ = nullptr;
     bool refittable_ = false;  // the BVH was built for refitting

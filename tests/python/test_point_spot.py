@@ -79,18 +79,18 @@ def floor_closed_form(position, direction, intensity, cutoff, beam, resolution, 
 @pytest.mark.parametrize("radius, spot", [(0.0, True), (0.0, False), (0.02, True)])
 def test_lit_floor_matches_the_closed_form(radius, spot):
     """Pixel by pixel, across the beam, the falloff and the dark outside: a delta light within
-    the pixel integration's noise (measured: relative L1 0.005); a sphere of radius 0.02
-    within its tessellation (its projected area varies by about 1% with the direction) and the
-    noise of sampling its triangles by area (measured at 4096 spp: relative L1 0.032, the sum
-    0.5% high; 0.044 at 1024 spp)."""
+    the pixel integration's noise (measured: relative L1 0.005); a sphere of radius 0.02,
+    sampled by solid angle, within its tessellation (its projected area varies by about 1%
+    with the direction) and the noise (measured at 1024 spp: 0.009 at seed 3; by area, as
+    before solid-angle sampling: 0.044, and 0.032 at 4096 spp)."""
     position, direction = (0.3, 2.0, 0.1), (0.2, -1.0, 0.1)
     scene = spot_scene(position, direction, radius=radius, spot=spot, resolution=16)
-    image = ep.render(scene, spp=256 if radius == 0 else 4096, seed=1)
+    image = ep.render(scene, spp=256 if radius == 0 else 1024, seed=1)
     expected = floor_closed_form(position, direction, 4.0, 30.0, 20.0, 16, 1.5, spot=spot)
     lit = image.mean(-1).double()
     error = float((lit - expected).abs().sum() / expected.sum())
     print(f"relative L1 against the closed form: {error:.4f}, sum {float(lit.sum() / expected.sum()):.4f}")
-    assert error < (0.01 if radius == 0 else 0.045)
+    assert error < (0.01 if radius == 0 else 0.02)
     assert float(lit.sum() / expected.sum()) == pytest.approx(1.0, abs=0.01)
     if spot:
         # Outside the cone, dark (but for a pixel the cone touches between the points above).
@@ -159,7 +159,7 @@ def test_delta_light_derivatives_match_finite_differences(name, make, value, dir
                          ids=[p[0] for p in SPHERE_PARAMETERS])
 def test_spot_sphere_derivatives_match_finite_differences(name, make, value, direction, eps):
     """Radius 0.05: the intensity's and the profile's derivatives through the emission the
-    light samples see (measured relative L1: 0.000, 0.007, 0.006, 0.006)."""
+    light samples see (measured relative L1: 0.000, 0.005, 0.005, 0.004)."""
     d_image, fd_image = derivative_and_fd(lambda x: make(x, 0.05), value, direction, eps, 64)
     error = relative_l1(d_image, fd_image)
     print(f"{name}: relative L1 {error:.4f}")
@@ -188,7 +188,8 @@ def test_spot_sphere_position_derivative_matches_finite_differences_in_sum():
 
 def test_occluder_in_front_of_the_spot_sphere_matches_finite_differences():
     """The penumbra moves with the square: the boundary term of secondary edges (the square's
-    edges seen from the floor against the small sphere)."""
+    edges seen from the floor against the small sphere). Measured at 512 spp: relative L1
+    0.073 (0.13 when the sphere was sampled by area); 1.0 without the term."""
     assert_occluder_derivative_matches(
         lambda occluder: spot_scene(radius=0.1, occluder=occluder), 0.05, 512, 0.25, 0.5)
 
@@ -266,7 +267,7 @@ def test_recover_the_direction_of_a_delta_spot_from_its_lit_region():
 def test_recover_the_position_of_a_spot_sphere_from_its_lit_region():
     """A spot of radius 0.1 moved 0.5 sideways: its position (x and z) is recovered from the
     ellipse it lights, the gradient coming from the boundary terms of its outline seen from the
-    floor (measured: 0.008 off, in 100 steps; loss 2.0e-3 -> 1.6e-4)."""
+    floor (measured: 0.003 off, in 100 steps; loss 1.9e-3 -> 8.1e-6)."""
     truth = torch.tensor([0.3, 0.1], dtype=torch.float64)
     start = torch.tensor([-0.1, 0.4], dtype=torch.float64)
 
