@@ -440,8 +440,9 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
 
 // ---- gradient slots --------------------------------------------------------------------------
 // `slots` mirrors the scene: {"camera": a, "envmap": a, "envmap_rotation": a,
-// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a} or None, ...],
-// "materials": [{"diffuse": a, "specular": a, "roughness": a} or None, ...]}, any entry None or
+// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a, "spot_profile": a} or None, ...],
+// "materials": [{"diffuse": a, "specular": a, "roughness": a} or None, ...],
+// "point_lights": [{"position": a, "intensity": a, "spot_profile": a} or None, ...]}, any entry None or
 // absent. Reverse mode: writable buffers the gradients are added into; forward mode: directions.
 // Each array must have exactly as many values as the parameter it stands for.
 using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;

@@ -238,4 +238,6 @@ class Scene:
         return state
 
     def __repr__(self):
-        return f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r})"
+        lights = getattr(self, "point_lights", ())
+        return (f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r}"
+                + (f", point_lights={len(lights)})" if lights else ")"))

@@ -278,3 +278,20 @@ def test_recover_the_position_of_a_spot_sphere_from_its_lit_region():
     print(f"loss {before:.4g} -> {after:.4g}; position error {start_error:.3f} -> {error:.4f}")
     assert after < 0.2 * before
     assert error < 0.15 * start_error
+
+
+@pytest.mark.parametrize("light, message", [
+    (dict(position=torch.tensor([0.0, float("nan"), 0])), r"point_lights\[0\].position"),
+    (dict(position=torch.tensor([0.0, 1, 0]), intensity=torch.tensor([1.0, -1, 1])),
+     r"point_lights\[0\].intensity"),
+    (dict(position=torch.tensor([0.0, 1, 0]), intensity=torch.ones(2)), r"point_lights\[0\].intensity"),
+    (dict(position=torch.zeros(2)), r"point_lights\[0\].position"),
+])
+def test_bad_point_light_names_the_field(light, message):
+    scene = spot_scene()
+    scene.point_lights = [ep.PointLight(**light)]
+    with pytest.raises(ValueError, match=message):
+        ep.render(scene, spp=1)
+    scene.point_lights = [spot_scene().meshes[0]]
+    with pytest.raises(ValueError, match=r"point_lights\[0\]: expected an edgepath.PointLight"):
+        ep.render(scene, spp=1)
