@@ -458,11 +458,12 @@ void Scene::build_lights() {
         m.light_offset = int64_t(lights.size());
         double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
         double total = 0.0;
-        Vec3f lo = m.vertex(0), hi = lo;
+        Vec3f lo, hi;  // the box of the triangles' vertices
         for (int64_t t = 0; t < m.num_triangles; ++t) {
             Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
             float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
             total += area;
+            if (t == 0) lo = hi = a;
             for (const Vec3f& v : {a, b, c}) {
                 lo = min(lo, v);
                 hi = max(hi, v);
