@@ -208,7 +208,7 @@ def _flatten_views(scene: Scene, cameras) -> Tuple[FlatScene, List[dict], List[t
 def render_views_flat(flat: FlatScene, views: List[dict], options: RenderOptions) -> torch.Tensor:
     """One call into the core for every view: (V, H, W, 3)."""
     images = torch.empty((len(views), flat.height, flat.width, 3), dtype=torch.float32)
-    _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), cache=flat.cache, point_lights=flat.point_lights)
+    _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), flat=flat)
     return images
 
 
@@ -240,7 +240,7 @@ class _RenderViewsFunction(torch.autograd.Function):
             adjoint = grad_images.detach().to(torch.float32).contiguous()
             _call_core(_core.render_views_gradients, ctx.views, *flat.core_args()[1:], adjoint,
                        flat.slot_buffers(buffers), camera_grads, ctx.grad_options.core(),
-                       cache=flat.cache, point_lights=flat.point_lights)
+                       flat=flat)
         gradients = [buffers.get(s) for s in ctx.slots] + [camera_grads[k] for k in ctx.view_indices]
         return (None,) * 6 + tuple(_first_order_only(ctx, gradients))
 
@@ -266,7 +266,7 @@ class _RenderFunction(torch.autograd.Function):
         if buffers:
             adjoint = grad_image.detach().to(torch.float32).contiguous()
             _call_core(_core.render_gradients, *flat.core_args(), adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache, point_lights=flat.point_lights)
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), flat=flat)
         return (None, None, None, None, *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
 
@@ -333,7 +333,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
     if directions:
         _call_core(_core.derivative_image, *flat.core_args(), flat.slot_buffers(directions),
-                   image, options.core(), cache=flat.cache, point_lights=flat.point_lights)
+                   image, options.core(), flat=flat)
     else:
         image.zero_()
     return image
@@ -402,7 +402,7 @@ def render_channels_flat(flat: FlatScene, names: List[str],
     values = torch.empty((flat.height, flat.width, nv), dtype=torch.float32)
     ids = torch.empty((flat.height, flat.width, ni), dtype=torch.int32)
     stats = _call_core(_core.render_channels, *flat.core_args(), names, values, ids, options.core(),
-                       cache=flat.cache, point_lights=flat.point_lights)
+                       flat=flat)
     return values, ids, stats
 
 
@@ -428,7 +428,7 @@ class _ChannelsFunction(torch.autograd.Function):
         if buffers and grad_values is not None:
             adjoint = grad_values.detach().to(torch.float32).contiguous()
             _call_core(_core.channel_gradients, *flat.core_args(), ctx.names, adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache, point_lights=flat.point_lights)
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), flat=flat)
         return (None, None, None, None, None,
                 *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
@@ -450,7 +450,7 @@ def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tens
     values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
     if directions:
         _call_core(_core.channel_derivative_image, *flat.core_args(), names,
-                   flat.slot_buffers(directions), values, options.core(), cache=flat.cache, point_lights=flat.point_lights)
+                   flat.slot_buffers(directions), values, options.core(), flat=flat)
     else:
         values.zero_()
     return _split_channels(names, values, None)
@@ -533,7 +533,7 @@ def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mi
 def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, dict]:
     """One call into the core. Returns the image and the core's counters."""
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
-    stats = _call_core(_core.render, *flat.core_args(), image, options.core(), cache=flat.cache, point_lights=flat.point_lights)
+    stats = _call_core(_core.render, *flat.core_args(), image, options.core(), flat=flat)
     return image, stats
 
 
@@ -566,7 +566,8 @@ def flatten_scene(scene: Scene) -> FlatScene:
         _flatten_envmap(scene.envmap, flat)
     lights = getattr(scene, "point_lights", ())
     if not isinstance(lights, (list, tuple)):
-        v.fail("point_lights", f"expected a list of edgepath.PointLight, got {type(lights).__name__}")
+        v.fail("point_lights", f"expected a list of edgepath.PointLight, got "
+                               f"{type(lights).__name__}")
     for i, light in enumerate(lights):
         _flatten_point_light(light, i, flat)
     return flat
@@ -574,9 +575,12 @@ def flatten_scene(scene: Scene) -> FlatScene:
 
 # ---- pieces -------------------------------------------------------------------------------
 
-def _call_core(fn, *args, cache=None, point_lights=()):
+def _call_core(fn, *args, flat: Optional[FlatScene] = None):
+    """``fn(*args)`` with the flat scene's cache and point lights; core errors name the user's
+    fields."""
     try:
-        return fn(*args, cache=cache, point_lights=list(point_lights))
+        return fn(*args, cache=None if flat is None else flat.cache,
+                  point_lights=[] if flat is None else flat.point_lights)
     except ValueError as error:
         raise ValueError(_user_field_names(str(error))) from None
 
@@ -727,8 +731,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "normal_indices": None,
         "emission": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
-        "sample_solid_angle": v.choice(getattr(mesh, "light_sampling", "area"), f + ".light_sampling",
-                                       LIGHT_SAMPLING),
+        "sample_solid_angle": v.choice(getattr(mesh, "light_sampling", "area"),
+                                       f + ".light_sampling", LIGHT_SAMPLING),
         "material": i,
     }
     if mesh.uvs is not None:
@@ -762,12 +766,14 @@ def _spot_profile(spot, f: str, flat: FlatScene, slot: Slot) -> List[float]:
     if not bool(torch.isfinite(da).all()) or float(da.norm()) == 0:
         v.fail(f + ".direction", f"must be 3 finite numbers, not all zero, got {da.tolist()}")
     cutoff = v.scalar_tensor(spot.cutoff_angle, f + ".cutoff_angle")
-    beam = cutoff * 0.75 if spot.beam_width is None else v.scalar_tensor(spot.beam_width, f + ".beam_width")
+    beam = cutoff * 0.75 if spot.beam_width is None else \
+        v.scalar_tensor(spot.beam_width, f + ".beam_width")
     c, b = float(cutoff.detach()), float(beam.detach())
     if not 0 < c <= 180:
         v.fail(f + ".cutoff_angle", f"must be in (0, 180] degrees, got {c}")
     if not 0 <= b < c:
-        v.fail(f + ".beam_width", f"must be in [0, cutoff_angle) degrees, got {b} (cutoff_angle {c})")
+        v.fail(f + ".beam_width", f"must be in [0, cutoff_angle) degrees, got {b} "
+                                  f"(cutoff_angle {c})")
     profile = torch.cat([axis, torch.deg2rad(cutoff), torch.deg2rad(beam)])
     return [float(x) for x in _param(flat, slot, profile).tolist()]
 
@@ -778,10 +784,11 @@ def _flatten_point_light(light, i: int, flat: FlatScene) -> None:
         v.fail(f, f"expected an edgepath.PointLight, got {type(light).__name__}")
     position = v.float_tensor(light.position, f + ".position", (3,))
     intensity = v.texture(light.intensity, f + ".intensity", 3).reshape(3)
-    out = {"position": [float(x) for x in _param(flat, ("point_lights", i, "position"), position).tolist()],
-           "intensity": [float(x) for x in _param(flat, ("point_lights", i, "intensity"), intensity).tolist()]}
+    slot = ("point_lights", i)
+    out = {"position": [float(x) for x in _param(flat, slot + ("position",), position).tolist()],
+           "intensity": [float(x) for x in _param(flat, slot + ("intensity",), intensity).tolist()]}
     if light.spot is not None:
-        out["spot_profile"] = _spot_profile(light.spot, f + ".spot", flat, ("point_lights", i, "spot_profile"))
+        out["spot_profile"] = _spot_profile(light.spot, f + ".spot", flat, slot + ("spot_profile",))
     flat.point_lights.append(out)
 
 
