@@ -274,8 +274,9 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_bsdf_eval_world(bp, ns, wo, nr->dir, ab * Le * nr->scale, db);
         }
         // Point lights: N = f(wo, w) I s(-w) / r^2, w = normalize(q - p), r = |q - p|, for
-        // each light at q that the forward pass saw (the shadow ray traced again).
-        for (size_t j = 0; j < scene.point_lights.size() && !delta; ++j) {
+        // each light at q that the forward pass saw (the shadow ray traced again), at the
+        // vertices that sampled them.
+        for (size_t j = 0; j < scene.point_lights.size() && r.point_lights; ++j) {
             const PointLightDesc& pl = scene.point_lights[j];
             Vec3f wl;
             float dist2;

@@ -79,6 +79,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
         // Point lights, each at every vertex, whatever the sampling strategy: no other way
         // finds them. Their contribution f I s(-w) / r^2 has no random numbers.
+        if (rv) rv->point_lights = !is_delta(bp);
         if (!is_delta(bp))
             for (const PointLightDesc& pl : scene.point_lights) {
                 Vec3f wl;

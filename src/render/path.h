@@ -31,6 +31,7 @@ struct PathVertexRecord {
     // Next-event estimation at this vertex: one sample on the area lights, one on the
     // environment.
     NeeRecord nee_area, nee_env;
+    bool point_lights = false;  // the point lights were sampled here (a vertex that scatters)
     // Continuation by BSDF sampling. A smooth material's (next_delta) direction is a function
     // of the vertex, and next_inv_pdf the inverse probability of its lobe (next_refract: the
     // dielectric's transmission).

@@ -327,3 +327,22 @@ def test_views_and_gradients_of_many_views_see_the_point_lights():
     intensity = scene.point_lights[0].intensity
     # Linear in the intensity: d(sum)/dI = sum / I for each view.
     assert float(intensity.grad) == pytest.approx(2 * float(single.sum()) / 4.0, rel=1e-4)
+
+
+@pytest.mark.parametrize("max_bounces", [1, 2])
+def test_point_lights_only_where_the_path_scatters(max_bounces):
+    """A wall beside the floor, lit by a point light too: with one bounce, the paths that go
+    on from the floor to the wall end there (no light sampled at the wall), with two they
+    sample it. The image is linear in the intensity, so its derivative is the image over the
+    intensity, exactly, with the same random numbers."""
+    def make(intensity):
+        scene = spot_scene(intensity=intensity, spot=False)
+        wv, wi = shapes.quad([[1.0, 0, -3], [1.0, 0, 3], [1.0, 2, 3], [1.0, 2, -3]])
+        scene.meshes = list(scene.meshes) + [ep.Mesh(vertices=wv, indices=wi,
+                                                     material=ep.Material(diffuse=0.8, two_sided=True))]
+        return scene
+    intensity = torch.tensor(4.0, dtype=torch.float64, requires_grad=True)
+    d_image = ep.derivative_image(make(intensity), intensity, torch.ones_like(intensity), spp=16,
+                                  seed=2, max_bounces=max_bounces)
+    image = ep.render(make(4.0), spp=16, seed=2, max_bounces=max_bounces)
+    assert relative_l1(d_image, image / 4.0) < 1e-4
