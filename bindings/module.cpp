@@ -27,6 +27,7 @@
 #include "edgepath.h"
 #include "io/image.h"
 #include "io/obj.h"
+#include "scene/spot.h"
 
 namespace nb = nanobind;
 using namespace nb::literals;
@@ -142,6 +143,14 @@ edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std:
     return m;
 }
 
+// `n` numbers from the list d[key] into out.
+void floats(const nb::dict& d, const char* key, const std::string& f, float* out, size_t n) {
+    std::vector<float> v;
+    if (!nb::try_cast(item(d, key, f), v) || v.size() != n)
+        fail(f + "." + key, "expected " + std::to_string(n) + " numbers");
+    std::copy(v.begin(), v.end(), out);
+}
+
 edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string& f) {
     edgepath::MeshDesc m;
     const FloatView vertices = float_view(views, item(d, "vertices", f), f + ".vertices", 2, 3);
@@ -183,7 +192,23 @@ edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string&
     m.material = scalar<int>(d, "material", f);
     if (has(d, "emission")) m.emission = texture(views, d["emission"], f + ".emission");
     m.two_sided_emission = scalar<bool>(d, "two_sided_emission", f);
+    if (has(d, "spot_profile")) {
+        m.spot = true;
+        floats(d, "spot_profile", f, m.spot_profile, edgepath::kSpotParams);
+    }
+    if (has(d, "sample_solid_angle")) m.sample_solid_angle = scalar<bool>(d, "sample_solid_angle", f);
     return m;
+}
+
+edgepath::PointLightDesc point_light_desc(const nb::dict& d, const std::string& f) {
+    edgepath::PointLightDesc l;
+    floats(d, "position", f, l.position, 3);
+    floats(d, "intensity", f, l.intensity, 3);
+    if (has(d, "spot_profile")) {
+        l.spot = true;
+        floats(d, "spot_profile", f, l.spot_profile, edgepath::kSpotParams);
+    }
+    return l;
 }
 
 edgepath::EnvmapDesc envmap_desc(Views& views, const nb::dict& d) {
@@ -204,7 +229,7 @@ struct Described {
 };
 
 void describe(Described& out, const nb::dict& camera, const nb::list& materials,
-              const nb::list& meshes, const nb::object& envmap) {
+              const nb::list& meshes, const nb::object& envmap, const nb::list& point_lights) {
     out.desc.camera = camera_desc(camera);
     for (size_t i = 0; i < materials.size(); ++i)
         out.desc.materials.push_back(material_desc(out.views, nb::cast<nb::dict>(materials[i]),
@@ -216,6 +241,9 @@ void describe(Described& out, const nb::dict& camera, const nb::list& materials,
         out.desc.has_envmap = true;
         out.desc.envmap = envmap_desc(out.views, nb::cast<nb::dict>(envmap));
     }
+    for (size_t i = 0; i < point_lights.size(); ++i)
+        out.desc.point_lights.push_back(
+            point_light_desc(nb::cast<nb::dict>(point_lights[i]), "point_lights[" + std::to_string(i) + "]"));
 }
 
 edgepath::RenderOptions render_options(const nb::dict& d) {
@@ -335,9 +363,10 @@ nb::dict stats_dict(const edgepath::RenderStats& stats) {
 }
 
 nb::dict render(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
-                nb::object envmap, nb::handle image, const nb::dict& options, SceneCache* cache) {
+                nb::object envmap, nb::handle image, const nb::dict& options, SceneCache* cache,
+                 const nb::list& point_lights) {
     Described d;
-    describe(d, camera, materials, meshes, envmap);
+    describe(d, camera, materials, meshes, envmap, point_lights);
     edgepath::RenderOptions opt = render_options(options);
     const CallScene scene = build(d.desc, cache);
     const ImageOut out = image_buffer(image, *scene, "image");
@@ -394,10 +423,11 @@ CallScene build_views(const edgepath::SceneDesc& desc, const std::vector<edgepat
 
 // Renders view k into images[k]; the counters are summed over the views.
 nb::dict render_views(const nb::list& cameras, const nb::list& materials, const nb::list& meshes,
-                      nb::object envmap, nb::handle images, const nb::dict& options, SceneCache* cache) {
+                      nb::object envmap, nb::handle images, const nb::dict& options, SceneCache* cache,
+                 const nb::list& point_lights) {
     const std::vector<edgepath::CameraDesc> views = camera_descs(cameras);
     Described d;
-    describe(d, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap);
+    describe(d, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, point_lights);
     edgepath::RenderOptions opt = render_options(options);
     const CallScene scene = build_views(d.desc, views, cache);
     const ImageOut out = views_buffer<ImageOut>(images, *scene, views.size(), 3, "images", "a");
@@ -418,9 +448,10 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
 
 // ---- gradient slots --------------------------------------------------------------------------
 // `slots` mirrors the scene: {"camera": a, "envmap": a, "envmap_rotation": a,
-// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a, "colors": a} or None, ...],
-// "materials": [{"diffuse": a, "specular": a, "roughness": a, "ior": a, "normal_map": a} or None,
-// ...]}, any entry None or
+// "meshes": [{"vertices": a, "uvs": a, "normals": a, "emission": a, "colors": a, "spot_profile": a} or
+// None, ...],
+// "materials": [{"diffuse": a, "specular": a, "roughness": a, "ior": a, "normal_map": a} or None, ...],
+// "point_lights": [{"position": a, "intensity": a, "spot_profile": a} or None, ...]}, any entry None or
 // absent. Reverse mode: writable buffers the gradients are added into; forward mode: directions.
 // Each array must have exactly as many values as the parameter it stands for.
 using GradOut = nb::ndarray<float, nb::c_contig, nb::device::cpu>;
@@ -475,6 +506,21 @@ edgepath::SceneGradients gradient_slots(SlotViews& views, const nb::dict& d, con
             g.meshes[i].normals = views.slot(m, "normals", md.normals ? md.num_normals * 3 : 0, f);
             g.meshes[i].emission = views.slot(m, "emission", md.emission.num_values(), f);
             g.meshes[i].colors = views.slot(m, "colors", md.colors ? md.num_vertices * 3 : 0, f);
+            g.meshes[i].spot = views.slot(m, "spot_profile", md.spot ? edgepath::kSpotParams : 0, f);
+        }
+    }
+    if (has(d, "point_lights")) {
+        nb::list lights = nb::cast<nb::list>(d["point_lights"]);
+        if (lights.size() != desc.point_lights.size())
+            fail("gradients.point_lights", "must have one entry per point light");
+        g.point_lights.resize(lights.size());
+        for (size_t i = 0; i < lights.size(); ++i) {
+            if (lights[i].is_none()) continue;
+            const nb::dict l = nb::cast<nb::dict>(lights[i]);
+            const std::string f = "gradients.point_lights[" + std::to_string(i) + "]";
+            g.point_lights[i].position = views.slot(l, "position", 3, f);
+            g.point_lights[i].intensity = views.slot(l, "intensity", 3, f);
+            g.point_lights[i].spot = views.slot(l, "spot_profile", desc.point_lights[i].spot ? edgepath::kSpotParams : 0, f);
         }
     }
     if (has(d, "materials")) {
@@ -512,9 +558,10 @@ struct GradientCall {
 
     GradientCall(bool reverse, const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                  nb::object envmap, const nb::dict& options, const std::vector<std::string>* channels,
-                 const nb::dict& slot_dict, SceneCache* cache)
+                 const nb::dict& slot_dict, SceneCache* cache,
+                 const nb::list& point_lights)
         : views{reverse, {}, {}} {
-        describe(d, camera, materials, meshes, envmap);
+        describe(d, camera, materials, meshes, envmap, point_lights);
         opt = render_options(options);
         if (channels) layout = channel_layout(*channels);
         slots = gradient_slots(views, slot_dict, d.desc);
@@ -537,8 +584,9 @@ struct GradientCall {
 
 void render_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, nb::handle adjoint, const nb::dict& grads, const nb::dict& options,
-                      SceneCache* cache) {
-    GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads, cache);
+                      SceneCache* cache,
+                 const nb::list& point_lights) {
+    GradientCall c(true, camera, materials, meshes, envmap, options, nullptr, grads, cache, point_lights);
     const FloatView a = c.adjoint(adjoint, "the image");
     interruptible(c.opt, [&] { edgepath::render_gradients(*c.scene, c.opt, a.data(), c.slots); });
 }
@@ -548,11 +596,12 @@ void render_gradients(const nb::dict& camera, const nb::list& materials, const n
 // into camera_grads[k] (None: not wanted).
 void render_views_gradients(const nb::list& cameras, const nb::list& materials, const nb::list& meshes,
                             nb::object envmap, nb::handle adjoints, const nb::dict& grads,
-                            const nb::list& camera_grads, const nb::dict& options, SceneCache* cache) {
+                            const nb::list& camera_grads, const nb::dict& options, SceneCache* cache,
+                 const nb::list& point_lights) {
     const std::vector<edgepath::CameraDesc> views = camera_descs(cameras);
     if (grads.contains("camera")) fail("gradients.camera", "give the cameras' gradients in camera_grads");
     if (camera_grads.size() != views.size()) fail("camera_grads", "must have one entry per view");
-    GradientCall c(true, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, options, nullptr, grads, cache);
+    GradientCall c(true, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, options, nullptr, grads, cache, point_lights);
     std::vector<edgepath::GradSlot> camera_slots;
     for (size_t k = 0; k < views.size(); ++k) {
         nb::dict one;
@@ -574,8 +623,9 @@ void render_views_gradients(const nb::list& cameras, const nb::list& materials, 
 
 void derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, const nb::dict& directions, nb::handle image, const nb::dict& options,
-                      SceneCache* cache) {
-    GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions, cache);
+                      SceneCache* cache,
+                 const nb::list& point_lights) {
+    GradientCall c(false, camera, materials, meshes, envmap, options, nullptr, directions, cache, point_lights);
     const ImageOut out = image_buffer(image, *c.scene, "image");
     interruptible(c.opt, [&] { edgepath::derivative_image(*c.scene, c.opt, c.slots, out.data()); });
 }
@@ -608,9 +658,10 @@ Out channel_buffer(nb::handle obj, const edgepath::Scene& scene, int channels, c
 
 nb::dict render_channels(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                          nb::object envmap, const std::vector<std::string>& channels, nb::handle values,
-                         nb::handle ids, const nb::dict& options, SceneCache* cache) {
+                         nb::handle ids, const nb::dict& options, SceneCache* cache,
+                 const nb::list& point_lights) {
     Described d;
-    describe(d, camera, materials, meshes, envmap);
+    describe(d, camera, materials, meshes, envmap, point_lights);
     edgepath::RenderOptions opt = render_options(options);
     const edgepath::ChannelLayout layout = channel_layout(channels);
     const CallScene scene = build(d.desc, cache);
@@ -622,8 +673,9 @@ nb::dict render_channels(const nb::dict& camera, const nb::list& materials, cons
 
 void channel_gradients(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                        nb::object envmap, const std::vector<std::string>& channels, nb::handle adjoint,
-                       const nb::dict& grads, const nb::dict& options, SceneCache* cache) {
-    GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads, cache);
+                       const nb::dict& grads, const nb::dict& options, SceneCache* cache,
+                 const nb::list& point_lights) {
+    GradientCall c(true, camera, materials, meshes, envmap, options, &channels, grads, cache, point_lights);
     const FloatView a = c.adjoint(adjoint, "the channels' values");
     interruptible(c.opt, [&] { edgepath::channel_gradients(*c.scene, c.opt, c.layout, a.data(), c.slots); });
 }
@@ -631,8 +683,9 @@ void channel_gradients(const nb::dict& camera, const nb::list& materials, const 
 void channel_derivative_image(const nb::dict& camera, const nb::list& materials, const nb::list& meshes,
                               nb::object envmap, const std::vector<std::string>& channels,
                               const nb::dict& directions, nb::handle values, const nb::dict& options,
-                              SceneCache* cache) {
-    GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions, cache);
+                              SceneCache* cache,
+                 const nb::list& point_lights) {
+    GradientCall c(false, camera, materials, meshes, envmap, options, &channels, directions, cache, point_lights);
     const ImageOut out = channel_buffer<ImageOut>(values, *c.scene, c.layout.num_values, "values", "float32");
     interruptible(c.opt, [&] { edgepath::channel_derivative_image(*c.scene, c.opt, c.layout, c.slots, out.data()); });
 }
@@ -767,36 +820,36 @@ NB_MODULE(_core, m) {
             "hierarchy (zeros before the first, and after a failed update).");
 
     m.def("render", &render, "camera"_a, "materials"_a, "meshes"_a, "envmap"_a.none(),
-          "image"_a, "options"_a, "cache"_a.none() = nb::none(),
+          "image"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Renders the described scene into `image` (H, W, 3) float32, in place. Returns the "
           "render counters as a dict.");
     m.def("render_views", &render_views, "cameras"_a, "materials"_a, "meshes"_a,
-          "envmap"_a.none(), "images"_a, "options"_a, "cache"_a.none() = nb::none(),
+          "envmap"_a.none(), "images"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Renders the scene once per camera into `images` (V, H, W, 3) float32, in place; one "
           "scene build. Returns the render counters summed over the views.");
     m.def("render_gradients", &render_gradients, "camera"_a, "materials"_a, "meshes"_a,
-          "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a, "cache"_a.none() = nb::none(),
+          "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Adds d(sum(adjoint * image))/d(parameter) into the buffers of `gradients`.");
     m.def("render_views_gradients", &render_views_gradients, "cameras"_a, "materials"_a,
           "meshes"_a, "envmap"_a.none(), "adjoint"_a, "gradients"_a, "camera_grads"_a,
-          "options"_a, "cache"_a.none() = nb::none(),
+          "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "render_gradients over the views of render_views: the scene's gradients summed over "
           "the views, view k's camera gradient into camera_grads[k].");
     m.def("derivative_image", &derivative_image, "camera"_a, "materials"_a, "meshes"_a,
-          "envmap"_a.none(), "directions"_a, "image"_a, "options"_a, "cache"_a.none() = nb::none(),
+          "envmap"_a.none(), "directions"_a, "image"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Writes the derivative of the image along `directions` into `image` (H, W, 3).");
     m.def("render_channels", &render_channels, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "channels"_a, "values"_a, "ids"_a, "options"_a,
-          "cache"_a.none() = nb::none(),
+          "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Renders the named channels: the continuous ones into `values` (H, W, C) float32, the "
           "ids into `ids` (H, W, K) int32, in place. Returns the render counters as a dict.");
     m.def("channel_gradients", &channel_gradients, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "channels"_a, "adjoint"_a, "gradients"_a, "options"_a,
-          "cache"_a.none() = nb::none(),
+          "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Adds d(sum(adjoint * values))/d(parameter) into the buffers of `gradients`.");
     m.def("channel_derivative_image", &channel_derivative_image, "camera"_a, "materials"_a,
           "meshes"_a, "envmap"_a.none(), "channels"_a, "directions"_a, "values"_a, "options"_a,
-          "cache"_a.none() = nb::none(),
+          "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Writes the derivative of the channels' values along `directions` into `values`.");
     m.def("imread", &imread, "path"_a,
           "Reads a PNG/JPEG (linearised) or EXR file as a float32 (H, W, C) numpy array.");

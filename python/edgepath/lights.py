@@ -3,7 +3,9 @@
 of their own outline).
 
 ``sun``: a directional light with an angular diameter, as a distant emitting disk.
-``sphere_light``: a point light with a radius, as a small emitting sphere."""
+``sphere_light``: a point light with a radius, as a small emitting sphere.
+``point_light`` and ``spot_light``: a light at a point (radius 0: a ``PointLight``, for the
+scene's ``point_lights``) or, with a radius, a small sphere (a ``Mesh``, for its ``meshes``)."""
 
 from __future__ import annotations
 
@@ -12,7 +14,7 @@ from typing import Sequence, Union
 
 import torch
 
-from .scene import Material, Mesh
+from .scene import Material, Mesh, PointLight, Spot
 
 Number = Union[float, torch.Tensor]
 
@@ -110,20 +112,24 @@ def _icosphere(subdivisions: int):
 
 
 def sphere_light(position: Sequence[float] | torch.Tensor, intensity: Number | Sequence[float] = 1.0,
-                 radius: Number = 0.01, subdivisions: int = 1) -> Mesh:
+                 radius: Number = 0.01, subdivisions: int = 1, spot: Spot | None = None) -> Mesh:
     """A point light with a radius: a sphere of ``radius`` around ``position`` (a geodesic
     sphere, an icosahedron split ``subdivisions`` times: 80 faces by default) emitting a
     constant radiance outwards, such that its radiant intensity (W/sr, a number or 3 values;
     Mitsuba's ``point`` has the same parameter) averaged over directions is ``intensity``: seen
     from outside, as a point light of that intensity, within the polyhedron's departure from a
     sphere (its projected area varies with the direction by a few percent). ``radius`` must be
-    positive: a point light of radius zero, which would have no boundary terms (as in
-    Mitsuba), is not available. The tessellation is coarse on purpose: the derivative of the
+    positive: ``point_light`` with radius 0 gives a delta light, whose shadows have no
+    boundary terms (as in Mitsuba). The tessellation is coarse on purpose: the derivative of the
     light's position comes from its outline's edges seen from the lit surfaces, and today's side
     rays bias it more the finer the outline (docs/gradients.md).
 
+    Light samples find it by solid angle (``light_sampling="solid_angle"``): uniformly in the
+    cone of directions it subtends, so that they land on the side it shows.
+
     ``position``, ``intensity`` and ``radius`` may be tensors with ``requires_grad``; as for
-    ``sun``, gradients reach them, and its shadows have boundary terms."""
+    ``sun``, gradients reach them, and its shadows have boundary terms. ``spot``: a ``Spot``
+    profile scaling the radiance by the direction it leaves in (see ``spot_light``)."""
     p = torch.as_tensor(position, dtype=torch.float64)
     r = torch.as_tensor(radius, dtype=torch.float64)
     i = torch.as_tensor(intensity, dtype=torch.float64).reshape(-1)
@@ -144,4 +150,61 @@ def sphere_light(position: Sequence[float] | torch.Tensor, intensity: Number | S
     area = float(torch.linalg.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]).norm(dim=-1).sum()) / 2
     radiance = (i / (area / 4 * r.reshape(()) ** 2)).expand(3)
     return Mesh(vertices=vertices.float(), indices=indices, emission=radiance.float(),
-                material=Material(diffuse=0.0, specular=0.0))
+                material=Material(diffuse=0.0, specular=0.0), spot=spot,
+                light_sampling="solid_angle")
+
+
+def _is_zero(radius: Number, name: str) -> bool:
+    r = torch.as_tensor(radius, dtype=torch.float64)
+    if r.numel() != 1 or not 0 <= float(r.detach()) < math.inf:
+        raise ValueError(f"{name}: radius must be a finite number >= 0, got {radius!r}")
+    return float(r.detach()) == 0
+
+
+def point_light(position: Sequence[float] | torch.Tensor, intensity: Number | Sequence[float] = 1.0,
+                radius: Number = 0.0, subdivisions: int = 1) -> PointLight | Mesh:
+    """Mitsuba's ``point``: radiant ``intensity`` (W/sr, a number or 3 values) from ``position``.
+    With ``radius`` 0, a ``PointLight`` (for ``Scene(point_lights=...)``): a delta light, whose
+    shadows have no boundary terms (as in Mitsuba); with a radius, ``sphere_light`` (a ``Mesh``
+    for ``Scene(meshes=...)``), whose shadows do. Tensors with ``requires_grad`` get gradients."""
+    if _is_zero(radius, "point_light"):
+        return PointLight(position=_vector(position, "point_light: position"),
+                          intensity=_intensity(intensity, "point_light"))
+    return sphere_light(position, intensity, radius, subdivisions)
+
+
+def spot_light(position: Sequence[float] | torch.Tensor, direction: Sequence[float] | torch.Tensor,
+               intensity: Number | Sequence[float] = 1.0, cutoff_angle: Number = 20.0,
+               beam_width: Number | None = None, radius: Number = 0.0,
+               subdivisions: int = 1) -> PointLight | Mesh:
+    """Mitsuba's ``spot``: radiant ``intensity`` (W/sr, a number or 3 values) from ``position``
+    along ``direction`` (any length), full within ``beam_width`` degrees of it (default: three
+    quarters of ``cutoff_angle``), none beyond ``cutoff_angle`` degrees, falling linearly with
+    the angle between (``Spot``). With ``radius`` 0, a ``PointLight`` (for
+    ``Scene(point_lights=...)``): a delta light, whose shadows have no boundary terms (as in
+    Mitsuba). With a radius, a small emitting sphere (``sphere_light``, a ``Mesh`` for
+    ``Scene(meshes=...)``) whose radiance has the profile in the direction it leaves in: seen
+    from afar, the same light; its shadows are soft and have boundary terms. Every value may be
+    a tensor with ``requires_grad``."""
+    spot = Spot(direction=_vector(direction, "spot_light: direction"), cutoff_angle=cutoff_angle,
+                beam_width=beam_width)
+    if _is_zero(radius, "spot_light"):
+        return PointLight(position=_vector(position, "spot_light: position"),
+                          intensity=_intensity(intensity, "spot_light"), spot=spot)
+    return sphere_light(position, intensity, radius, subdivisions, spot=spot)
+
+
+def _vector(value, name: str) -> torch.Tensor:
+    t = value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float32)
+    if t.shape != (3,) or not bool(torch.isfinite(t.detach()).all()):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
+    return t
+
+
+def _intensity(value, name: str):
+    """``value`` checked (1 or 3 numbers >= 0) and returned as given: a tensor stays the one the
+    light holds, to optimise."""
+    t = torch.as_tensor(value).detach().reshape(-1).double()
+    if t.numel() not in (1, 3) or not bool(torch.isfinite(t).all()) or bool((t < 0).any()):
+        raise ValueError(f"{name}: intensity must be 1 or 3 finite numbers >= 0, got {value!r}")
+    return value if isinstance(value, torch.Tensor) else torch.as_tensor(value, dtype=torch.float32)

@@ -23,19 +23,22 @@ import torch.autograd.forward_ad as fwad
 
 from . import _core
 from . import _validate as v
-from .scene import Camera, EnvironmentMap, Material, Mesh, Scene, frame_from_to_world
+from .scene import (Camera, EnvironmentMap, Material, Mesh, PointLight, Scene, Spot,
+                    frame_from_to_world)
 
 SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
 MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
+LIGHT_SAMPLING = {"area": False, "solid_angle": True}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
 # A gradient slot of the core: ("camera",), ("envmap",), ("envmap_rotation",),
 # ("meshes", i, "vertices" | "uvs" | "normals" | "emission" | "colors"),
-# ("materials", i, "diffuse" | "specular" | "roughness" | "ior" | "normal_map").
+# ("materials", i, "diffuse" | "specular" | "roughness" | "ior" | "normal_map"),
+# ("meshes", i, "spot_profile"), ("point_lights", i, "position" | "intensity" | "spot_profile").
 Slot = Tuple
 
 
@@ -49,6 +52,7 @@ class FlatScene:
     materials: List[dict] = field(default_factory=list)
     meshes: List[dict] = field(default_factory=list)
     envmap: Optional[dict] = None
+    point_lights: List[dict] = field(default_factory=list)
     height: int = 0  # size of the rendered image (the crop window if one is set)
     width: int = 0
     params: Dict[Slot, torch.Tensor] = field(default_factory=dict)
@@ -194,7 +198,8 @@ def _flatten_views(scene: Scene, cameras) -> Tuple[FlatScene, List[dict], List[t
         params.append(one.params[("camera",)])
     if not isinstance(scene, Scene):
         v.fail("scene", f"expected an edgepath.Scene, got {type(scene).__name__}")
-    flat = flatten_scene(Scene(cameras[0], scene.meshes, scene.envmap))
+    flat = flatten_scene(Scene(cameras[0], scene.meshes, scene.envmap,
+                               getattr(scene, "point_lights", ())))
     del flat.params[("camera",)]
     flat.cache = _scene_cache(scene)
     return flat, views, params
@@ -203,7 +208,7 @@ def _flatten_views(scene: Scene, cameras) -> Tuple[FlatScene, List[dict], List[t
 def render_views_flat(flat: FlatScene, views: List[dict], options: RenderOptions) -> torch.Tensor:
     """One call into the core for every view: (V, H, W, 3)."""
     images = torch.empty((len(views), flat.height, flat.width, 3), dtype=torch.float32)
-    _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), cache=flat.cache)
+    _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), flat=flat)
     return images
 
 
@@ -235,7 +240,7 @@ class _RenderViewsFunction(torch.autograd.Function):
             adjoint = grad_images.detach().to(torch.float32).contiguous()
             _call_core(_core.render_views_gradients, ctx.views, *flat.core_args()[1:], adjoint,
                        flat.slot_buffers(buffers), camera_grads, ctx.grad_options.core(),
-                       cache=flat.cache)
+                       flat=flat)
         gradients = [buffers.get(s) for s in ctx.slots] + [camera_grads[k] for k in ctx.view_indices]
         return (None,) * 6 + tuple(_first_order_only(ctx, gradients))
 
@@ -261,7 +266,7 @@ class _RenderFunction(torch.autograd.Function):
         if buffers:
             adjoint = grad_image.detach().to(torch.float32).contiguous()
             _call_core(_core.render_gradients, *flat.core_args(), adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache)
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), flat=flat)
         return (None, None, None, None, *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
 
@@ -328,7 +333,7 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
     if directions:
         _call_core(_core.derivative_image, *flat.core_args(), flat.slot_buffers(directions),
-                   image, options.core(), cache=flat.cache)
+                   image, options.core(), flat=flat)
     else:
         image.zero_()
     return image
@@ -414,7 +419,7 @@ def render_channels_flat(flat: FlatScene, names: List[str],
     values = torch.empty((flat.height, flat.width, nv), dtype=torch.float32)
     ids = torch.empty((flat.height, flat.width, ni), dtype=torch.int32)
     stats = _call_core(_core.render_channels, *flat.core_args(), names, values, ids, options.core(),
-                       cache=flat.cache)
+                       flat=flat)
     return values, ids, stats
 
 
@@ -440,7 +445,7 @@ class _ChannelsFunction(torch.autograd.Function):
         if buffers and grad_values is not None:
             adjoint = grad_values.detach().to(torch.float32).contiguous()
             _call_core(_core.channel_gradients, *flat.core_args(), ctx.names, adjoint,
-                       flat.slot_buffers(buffers), ctx.grad_options.core(), cache=flat.cache)
+                       flat.slot_buffers(buffers), ctx.grad_options.core(), flat=flat)
         return (None, None, None, None, None,
                 *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
@@ -462,7 +467,7 @@ def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tens
     values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
     if directions:
         _call_core(_core.channel_derivative_image, *flat.core_args(), names,
-                   flat.slot_buffers(directions), values, options.core(), cache=flat.cache)
+                   flat.slot_buffers(directions), values, options.core(), flat=flat)
     else:
         values.zero_()
     return _split_channels(names, values, None)
@@ -545,7 +550,7 @@ def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mi
 def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, dict]:
     """One call into the core. Returns the image and the core's counters."""
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
-    stats = _call_core(_core.render, *flat.core_args(), image, options.core(), cache=flat.cache)
+    stats = _call_core(_core.render, *flat.core_args(), image, options.core(), flat=flat)
     return image, stats
 
 
@@ -576,14 +581,23 @@ def flatten_scene(scene: Scene) -> FlatScene:
 
     if scene.envmap is not None:
         _flatten_envmap(scene.envmap, flat)
+    lights = getattr(scene, "point_lights", ())
+    if not isinstance(lights, (list, tuple)):
+        v.fail("point_lights", f"expected a list of edgepath.PointLight, got "
+                               f"{type(lights).__name__}")
+    for i, light in enumerate(lights):
+        _flatten_point_light(light, i, flat)
     return flat
 
 
 # ---- pieces -------------------------------------------------------------------------------
 
-def _call_core(fn, *args, cache=None):
+def _call_core(fn, *args, flat: Optional[FlatScene] = None):
+    """``fn(*args)`` with the flat scene's cache and point lights; core errors name the user's
+    fields."""
     try:
-        return fn(*args, cache=cache)
+        return fn(*args, cache=None if flat is None else flat.cache,
+                  point_lights=[] if flat is None else flat.point_lights)
     except ValueError as error:
         raise ValueError(_user_field_names(str(error))) from None
 
@@ -739,6 +753,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "emission": None,
         "colors": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
+        "sample_solid_angle": v.choice(getattr(mesh, "light_sampling", "area"),
+                                       f + ".light_sampling", LIGHT_SAMPLING),
         "material": i,
     }
     if mesh.uvs is not None:
@@ -757,9 +773,49 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
     if colors is not None:
         colors = v.float_tensor(colors, f + ".colors", (vertices.shape[0], 3))
         out["colors"] = _param(flat, ("meshes", i, "colors"), colors)
+    spot = getattr(mesh, "spot", None)
+    if spot is not None:
+        if mesh.emission is None:
+            v.fail(f + ".spot", "a spot profile needs an emitting mesh (give emission)")
+        out["spot_profile"] = _spot_profile(spot, f + ".spot", flat, ("meshes", i, "spot_profile"))
     material = _flatten_material(mesh.material, i, mesh.emission is not None, flat)
     flat.meshes.append(out)
     flat.materials.append(material)
+
+
+def _spot_profile(spot, f: str, flat: FlatScene, slot: Slot) -> List[float]:
+    """The core's five values of a Spot (axis, cutoff angle and beam width in radians)."""
+    if not isinstance(spot, Spot):
+        v.fail(f, f"expected an edgepath.Spot, got {type(spot).__name__}")
+    axis = v.float_tensor(spot.direction, f + ".direction", (3,))
+    da = axis.detach()
+    if not bool(torch.isfinite(da).all()) or float(da.norm()) == 0:
+        v.fail(f + ".direction", f"must be 3 finite numbers, not all zero, got {da.tolist()}")
+    cutoff = v.scalar_tensor(spot.cutoff_angle, f + ".cutoff_angle")
+    beam = cutoff * 0.75 if spot.beam_width is None else \
+        v.scalar_tensor(spot.beam_width, f + ".beam_width")
+    c, b = float(cutoff.detach()), float(beam.detach())
+    if not 0 < c <= 180:
+        v.fail(f + ".cutoff_angle", f"must be in (0, 180] degrees, got {c}")
+    if not 0 <= b < c:
+        v.fail(f + ".beam_width", f"must be in [0, cutoff_angle) degrees, got {b} "
+                                  f"(cutoff_angle {c})")
+    profile = torch.cat([axis, torch.deg2rad(cutoff), torch.deg2rad(beam)])
+    return [float(x) for x in _param(flat, slot, profile).tolist()]
+
+
+def _flatten_point_light(light, i: int, flat: FlatScene) -> None:
+    f = f"point_lights[{i}]"
+    if not isinstance(light, PointLight):
+        v.fail(f, f"expected an edgepath.PointLight, got {type(light).__name__}")
+    position = v.float_tensor(light.position, f + ".position", (3,))
+    intensity = v.texture(light.intensity, f + ".intensity", 3).reshape(3)
+    slot = ("point_lights", i)
+    out = {"position": [float(x) for x in _param(flat, slot + ("position",), position).tolist()],
+           "intensity": [float(x) for x in _param(flat, slot + ("intensity",), intensity).tolist()]}
+    if light.spot is not None:
+        out["spot_profile"] = _spot_profile(light.spot, f + ".spot", flat, slot + ("spot_profile",))
+    flat.point_lights.append(out)
 
 
 def _flatten_envmap(envmap, flat: FlatScene) -> None:
@@ -803,6 +859,7 @@ def _check_direction(param, direction) -> Tuple[torch.Tensor, torch.Tensor]:
 
 
 _DUAL_LEVEL_LOCK = threading.Lock()
+SPOT_FIELDS = ("direction", "cutoff_angle", "beam_width")
 
 
 def _slot_directions(scene: Scene, param, direction) -> Dict[Slot, torch.Tensor]:
@@ -855,7 +912,7 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
 
     def swap(obj, names):
         nonlocal found
-        if not isinstance(obj, (Camera, Mesh, Material, EnvironmentMap)):
+        if not isinstance(obj, (Camera, Mesh, Material, EnvironmentMap, PointLight, Spot)):
             return obj  # None, or a wrong type the flattening reports
         copy = object.__new__(type(obj))
         copy.__dict__.update(obj.__dict__)
@@ -876,14 +933,23 @@ def _substitute(scene: Scene, param: torch.Tensor, value: torch.Tensor,
             m = swap(mesh, ("vertices", "uvs", "normals", "emission", "colors"))
             if isinstance(mesh, Mesh):
                 m.material = swap(mesh.material, ("diffuse", "specular", "roughness", "ior", "normal_map"))
+                m.spot = swap(getattr(mesh, "spot", None), SPOT_FIELDS)
             meshes.append(m)
+    lights = getattr(scene, "point_lights", ())
+    if isinstance(lights, (list, tuple)):
+        lights = []
+        for light in scene.point_lights:
+            copy = swap(light, ("position", "intensity"))
+            if isinstance(light, PointLight):
+                copy.spot = swap(light.spot, SPOT_FIELDS)
+            lights.append(copy)
     envmap = swap(scene.envmap, ("values", "to_world", "scale"))
     if not found:
         if not required:
             return None
         v.fail("param", "is not a tensor of this scene (pass the very tensor the scene holds, "
                         "e.g. scene.meshes[0].vertices)")
-    return Scene(camera=camera, meshes=meshes, envmap=envmap)
+    return Scene(camera=camera, meshes=meshes, envmap=envmap, point_lights=lights)
 
 
 _MATERIAL_FIELD = re.compile(r"\bmaterials\[(\d+)\]")

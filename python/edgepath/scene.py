@@ -121,6 +121,43 @@ class Material:
         return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"
 
 
+class Spot:
+    """A spot light's angular profile, as Mitsuba's ``spot``: emission is scaled by 1 within
+    ``beam_width`` degrees of the axis ``direction`` (a (3,) tensor, any length), by 0 beyond
+    ``cutoff_angle`` degrees, and linearly in the angle between (a continuous falloff, so its
+    derivatives need no boundary terms). ``beam_width`` defaults to three quarters of
+    ``cutoff_angle`` (as Mitsuba); 0 <= beam_width < cutoff_angle <= 180. Every value is
+    differentiable (a tensor with ``requires_grad``)."""
+
+    def __init__(self, direction: torch.Tensor, cutoff_angle: Constant = 20.0,
+                 beam_width: Optional[Constant] = None):
+        self.direction = direction
+        self.cutoff_angle = cutoff_angle
+        self.beam_width = beam_width
+
+    def __repr__(self):
+        return f"Spot(cutoff_angle={self.cutoff_angle}, beam_width={self.beam_width})"
+
+
+class PointLight:
+    """A light at a point (Mitsuba's ``point``, or its ``spot`` with ``spot``): radiant
+    ``intensity`` (W/sr; a float, or (3,) / (1,)) from ``position`` (3,) in every direction, or
+    scaled by a ``Spot`` profile. A delta light: found by next-event estimation only, it casts
+    hard shadows whose moving outlines have no boundary terms (as in Mitsuba), so derivatives
+    of the image where a shadow edge moves are missing; the shading it gives (intensity,
+    position, the spot's profile, the lit surfaces) is differentiated exactly. For shadows
+    with derivatives, give the light a radius (``edgepath.lights``)."""
+
+    def __init__(self, position: torch.Tensor, intensity: Constant = 1.0,
+                 spot: Optional[Spot] = None):
+        self.position = position
+        self.intensity = intensity
+        self.spot = spot
+
+    def __repr__(self):
+        return f"PointLight(intensity={self.intensity}, spot={self.spot!r})"
+
+
 class Mesh:
     """A triangle mesh. ``vertices`` (N, 3) float, ``indices`` (M, 3) int32/int64.
 
@@ -131,7 +168,13 @@ class Mesh:
     light emitting on the side of its face normal (both sides if ``two_sided_emission``).
     ``colors``: (N, 3) vertex colours, non-negative, one row per vertex (indexed by
     ``indices``); interpolated by the barycentrics, they multiply the material's diffuse
-    reflectance (constant or texture) and are differentiable."""
+    reflectance (constant or texture) and are differentiable.
+    ``spot``: a ``Spot`` profile that scales the emission by the direction it leaves in.
+    ``light_sampling``: how next-event estimation samples an emitting mesh: "area" (a triangle
+    by power, a point uniformly on it) or "solid_angle" (a direction uniformly in the cone of
+    the mesh's bounding sphere, towards the first of its triangles along it: for small convex
+    lights around a point, such as ``lights.sphere_light``, whose visible side it samples
+    evenly)."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,
@@ -140,7 +183,9 @@ class Mesh:
                  material: Optional[Material] = None,
                  emission: Optional[Constant] = None,
                  two_sided_emission: bool = False,
-                 colors: Optional[torch.Tensor] = None):
+                 colors: Optional[torch.Tensor] = None,
+                 spot: Optional[Spot] = None,
+                 light_sampling: str = "area"):
         self.vertices = vertices
         self.indices = indices
         self.uvs = uvs
@@ -151,6 +196,8 @@ class Mesh:
         self.emission = emission
         self.two_sided_emission = two_sided_emission
         self.colors = colors
+        self.spot = spot
+        self.light_sampling = light_sampling
 
     def __repr__(self):
         n = tuple(self.vertices.shape) if isinstance(self.vertices, torch.Tensor) else "?"
@@ -175,13 +222,16 @@ class EnvironmentMap:
 
 
 class Scene:
-    """A camera, a list of meshes (some of them emitters), and an optional environment map."""
+    """A camera, a list of meshes (some of them emitters), an optional environment map, and
+    a list of ``PointLight``s (lights at a point, without a radius)."""
 
     def __init__(self, camera: Camera, meshes: Sequence[Mesh],
-                 envmap: Optional[EnvironmentMap] = None):
+                 envmap: Optional[EnvironmentMap] = None,
+                 point_lights: Sequence[PointLight] = ()):
         self.camera = camera
         self.meshes = meshes
         self.envmap = envmap
+        self.point_lights = point_lights
         # The renderer's own scene (ray-tracing BVH, edge list), kept across renders and
         # updated from what changed (edgepath.render); never copied with the scene.
         self._core_cache = None
@@ -210,4 +260,6 @@ class Scene:
         return state
 
     def __repr__(self):
-        return f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r})"
+        lights = getattr(self, "point_lights", ())
+        return (f"Scene(camera={self.camera!r}, meshes={len(self.meshes)}, envmap={self.envmap!r}"
+                + (f", point_lights={len(lights)})" if lights else ")"))

@@ -52,6 +52,24 @@ Vec3f d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir,
     return env.to_world_dir(d_local);
 }
 
+// Adjoint of Scene::emitted for mesh m at sp towards w, Le = tex(uv) s(w), given the adjoint
+// dLe of Le: into the emission texture (and uv, if duv), the spot profile's slot; returns the
+// adjoint of w.
+Vec3f d_emitted(const Mesh& m, const SceneGradients::MeshSlots* ms, const SurfacePoint& sp, const Vec3f& w,
+                const Vec3f& dLe, GradSink& sink, Vec2f* duv) {
+    const float s = Scene::spot_scale(m.spot, m.spot_profile, w);
+    float d3[3] = {dLe.x * s, dLe.y * s, dLe.z * s};
+    d_texture(m.emission, ms ? ms->emission : kNoSlot, sp.uv, d3, sink, duv);
+    Vec3f dw(0.f);
+    if (m.spot) {
+        float dp[kSpotParams] = {};
+        d_spot_falloff(m.spot_profile, w, dot(dLe, eval_texture3(m.emission, sp.uv)), dp, dw);
+        if (ms && ms->spot.wanted())
+            for (int i = 0; i < kSpotParams; ++i) sink.add(ms->spot, i, dp[i]);
+    }
+    return dw;
+}
+
 }  // namespace
 
 VertexGeometry::VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir) {
@@ -288,9 +306,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             Vec3f Le = scene.emitted(sp, wo);
             if (!is_black(Le)) {
                 A_k += a * Le * r.emission_weight;
-                Vec3f dLe = ab * r.emission_weight;
-                float d3[3] = {dLe.x, dLe.y, dLe.z};
-                d_texture(mesh.emission, ms ? ms->emission : kNoSlot, sp.uv, d3, sink, &ha.duv);
+                dwo += d_emitted(mesh, ms, sp, wo, ab * r.emission_weight, sink, &ha.duv);
             }
         }
 
@@ -314,10 +330,9 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
                 const SceneGradients::MeshSlots* lms = mesh_slots(slots, nr->hit.mesh);
                 VertexGeometry lg(scene, nr->hit, sp.p, nr->dir);
                 Le = scene.emitted(lg.sp, -nr->dir);
-                Vec3f dLe = ab * f * nr->scale;
-                float d3[3] = {dLe.x, dLe.y, dLe.z};
                 HitAdjoint la;
-                d_texture(lm.emission, lms ? lms->emission : kNoSlot, lg.sp.uv, d3, sink,
+                // The sample's direction is fixed: the profile's own direction does not move.
+                d_emitted(lm, lms, lg.sp, -nr->dir, ab * f * nr->scale, sink,
                           lm.emission.is_constant() ? nullptr : &la.duv);
                 if (!lm.emission.is_constant()) {
                     Vec3f d_dir_unused(0.f);
@@ -326,6 +341,49 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             }
             A_k += a * f * Le * nr->scale;
             d_bsdf_eval_world(bp, ns, wo, nr->dir, ab * Le * nr->scale, db);
+        }
+        // Point lights: N = f(wo, w) I s(-w) / r^2, w = normalize(q - p), r = |q - p|, for
+        // each light at q that the forward pass saw (the shadow ray traced again), at the
+        // vertices that sampled them.
+        for (size_t j = 0; j < scene.point_lights.size() && r.point_lights; ++j) {
+            const PointLightDesc& pl = scene.point_lights[j];
+            Vec3f wl;
+            float dist2;
+            if (!see_point_light(scene, sp, pl, wl, dist2)) continue;
+            const Vec3f f = bsdf_eval_world(bp, ns, wo, wl);
+            if (is_black(f)) continue;
+            const SceneGradients::PointLightSlots* ps =
+                j < slots.point_lights.size() ? &slots.point_lights[j] : nullptr;
+            const Vec3f I = Vec3f::load(pl.intensity);
+            const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
+            const float g = s / dist2;
+            A_k += a * f * I * g;
+            DBsdf<float> dl{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+            d_bsdf_eval_world(bp, ns, wo, wl, ab * I * g, dl);
+            db.diffuse += dl.diffuse;
+            db.specular += dl.specular;
+            db.n += dl.n;
+            db.wo += dl.wo;
+            db.alpha += dl.alpha;
+            Vec3f d_wl = dl.wi;
+            if (ps && ps->intensity.wanted()) {
+                const Vec3f dI = ab * f * g;
+                sink.add3(ps->intensity, 0, dI.x, dI.y, dI.z);
+            }
+            const float dg = dot(ab * f, I);
+            const float d_dist2 = -dg * g / dist2;
+            if (pl.spot) {
+                float dp[kSpotParams] = {};
+                Vec3f dw(0.f);
+                d_spot_falloff(pl.spot_profile, -wl, dg / dist2, dp, dw);
+                d_wl -= dw;
+                if (ps && ps->spot.wanted())
+                    for (int i = 0; i < kSpotParams; ++i) sink.add(ps->spot, i, dp[i]);
+            }
+            const Vec3f to = Vec3f::load(pl.position) - sp.p;
+            const Vec3f d_to = d_normalize(to, d_wl) + to * (2.f * d_dist2);
+            if (ps && ps->position.wanted()) sink.add3(ps->position, 0, d_to.x, d_to.y, d_to.z);
+            ha.dp -= d_to;
         }
         // Continuation: beta_next = beta T, T = f(wo, w_next) / pdf
         if (r.next && (k + 1 < K || rec.escaped)) {

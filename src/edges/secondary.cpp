@@ -64,8 +64,10 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     auto each_light_vertex = [&](auto&& f) {
         for (const Scene::EmissiveTriangle& l : scene.lights) {
             const Mesh& m = scene.meshes[size_t(l.mesh)];
-            const int32_t* t = m.indices + 3 * l.prim;
-            for (int k = 0; k < 3; ++k) f(m.vertex(t[k]));
+            // A mesh sampled by solid angle (prim -1): all its triangles.
+            const int64_t first = l.prim < 0 ? 0 : l.prim, end = l.prim < 0 ? m.num_triangles : l.prim + 1;
+            for (int64_t t = first; t < end; ++t)
+                for (int k = 0; k < 3; ++k) f(m.vertex(m.indices[3 * t + k]));
         }
     };
     Vec3f lo, hi;

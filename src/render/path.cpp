@@ -77,6 +77,17 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         LightSample ls;
         if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls, rv ? &rv->nee_area : nullptr);
         if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
+        // Point lights, each at every vertex, whatever the sampling strategy: no other way
+        // finds them. Their contribution f I s(-w) / r^2 has no random numbers.
+        if (rv) rv->point_lights = !is_delta(bp);
+        if (!is_delta(bp))
+            for (const PointLightDesc& pl : scene.point_lights) {
+                Vec3f wl;
+                float dist2;
+                if (!see_point_light(scene, sp, pl, wl, dist2, &counters)) continue;
+                const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
+                L += beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2);
+            }
 
         // BSDF sampling.
         float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();

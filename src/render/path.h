@@ -31,6 +31,7 @@ struct PathVertexRecord {
     // Next-event estimation at this vertex: one sample on the area lights, one on the
     // environment.
     NeeRecord nee_area, nee_env;
+    bool point_lights = false;  // the point lights were sampled here (a vertex that scatters)
     // Continuation by BSDF sampling. A smooth material's (next_delta) direction is a function
     // of the vertex, and next_inv_pdf the inverse probability of its lobe (next_refract: the
     // dielectric's transmission).
@@ -78,6 +79,23 @@ inline FirstHit first_hit(const Scene& scene, const Ray& ray, bool hide_emitters
 // sample that sees no discontinuity).
 inline bool same_surface(const FirstHit& a, const FirstHit& b) {
     return a.found == b.found && (!a.found || (a.hit.mesh == b.hit.mesh && a.hit.prim == b.hit.prim));
+}
+
+// Point light `light` seen from sp: the unit direction towards it, the squared distance, and
+// whether it lights sp (in front of it, within its spot profile, nothing in between).
+// `counters` counts the shadow ray, if one is traced.
+inline bool see_point_light(const Scene& scene, const SurfacePoint& sp, const PointLightDesc& light, Vec3f& dir,
+                            float& dist2, RayCounters* counters = nullptr) {
+    const Vec3f to = Vec3f::load(light.position) - sp.p;
+    dist2 = length_squared(to);
+    if (!(dist2 > 0.f)) return false;
+    const float dist = std::sqrt(dist2);
+    dir = to / dist;
+    if (!(Scene::spot_scale(light.spot, light.spot_profile, -dir) > 0.f)) return false;
+    Ray shadow = spawn_ray(sp, dir);
+    shadow.tmax = length(Vec3f::load(light.position) - shadow.origin) * (1.f - kShadowEpsilon);
+    if (counters) ++counters->shadow;
+    return !scene.occluded(shadow);
 }
 
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When

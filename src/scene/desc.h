@@ -55,6 +55,26 @@ struct MeshDesc {
     int material = 0;                    // index into SceneDesc::materials
     TextureDesc emission;                // 3 channels; empty: not an emitter
     bool two_sided_emission = false;     // false: emits on the side of the face normal only
+    // Emission scaled in each outgoing direction by a spot profile (scene/spot.h): its axis,
+    // cutoff angle and beam width (radians), when `spot` is set.
+    bool spot = false;
+    float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
+    // An emitter sampled by solid angle: uniformly in the cone of directions of its bounding
+    // sphere (the box's centre, the farthest vertex), towards its first triangle along the
+    // direction. Meant for small convex lights around a point (a sphere light): from outside,
+    // every sample lands on the side it shows. Otherwise (and from inside the sphere, where
+    // it is not sampled) by area, triangle by triangle.
+    bool sample_solid_angle = false;
+};
+
+// A light at a point (a delta light, as Mitsuba's `point` and `spot`): it radiates `intensity`
+// (W/sr) in every direction, or in a spot profile (scene/spot.h) when `spot` is set. Found only
+// by next-event estimation; its shadows have no boundary terms.
+struct PointLightDesc {
+    float position[3] = {0, 0, 0};
+    float intensity[3] = {1, 1, 1};
+    bool spot = false;
+    float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
 };
 
 // The ranges the kernels (and Embree, whose rays must stay within about 1.8e18) assume, checked
@@ -113,6 +133,7 @@ struct SceneDesc {
     std::vector<MeshDesc> meshes;
     bool has_envmap = false;
     EnvmapDesc envmap;
+    std::vector<PointLightDesc> point_lights;
 };
 
 enum class LightSampling { MIS = 0, LightOnly = 1, BSDFOnly = 2 };

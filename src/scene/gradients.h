@@ -22,12 +22,18 @@ struct GradSlot {
 struct SceneGradients {
     struct MeshSlots {
         GradSlot vertices, uvs, normals, emission, colors;
+        GradSlot spot;  // kSpotParams values (scene/spot.h), for an emitter with a spot profile
+    };
+    struct PointLightSlots {
+        GradSlot position, intensity;  // 3 values each
+        GradSlot spot;                 // kSpotParams values
     };
     struct MaterialSlots {
         GradSlot diffuse, specular, roughness, ior, normal_map;
     };
     std::vector<MeshSlots> meshes;        // one per mesh (may be empty: nothing wanted)
     std::vector<MaterialSlots> materials; // one per material
+    std::vector<PointLightSlots> point_lights;  // one per point light (or empty)
     GradSlot envmap;                      // (H, W, 3)
     GradSlot envmap_rotation;             // 9 values: the row-major to_world rotation
     GradSlot camera;                      // kCameraParams values (see scene/camera.h)
@@ -38,9 +44,11 @@ inline void number_slots(SceneGradients& g) {
     uint32_t key = 0;
     for (GradSlot* s : {&g.camera, &g.envmap, &g.envmap_rotation}) s->key = key++;
     for (auto& m : g.meshes)
-        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission, &m.colors}) s->key = key++;
+        for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission, &m.colors, &m.spot}) s->key = key++;
     for (auto& m : g.materials)
         for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness, &m.ior, &m.normal_map}) s->key = key++;
+    for (auto& l : g.point_lights)
+        for (GradSlot* s : {&l.position, &l.intensity, &l.spot}) s->key = key++;
 }
 
 inline void atomic_add(float* p, float v) {

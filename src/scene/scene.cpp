@@ -56,6 +56,16 @@ void check_texture(const TextureDesc& t, int channels, const std::string& field,
     if (non_negative) check_non_negative(t.data, n, field);
 }
 
+// A spot profile (scene/spot.h): a finite, nonzero axis and 0 <= beam width < cutoff <= pi.
+void check_spot(const float* p, const std::string& field) {
+    check_finite(p, kSpotParams, field);
+    if (!(length(Vec3f(p[0], p[1], p[2])) > 0.f)) fail(field, "the axis is zero");
+    if (!(p[3] > 0.f && p[3] <= 3.14159265f))
+        fail(field, "the cutoff angle must be in (0, pi] radians, got " + str(p[3]));
+    if (!(p[4] >= 0.f && p[4] < p[3]))
+        fail(field, "the beam width must be in [0, cutoff angle) radians, got " + str(p[4]));
+}
+
 void check_indices(const int32_t* idx, int64_t num_triangles, int64_t bound, const std::string& field,
                    const std::string& what) {
     for (int64_t i = 0; i < num_triangles * 3; ++i)
@@ -172,6 +182,7 @@ void validate_mesh(const MeshDesc& m, int i, int num_materials) {
         check_texture(m.emission, 3, f + ".emission", true);
         check_radiance(m.emission, 1.f, f + ".emission");
     }
+    if (m.spot) check_spot(m.spot_profile, f + ".spot_profile");
 }
 
 }  // namespace
@@ -243,6 +254,20 @@ Scene::~Scene() {
 namespace {
 
 void validate(const SceneDesc& desc) {
+    for (size_t i = 0; i < desc.point_lights.size(); ++i) {
+        const PointLightDesc& l = desc.point_lights[i];
+        const std::string f = "point_lights[" + str(i) + "]";
+        check_finite(l.position, 3, f + ".position");
+        for (int k = 0; k < 3; ++k)
+            if (!(std::abs(l.position[k]) <= kMaxCoordinate))
+                fail(f + ".position", "value " + str(l.position[k]) + " is beyond " + str(kMaxCoordinate));
+        check_finite(l.intensity, 3, f + ".intensity");
+        check_non_negative(l.intensity, 3, f + ".intensity");
+        for (int k = 0; k < 3; ++k)
+            if (!(l.intensity[k] <= kMaxRadiance))
+                fail(f + ".intensity", "value " + str(l.intensity[k]) + " is beyond " + str(kMaxRadiance));
+        if (l.spot) check_spot(l.spot_profile, f + ".spot_profile");
+    }
     validate_camera(desc.camera);
     if (desc.meshes.empty()) fail("meshes", "the scene has no meshes");
     for (size_t i = 0; i < desc.materials.size(); ++i) {
@@ -400,7 +425,11 @@ void Scene::set_views(const SceneDesc& desc) {
         m.material = md.material;
         m.emission = Texture(md.emission);
         m.two_sided_emission = md.two_sided_emission;
+        m.spot = md.spot;
+        m.solid_angle = md.sample_solid_angle;
+        std::copy(md.spot_profile, md.spot_profile + kSpotParams, m.spot_profile);
     }
+    point_lights = desc.point_lights;
 
     has_envmap = desc.has_envmap;
     envmap = Envmap();
@@ -479,11 +508,31 @@ void Scene::build_lights() {
         if (!m.is_emitter()) continue;
         m.light_offset = int64_t(lights.size());
         double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
+        double total = 0.0;
+        Vec3f lo, hi;  // the box of the triangles' vertices
         for (int64_t t = 0; t < m.num_triangles; ++t) {
             Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
             float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
+            total += area;
+            if (t == 0) lo = hi = a;
+            for (const Vec3f& v : {a, b, c}) {
+                lo = min(lo, v);
+                hi = max(hi, v);
+            }
+            if (m.solid_angle) continue;
             lights.push_back({int(i), t, area});
             light_weights.push_back(area * power);
+        }
+        if (m.solid_angle) {
+            // One entry for the mesh, weighted by its power as its triangles would be.
+            m.sphere_center = (lo + hi) * 0.5f;
+            m.sphere_radius = 0.f;
+            for (int64_t t = 0; t < 3 * m.num_triangles; ++t)
+                m.sphere_radius = std::max(m.sphere_radius, length(m.vertex(m.indices[t]) - m.sphere_center));
+            // Float rounding of the distances: the sphere must contain every vertex.
+            m.sphere_radius *= 1.f + 1e-6f;
+            lights.push_back({int(i), -1, float(total)});
+            light_weights.push_back(total * power);
         }
     }
     light_distribution = Distribution1D();
@@ -636,7 +685,7 @@ Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
     // normal would switch emission off along curves inside triangles near silhouettes, which
     // move with the geometry but lie on no edge.
     if (!m.two_sided_emission && dot(sp.ng, w) <= 0.f) return Vec3f(0.f);
-    return eval_texture3(m.emission, sp.uv);
+    return eval_texture3(m.emission, sp.uv) * spot_scale(m.spot, m.spot_profile, w);
 }
 
 bool Scene::sample_env(float u1, float u2, LightSample& ls) const {
@@ -652,11 +701,64 @@ bool Scene::sample_env(float u1, float u2, LightSample& ls) const {
     return ls.pdf > 0.f;
 }
 
+bool Scene::light_cone(const Mesh& m, const Vec3f& p, Vec3f& axis, float& one_minus_cos) const {
+    const Vec3f to = m.sphere_center - p;
+    const float d2 = length_squared(to);
+    const float r2 = m.sphere_radius * m.sphere_radius;
+    if (!(d2 > r2)) return false;
+    axis = to / std::sqrt(d2);
+    // 1 - sqrt(1 - s) without the cancellation: s / (1 + sqrt(1 - s)), s = r^2 / d^2.
+    const float s = r2 / d2;
+    one_minus_cos = s / (1.f + std::sqrt(1.f - s));
+    return one_minus_cos > 0.f;
+}
+
 bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const {
     if (!light_distribution.valid()) return false;
     float u = std::min(u0, 0.99999994f);
     int li = light_distribution.sample(u);
     const EmissiveTriangle& lt = lights[li];
+    if (lt.prim < 0) {
+        // By solid angle: a direction uniform in the bounding sphere's cone, then the first of
+        // the mesh's triangles along it.
+        const Mesh& m = meshes[size_t(lt.mesh)];
+        Vec3f axis;
+        float omc;
+        if (!light_cone(m, p, axis, omc)) return false;
+        const float cos_t = 1.f - u1 * omc;
+        const float sin_t = std::sqrt(std::max(0.f, u1 * omc * (2.f - u1 * omc)));
+        const float phi = 2.f * kPi * u2;
+        const Vec3f d = Frame(axis).to_world(Vec3f(std::cos(phi) * sin_t, std::sin(phi) * sin_t, cos_t));
+        TriangleHit<float> best;
+        int64_t prim = -1;
+        for (int64_t t = 0; t < m.num_triangles; ++t) {
+            if (m.is_degenerate(t)) continue;
+            const int32_t* tri = m.indices + 3 * t;
+            TriangleHit<float> h;
+            if (!intersect_triangle(p, d, m.vertex(tri[0]), m.vertex(tri[1]), m.vertex(tri[2]), h)) continue;
+            if (h.b1 < 0.f || h.b2 < 0.f || h.b1 + h.b2 > 1.f || !(h.t > 0.f)) continue;
+            if (prim < 0 || h.t < best.t) {
+                best = h;
+                prim = t;
+            }
+        }
+        if (prim < 0) return false;
+        SurfacePoint q = surface_point(lt.mesh, prim, best.b1, best.b2);
+        ls.radiance = emitted(q, -d);
+        if (is_black(ls.radiance)) return false;
+        ls.dir = d;
+        ls.dist = best.t;
+        ls.hit.mesh = lt.mesh;
+        ls.hit.prim = prim;
+        ls.hit.b1 = best.b1;
+        ls.hit.b2 = best.b2;
+        ls.hit.t = best.t;
+        ls.p = q.p;
+        ls.p_error = q.p_error;
+        ls.ng = q.ng;
+        ls.pdf = light_distribution.pmf(li) / (2.f * kPi * omc);
+        return ls.pdf > 0.f && std::isfinite(ls.pdf);
+    }
     Vec2f b = square_to_triangle(u1, u2);
     SurfacePoint q = surface_point(lt.mesh, lt.prim, b.x, b.y);
     Vec3f d = q.p - p;
@@ -685,6 +787,12 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
 float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
     const Mesh& m = meshes[q.mesh];
     if (m.light_offset < 0 || !light_distribution.valid()) return 0.f;
+    if (m.solid_angle) {
+        Vec3f axis;
+        float omc;
+        if (!light_cone(m, p, axis, omc)) return 0.f;
+        return light_distribution.pmf(int(m.light_offset)) / (2.f * kPi * omc);
+    }
     int64_t li = m.light_offset + q.prim;
     Vec3f d = q.p - p;
     float dist2 = length_squared(d);

@@ -18,6 +18,7 @@
 #include "scene/desc.h"
 #include "scene/envmap.h"
 #include "scene/geometry.h"
+#include "scene/spot.h"
 #include "scene/texture.h"
 
 namespace edgepath {
@@ -60,6 +61,11 @@ struct Mesh {
     int material = 0;
     Texture emission;
     bool two_sided_emission = false;
+    bool spot = false;         // emission scaled by the spot profile spot_profile (scene/spot.h)
+    float spot_profile[5] = {0, 0, 1, 0, 0};
+    bool solid_angle = false;  // sampled by the solid angle of its bounding sphere (desc.h)
+    Vec3f sphere_center;       // that sphere, when solid_angle (set by Scene::build_lights)
+    float sphere_radius = 0.f;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
@@ -169,12 +175,15 @@ public:
     bool has_envmap = false;
     Envmap envmap;
 
+    // A light to pick: a triangle, or (prim -1) a whole mesh sampled by solid angle.
     struct EmissiveTriangle {
         int mesh;
         int64_t prim;
         float area;
     };
     std::vector<EmissiveTriangle> lights;
+    // Delta lights (desc.h): next-event estimation only, every one at every vertex.
+    std::vector<PointLightDesc> point_lights;
     Distribution1D light_distribution;
     bool env_sampled = false;  // the environment has light to sample (not black)
 
@@ -196,6 +205,10 @@ public:
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
 
     bool has_lights() const { return light_distribution.valid() || env_sampled; }
+    // Radiance (or, for a point light, intensity) scale of a spot profile in direction w.
+    static float spot_scale(bool spot, const float* profile, const Vec3f& w) {
+        return spot ? spot_falloff(profile, w) : 1.f;
+    }
     // Next-event estimation samples both kinds of emitters separately, each with its own
     // sample: picking one of them at random would multiply a small lamp's nearly noiseless
     // estimate by a random 0 or 1/p.
@@ -235,6 +248,9 @@ private:
     void build_geometry(bool refittable);
     bool refit_geometry();  // false: it cannot (a build is needed)
     void build_lights();
+    // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and
+    // 1 - cos of its half angle; false if p is inside the sphere.
+    bool light_cone(const Mesh& m, const Vec3f& p, Vec3f& axis, float& one_minus_cos) const;
 
     RTCScene rtc_ = nullptr;
     bool refittable_ = false;  // the BVH was built for refitting

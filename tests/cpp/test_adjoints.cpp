@@ -12,6 +12,7 @@
 #include "scene/camera.h"
 #include "scene/edges.h"
 #include "scene/geometry.h"
+#include "scene/spot.h"
 #include "scene/texture.h"
 
 namespace edgepath {
@@ -104,6 +105,37 @@ TEST(Adjoint, BsdfWorldMatchesLocalModel) {
 }
 
 // Inputs: ns[3], wo[3]; ng fixed. Cases: unbent, bent on the front, bent on the back.
+// Spot profile: inputs axis[3] (any length), cutoff, beam width, w[3] (used as given). Cases in
+// the falloff between the beam and the cutoff, where it has a derivative; inside the beam and
+// beyond the cutoff it is flat, and the adjoint must say so.
+TEST(Adjoint, SpotFalloff) {
+    auto f = [](const std::vector<double>& x) {
+        return std::vector<double>{spot_falloff(x.data(), v3(x, 5))};
+    };
+    auto adjoint = [](const std::vector<double>& x, const std::vector<double>& ybar) {
+        std::vector<double> xbar(8, 0.0);
+        Vec3d dw(0.0);
+        d_spot_falloff(x.data(), v3(x, 5), ybar[0], xbar.data(), dw);
+        put(xbar, 5, dw);
+        return xbar;
+    };
+    const Vec3d axis(0.3, -0.2, 1.7);
+    const Vec3d u = normalize(axis);
+    const Vec3d side = normalize(cross(u, Vec3d(1, 0, 0)));
+    int in_falloff = 0;
+    for (double angle : {0.1, 0.25, 0.3, 0.34, 0.5, 0.9}) {
+        const Vec3d w = u * std::cos(angle) + side * std::sin(angle);
+        std::vector<double> x = {axis.x, axis.y, axis.z, 0.35, 0.2, w.x, w.y, w.z};
+        const double value = f(x)[0];
+        if (value > 0.0 && value < 1.0) ++in_falloff;
+        check_adjoint(f, adjoint, x, "spot_falloff");
+    }
+    EXPECT_EQ(in_falloff, 3);
+    // A wide spot (cutoff past 90 degrees) with no beam: the falloff reaches the axis.
+    const Vec3d w = u * std::cos(2.0) + side * std::sin(2.0);
+    check_adjoint(f, adjoint, {axis.x, axis.y, axis.z, 2.5, 0.0, w.x, w.y, w.z}, "spot_falloff wide");
+}
+
 TEST(Adjoint, BendNormal) {
     const Vec3d ng(0, 0, 1);
     struct Case {

@@ -508,5 +508,44 @@ TEST(Render, PacketsMatchSingleRays) {
     }
 }
 
+// A sphere light sampled by solid angle: every sample lands on the side it shows, its density
+// is the one light_pdf gives the same point (MIS needs both to agree), and the irradiance it
+// estimates at a few points equals the area sampling's estimate of the same mesh (measured:
+// within 0.5% at 1e5 samples, 0.2% at 2e6, by turns above and below: the noise).
+TEST(Render, SphereLightSampledBySolidAngle) {
+    MeshData ball = make_sphere(Vec3f(0.3f, 1.5f, -0.2f), 0.2f, 8, 16);
+    ConstTex black({0, 0, 0}), rough({0.5f}), le({2.f, 2.f, 2.f});
+    double estimate[2][3] = {};
+    const Vec3f points[3] = {Vec3f(0, 0, 0), Vec3f(1.f, 0.5f, 0.3f), Vec3f(-0.5f, 1.4f, -0.4f)};
+    const Vec3f n(0, 1, 0);
+    for (int mode = 0; mode < 2; ++mode) {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 8, 8, 45);
+        d.materials.push_back(material(black, black, rough));
+        d.meshes.push_back(ball.desc(0));
+        d.meshes[0].emission = le.desc();
+        d.meshes[0].sample_solid_angle = mode == 0;
+        auto scene = build_scene(d);
+        Rng rng = Rng::for_sample(7, 0, 0);
+        const int N = 100000;
+        for (int i = 0; i < 3; ++i) {
+            double sum = 0;
+            for (int s = 0; s < N; ++s) {
+                LightSample ls;
+                const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+                if (!scene->sample_area_light(points[i], u0, u1, u2, ls)) continue;
+                const SurfacePoint q = scene->surface_point(ls.hit);
+                ASSERT_GT(dot(q.ng, -ls.dir), 0.f);
+                if (mode == 0 && s < 1000)
+                    EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 1e-4f * ls.pdf);
+                sum += ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf;
+            }
+            estimate[mode][i] = sum / N;
+        }
+    }
+    for (int i = 0; i < 3; ++i)
+        EXPECT_NEAR(estimate[0][i], estimate[1][i], 0.01 * estimate[1][i]) << "point " << i << ": " << estimate[0][i] << " by solid angle, " << estimate[1][i] << " by area";
+}
+
 }  // namespace
 }  // namespace edgepath

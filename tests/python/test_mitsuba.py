@@ -117,8 +117,8 @@ def _line_of(path, text):
 
 UNSUPPORTED = [
     ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
-    ('<emitter type="spot"><point name="position" value="0, 1, 0"/></emitter>',
-     "unsupported emitter type 'spot'"),
+    ('<emitter type="projector"><float name="scale" value="2"/></emitter>',
+     "unsupported emitter type 'projector'"),
     ('<shape type="rectangle"><bsdf type="roughdielectric"/></shape>',
      "unsupported bsdf type 'roughdielectric'"),
     ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',
@@ -404,7 +404,42 @@ def test_point_emitter(tmp_path):
     _assert_emitter_errors(tmp_path, "point", [
         ('<point name="position" value="0 0 1"/><transform name="to_world"><scale value="1"/></transform>',
          "position or to_world"),
-        ('<float name="radius" value="0"/>', "radius 0.0: must be positive"),
+        ('<float name="radius" value="-1"/>', "radius -1.0: must be finite and >= 0"),
+        ('<rgb name="intensity" value="-1"/>', "intensity must be a constant >= 0"),
+    ])
+
+
+def test_point_and_spot_emitters_of_radius_zero_are_delta_lights(tmp_path):
+    body = """<shape type="rectangle" id="floor"/>
+    <emitter type="point" id="bulb"><point name="position" value="0, 0, 2"/>
+        <rgb name="intensity" value="8, 4, 2"/><float name="radius" value="0"/></emitter>
+    <emitter type="spot"><transform name="to_world"><lookat origin="1, 2, 3" target="1, 2, 0"/></transform>
+        <float name="cutoff_angle" value="40"/><float name="radius" value="0"/></emitter>
+    <emitter type="spot" id="round"><transform name="to_world"><translate z="3"/></transform>
+        <float name="beam_width" value="5"/></emitter>"""
+    s = ep.load_mitsuba(_write(tmp_path, body))
+    assert s.shape_ids == ["floor", "round"] and list(s.point_lights) == ["bulb", "spot_1"]
+    bulb, spot = s.scene.point_lights
+    assert bulb is s.point_lights["bulb"] and bulb.spot is None
+    assert torch.equal(bulb.position.float(), torch.tensor([0.0, 0, 2]))
+    assert torch.allclose(bulb.intensity, torch.tensor([8.0, 4, 2]))
+    # A spot shines along its to_world's z axis, from its translation.
+    assert torch.allclose(spot.position.float(), torch.tensor([1.0, 2, 3]))
+    assert torch.allclose(spot.spot.direction.float(), torch.tensor([0.0, 0, -1]), atol=1e-6)
+    assert (float(spot.spot.cutoff_angle), float(spot.spot.beam_width)) == (40.0, 30.0)
+    names = s.parameters()
+    assert names["bulb.intensity.value"] is bulb.intensity and names["bulb.position"] is bulb.position
+    assert names["spot_1.cutoff_angle"] is spot.spot.cutoff_angle
+    assert names["spot_1.direction"] is spot.spot.direction
+    # Without a radius, a small sphere with the profile (the default cutoff angle 20 degrees).
+    round_spot = s.shapes["round"]
+    assert round_spot.spot is not None and float(round_spot.spot.cutoff_angle) == 20.0
+    assert float(round_spot.spot.beam_width) == 5.0
+    _assert_emitter_errors(tmp_path, "spot", [
+        ('<point name="position" value="0 0 1"/>', "a spot is placed by to_world"),
+        ('<float name="cutoff_angle" value="0"/>', "cutoff_angle 0.0"),
+        ('<float name="cutoff_angle" value="10"/><float name="beam_width" value="10"/>', "beam_width 10.0"),
+        ('<float name="radius" value="-1"/>', "radius -1.0"),
         ('<rgb name="intensity" value="-1"/>', "intensity must be a constant >= 0"),
     ])
 

@@ -1,17 +1,18 @@
 """Emitters of Mitsuba scene files: area lights inside a ``<shape>``, the environment
-(``constant`` or ``envmap``), ``directional`` suns and ``point`` lights at the top level."""
+(``constant`` or ``envmap``), ``directional`` suns, ``point`` and ``spot`` lights at the top
+level."""
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import List, Optional, Union
+from typing import List, Optional, Tuple, Union
 
 import torch
 
 from ..io import _texture_rgb
-from ..lights import sphere_light, sun
-from ..scene import EnvironmentMap, Mesh
+from ..lights import point_light, sphere_light, spot_light, sun
+from ..scene import EnvironmentMap, Mesh, PointLight as DeltaLight
 from .textures import colour
 from .transforms import transform
 from .xml import Node, Reader
@@ -63,7 +64,7 @@ def load_environment(ctx: Reader, node: Node) -> EnvironmentMap:
     if kind == "area":
         ctx.fail(node, "area emitters belong inside a <shape>")
     ctx.fail(node, f"unsupported emitter type '{kind}' (supported: area, constant, envmap, "
-                   "directional, point)")
+                   "directional, point, spot)")
 
 
 @dataclass
@@ -77,11 +78,13 @@ class Sun:
 
 @dataclass
 class PointLight:
-    """A ``point`` emitter, until the scene's bounds are known (for a default radius)."""
+    """A ``point`` or ``spot`` emitter, until the scene's bounds are known (for a default
+    radius). ``spot``: (direction, cutoff_angle, beam_width) of a spot, else None."""
     sid: str
     position: torch.Tensor
     intensity: torch.Tensor
     radius: Optional[float]
+    spot: Optional[tuple] = None
 
 
 def _placed_emitter(ctx: Reader, node: Node, vector: str, column: int, power: str):
@@ -109,16 +112,52 @@ def _placed_emitter(ctx: Reader, node: Node, vector: str, column: int, power: st
 POINT_RADIUS = 1e-3
 
 
+def _radius(ctx: Reader, node: Node, props) -> Optional[float]:
+    radius = ctx.float_value(props.pop("radius")) if "radius" in props else None
+    if radius is not None and not 0 <= radius < math.inf:
+        ctx.fail(node, f"radius {radius}: must be finite and >= 0")
+    return radius
+
+
 def load_point(ctx: Reader, node: Node, index: int) -> PointLight:
     """Mitsuba's ``point`` (``intensity``, default 1; ``position`` or the translation of a
-    ``to_world``) with edgepath's ``radius`` (default ``POINT_RADIUS`` times the scene's)."""
+    ``to_world``) with edgepath's ``radius`` (default ``POINT_RADIUS`` times the scene's; 0: a
+    delta light)."""
     props, position, intensity = _placed_emitter(ctx, node, "position", 3, "intensity")
-    radius = ctx.float_value(props.pop("radius")) if "radius" in props else None
-    if radius is not None and not 0 < radius < math.inf:
-        ctx.fail(node, f"radius {radius}: must be positive (edgepath has no point lights of "
-                       "radius 0)")
+    radius = _radius(ctx, node, props)
     ctx.leftovers(node, props, "emitter")
     return PointLight(node.attrs.get("id", f"point_{index}"), position, intensity, radius)
+
+
+def load_spot(ctx: Reader, node: Node, index: int) -> PointLight:
+    """Mitsuba's ``spot`` (``intensity``, default 1; ``cutoff_angle``, default 20 degrees;
+    ``beam_width``, default three quarters of it; at the origin shining along +z, placed by
+    ``to_world``) with edgepath's ``radius`` (as ``point``'s)."""
+    props, nested = ctx.properties(node)
+    if "position" in props:
+        ctx.fail(node, "a spot is placed by to_world (a position is not a spot's property)")
+    m = transform(ctx, props.pop("to_world")) if "to_world" in props else \
+        torch.eye(4, dtype=torch.float64)
+    for child in nested:
+        if child.attrs.get("name") != "intensity":
+            ctx.fail(child, "unexpected element inside <emitter>")
+    intensity = colour(ctx, props.pop("intensity")) if "intensity" in props else torch.ones(3)
+    if intensity.dim() != 1 or bool((intensity < 0).any()):
+        ctx.fail(node, "a spot emitter's intensity must be a constant >= 0")
+    cutoff = ctx.float_value(props.pop("cutoff_angle")) if "cutoff_angle" in props else 20.0
+    beam = ctx.float_value(props.pop("beam_width")) if "beam_width" in props else cutoff * 0.75
+    if not 0 < cutoff <= 180:
+        ctx.fail(node, f"cutoff_angle {cutoff}: must be in (0, 180] degrees")
+    if not 0 <= beam < cutoff:
+        ctx.fail(node, f"beam_width {beam}: must be in [0, cutoff_angle) degrees")
+    direction = m[:3, 2]
+    if not bool(torch.isfinite(direction).all()) or float(direction.norm()) == 0:
+        ctx.fail(node, "to_world has a zero z axis (the spot's direction)")
+    radius = _radius(ctx, node, props)
+    ctx.leftovers(node, props, "emitter")
+    return PointLight(node.attrs.get("id", f"spot_{index}"), m[:3, 3].clone(), intensity, radius,
+                      (direction.clone(), torch.tensor(cutoff, dtype=torch.float64),
+                       torch.tensor(beam, dtype=torch.float64)))
 
 
 def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
@@ -137,22 +176,32 @@ def load_directional(ctx: Reader, node: Node, index: int) -> Sun:
     return Sun(sid, -travel / travel.norm(), irradiance, diameter)
 
 
-def place_lights(ctx: Reader, lights: List[Union[Sun, PointLight]], meshes: List[Mesh]) -> List[Mesh]:
-    """The meshes of suns and point lights, placed and sized for the bounds of ``meshes``."""
+def place_lights(ctx: Reader, lights: List[Union[Sun, PointLight]],
+                 meshes: List[Mesh]) -> Tuple[List[Mesh], List[DeltaLight]]:
+    """The meshes of suns and of point and spot lights with a radius, placed and sized for the
+    bounds of ``meshes``; and the delta lights (radius 0)."""
     if not lights:
-        return []
+        return [], []
     points = torch.cat([m.vertices.detach().reshape(-1, 3).double() for m in meshes])
     lo, hi = points.min(0).values, points.max(0).values
     center, radius = (lo + hi) / 2, max(float((hi - lo).norm()) / 2, 1e-6)
-    out = []
+    out, deltas = [], []
     for s in lights:
         if isinstance(s, Sun):
             mesh = sun(s.direction, s.irradiance, s.angular_diameter, center=center.tolist(),
                        scene_radius=radius)
         else:
-            mesh = sphere_light(s.position, s.intensity,
-                                s.radius if s.radius is not None else POINT_RADIUS * radius)
+            r = s.radius if s.radius is not None else POINT_RADIUS * radius
+            if s.spot is None:
+                mesh = point_light(s.position, s.intensity, r)
+            else:
+                direction, cutoff, beam = s.spot
+                mesh = spot_light(s.position, direction, s.intensity, cutoff, beam, r)
+            if isinstance(mesh, DeltaLight):
+                ctx.result.point_lights[s.sid] = mesh
+                deltas.append(mesh)
+                continue
         ctx.result.shapes[s.sid] = mesh
         ctx.result.shape_ids.append(s.sid)
         out.append(mesh)
-    return out
+    return out, deltas

@@ -9,8 +9,8 @@ from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import torch
 
-from ..scene import Material, Mesh, Scene
-from .emitters import load_directional, load_environment, load_point, place_lights
+from ..scene import Material, Mesh, PointLight, Scene
+from .emitters import load_directional, load_environment, load_point, load_spot, place_lights
 from .integrator import load_integrator
 from .materials import DIFFUSE_KEYS, load_bsdf
 from .sensors import load_sensor
@@ -35,6 +35,8 @@ class MitsubaScene:
     ``sample_count`` and ``seed``; ``hide_emitters``: the integrator's; ``shapes``: meshes by
     shape id (shapes without an id are named ``shape_<i>``, in file order), ``shape_ids`` in
     the order of ``scene.meshes``;
+    ``point_lights``: the delta lights (``point`` and ``spot`` of radius 0) by emitter id
+    (``point_<i>``, ``spot_<i>`` without one), as in ``scene.point_lights``;
     ``bsdfs``: materials by BSDF id; ``textures``: bitmap tensors by texture id. The tensors
     are the ones the scene holds: set ``requires_grad`` on them to optimise them."""
     scene: Scene
@@ -44,6 +46,7 @@ class MitsubaScene:
     shapes: Dict[str, Mesh] = field(default_factory=dict)
     shape_ids: List[str] = field(default_factory=list)
     bsdfs: Dict[str, Material] = field(default_factory=dict)
+    point_lights: Dict[str, PointLight] = field(default_factory=dict)
     textures: Dict[str, torch.Tensor] = field(default_factory=dict)
     path: str = ""
     hide_emitters: bool = False  # the integrator's hide_emitters
@@ -55,7 +58,9 @@ class MitsubaScene:
         ``mi.traverse`` names them where Mitsuba has the same quantity: ``sensor.to_world``,
         ``sensor.x_fov``, ``sensor.aperture_radius`` and ``sensor.focus_distance`` (a thin
         lens), ``SHAPE.vertex_positions`` ((N, 3) here), ``SHAPE.emitter.radiance``
-        (area lights), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
+        (area lights), ``LIGHT.position``, ``LIGHT.intensity.value``, ``LIGHT.cutoff_angle``,
+        ``LIGHT.beam_width`` (point and spot lights of radius 0; edgepath's ``LIGHT.direction``,
+        a spot's axis, where Mitsuba has its to_world), ``BSDF.reflectance`` (``diffuse_reflectance`` of a roughplastic,
         ``brdf_0.`` in front inside a twosided), ``BSDF.alpha``, ``envmap.data``; constants end
         in ``.value``, textures in ``.data``. edgepath's own names where Mitsuba has none:
         ``BSDF.specular`` (the GGX lobe's F0, which Mitsuba derives from eta/k or the IOR),
@@ -91,6 +96,13 @@ class MitsubaScene:
                     texture_suffix=mitsuba is not None and name != "ior")
         if self.scene.envmap is not None:
             put("envmap.data", self.scene.envmap.values)
+        for sid, light in self.point_lights.items():
+            put(f"{sid}.position", light.position)
+            put(f"{sid}.intensity.value", light.intensity)
+            if light.spot is not None:
+                put(f"{sid}.direction", light.spot.direction)
+                put(f"{sid}.cutoff_angle", light.spot.cutoff_angle)
+                put(f"{sid}.beam_width", light.spot.beam_width)
         return out
 
     def direction(self, name: str, values: Sequence[float]) -> Tuple[torch.Tensor, torch.Tensor]:
@@ -189,6 +201,8 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
             lights.append(load_directional(ctx, child, len(lights)))
         elif tag == "emitter" and child.attrs.get("type") == "point":
             lights.append(load_point(ctx, child, len(lights)))
+        elif tag == "emitter" and child.attrs.get("type") == "spot":
+            lights.append(load_spot(ctx, child, len(lights)))
         elif tag == "emitter":
             if envmap is not None:
                 ctx.fail(child, "only one environment emitter (constant or envmap) is supported")
@@ -200,8 +214,9 @@ def load_scene(ctx: Reader, user_params: Dict[str, object]) -> MitsubaScene:
         raise MitsubaError(f"{ctx.path}: no <sensor> (edgepath needs a camera)")
     if not meshes:
         raise MitsubaError(f"{ctx.path}: no <shape>")
-    meshes += place_lights(ctx, lights, meshes)
-    ctx.result.scene = Scene(camera=sensor, meshes=meshes, envmap=envmap)
+    light_meshes, point_lights = place_lights(ctx, lights, meshes)
+    ctx.result.scene = Scene(camera=sensor, meshes=meshes + light_meshes, envmap=envmap,
+                             point_lights=point_lights)
     return ctx.result
 
 
