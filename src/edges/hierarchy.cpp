@@ -987,4 +987,29 @@ float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
     return kUniform + (1.f - kUniform) * g / total_ * dphi_dt;
 }
 
+// The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or
+// else the one used least recently, brought up to date.
+std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
+    KeptHierarchies& h = *hierarchies_;
+    std::lock_guard<std::mutex> lock(h.mutex);
+    // The one built for these arguments, or else the one used least recently.
+    size_t pick = 0;
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
+        if (h.used[k] < h.used[pick]) pick = k;
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
+        if (h.kept[k] && h.kept[k]->built_for(edges, group)) pick = k;
+    h.used[pick] = ++h.calls;
+    std::shared_ptr<EdgeHierarchy>& kept = h.kept[pick];
+    if (!kept)
+        kept = std::make_shared<EdgeHierarchy>();
+    else if (kept.use_count() > 1)
+        kept = std::make_shared<EdgeHierarchy>(*kept);  // a pass in another thread still reads it
+    switch (kept->update(*this, edges, group)) {
+        case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
+        case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;
+        case EdgeHierarchy::Update::Reused: ++hierarchy_stats_.reuses; break;
+    }
+    return kept;
+}
+
 }  // namespace edgepath

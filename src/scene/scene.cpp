@@ -1,6 +1,5 @@
 #include "scene/scene.h"
 
-#include "edges/hierarchy.h"
 
 #include <cmath>
 #include <limits>
@@ -209,37 +208,6 @@ const std::vector<Edge>& Scene::edges() const {
         edges_ready_.store(true, std::memory_order_release);
     }
     return edges_;
-}
-
-struct Scene::KeptHierarchies {
-    static constexpr size_t kKept = 2;
-    std::mutex mutex;
-    std::shared_ptr<EdgeHierarchy> kept[kKept];
-    uint64_t used[kKept] = {0, 0};  // when each was last used (a count of calls)
-    uint64_t calls = 0;
-};
-
-std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
-    KeptHierarchies& h = *hierarchies_;
-    std::lock_guard<std::mutex> lock(h.mutex);
-    // The one built for these arguments, or else the one used least recently.
-    size_t pick = 0;
-    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
-        if (h.used[k] < h.used[pick]) pick = k;
-    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
-        if (h.kept[k] && h.kept[k]->built_for(edges, group)) pick = k;
-    h.used[pick] = ++h.calls;
-    std::shared_ptr<EdgeHierarchy>& kept = h.kept[pick];
-    if (!kept)
-        kept = std::make_shared<EdgeHierarchy>();
-    else if (kept.use_count() > 1)
-        kept = std::make_shared<EdgeHierarchy>(*kept);  // a pass in another thread still reads it
-    switch (kept->update(*this, edges, group)) {
-        case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
-        case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;
-        case EdgeHierarchy::Update::Reused: ++hierarchy_stats_.reuses; break;
-    }
-    return kept;
 }
 
 Scene::HierarchyStats Scene::hierarchy_stats() const {

@@ -266,7 +266,15 @@ private:
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
-    struct KeptHierarchies;
+    // The edge hierarchies kept for edge_hierarchy() (defined with it, in edges/hierarchy.cpp:
+    // the scene layer does not see the edges layer).
+    struct KeptHierarchies {
+        static constexpr size_t kKept = 2;
+        std::mutex mutex;
+        std::shared_ptr<EdgeHierarchy> kept[kKept];
+        uint64_t used[kKept] = {0, 0};  // when each was last used (a count of calls)
+        uint64_t calls = 0;
+    };
     mutable std::unique_ptr<KeptHierarchies> hierarchies_;
     mutable HierarchyStats hierarchy_stats_;
     uint64_t geometry_version_ = 0;
