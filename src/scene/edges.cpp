@@ -47,6 +47,19 @@ Vec3f face_normal(const MeshDesc& m, int64_t f) {
     return normalize(cross(p1 - p0, p2 - p0));
 }
 
+// Whether the vertex of face g that is not on face f lies in f's plane: the orientation of the
+// four points computed in double precision from their float coordinates (zero for faces of a
+// plane given exactly, such as a floor's grid).
+bool exactly_coplanar(const MeshDesc& m, int64_t f, int64_t g) {
+    auto vertex = [&](int32_t v) { return Vec3d(Vec3f::load(m.vertices + 3 * int64_t(v))); };
+    const int32_t* a = m.indices + 3 * f;
+    const int32_t* b = m.indices + 3 * g;
+    const Vec3d p0 = vertex(a[0]), n = cross(vertex(a[1]) - p0, vertex(a[2]) - p0);
+    for (int k = 0; k < 3; ++k)
+        if (dot(n, vertex(b[k]) - p0) != 0.0) return false;
+    return true;
+}
+
 // The shading normal a face uses at one of its vertices (vertex index v of face f).
 Vec3f shading_normal(const MeshDesc& m, int64_t f, int32_t v) {
     const int32_t* t = m.indices + 3 * f;
@@ -130,7 +143,10 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                         if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c]) value_jump = true;
                 }
             shading_jump = shading_jump || value_jump;
-            const bool coplanar = dot(n0, n1) > 1.f - 1e-6f;
+            // Only faces in exactly one plane are never a silhouette: two faces at any angle,
+            // however small, fold where the eye lies between their planes (a scan's nearly flat
+            // neighbours seen edge-on at its outline).
+            const bool coplanar = dot(n0, n1) > 0.f && exactly_coplanar(m, h0.face, h1.face);
             if (!coplanar || value_jump || (shading_jump && m.normals != nullptr)) {
                 Edge e;
                 e.mesh = mesh_index;

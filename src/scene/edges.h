@@ -14,8 +14,10 @@
 //   smooth    - two faces at an angle in a mesh with shading normals: a silhouette only;
 //   shared    - more than two faces (non-manifold): kept once per pair of consecutive faces
 //               around it, each pair treated as a two-face edge (never assumed away).
-// Edges between two coplanar faces of the same orientation, shading, uvs and colours are
-// dropped (never a silhouette, never a shading discontinuity); degenerate edges (both ends at one position) too.
+// Edges between two faces of the same orientation whose float corners lie exactly in one plane,
+// with the same shading, uvs and colours, are dropped (never a silhouette, never a shading
+// discontinuity; faces at any angle, however small, fold where the eye lies between their
+// planes); degenerate edges (both ends at one position) too.
 #pragma once
 #include <cstdint>
 #include <vector>

@@ -52,9 +52,38 @@ TEST(Edges, SmoothSphereWithSeamIsClosed) {
     auto c = count_kinds(edges);
     EXPECT_EQ(c[EdgeKind::Boundary], 0);
     EXPECT_EQ(c[EdgeKind::Crease], 0);
-    // Closed: 86 distinct positions, 168 faces, so E = V + F - 2 = 252 edges; the 72 diagonals
-    // of the planar quads of the 6 non-polar bands are flat and dropped.
-    EXPECT_EQ(int(edges.size()), 252 - 72);
+    // Closed: 86 distinct positions, 168 faces, so E = V + F - 2 = 252 edges. The 72 diagonals
+    // of the quads of the 6 non-polar bands are dropped only where the quad's float corners are
+    // exactly in one plane (the quads are planar only up to rounding).
+    EXPECT_LE(int(edges.size()), 252);
+    EXPECT_GE(int(edges.size()), 252 - 72);
+}
+
+TEST(Edges, NearlyCoplanarFacesKeepTheirEdge) {
+    // Two faces 1e-4 rad apart fold where the eye lies between their planes (a scan's nearly flat
+    // neighbours seen edge-on at its outline): their edge is kept; two faces of one plane given
+    // exactly are not.
+    for (float lift : {0.f, 1e-4f}) {
+        MeshData m;
+        m.vertices = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, lift};
+        m.indices = {0, 1, 2, 2, 1, 3};
+        auto edges = edges_of(m);
+        EXPECT_EQ(int(edges.size()), lift == 0.f ? 4 : 5) << lift;
+        if (lift != 0.f) {
+            auto vertex = [&](int32_t v) { return Vec3f::load(m.vertices.data() + 3 * v); };
+            auto normal = [&](int64_t f) {
+                const int32_t* t = m.indices.data() + 3 * f;
+                return normalize(cross(vertex(t[1]) - vertex(t[0]), vertex(t[2]) - vertex(t[0])));
+            };
+            // Above the first face's plane and below the second's, z = lift (x + y - 1).
+            const Vec3f eye(0.9f, 0.9f, 4e-5f);
+            int folds = 0;
+            for (const Edge& e : edges)
+                if (e.kind != EdgeKind::Boundary)
+                    folds += is_silhouette(eye, vertex(e.v0), normal(e.f0), normal(e.f1), e.kind);
+            EXPECT_EQ(folds, 1);
+        }
+    }
 }
 
 TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
