@@ -154,7 +154,8 @@ bool spherical_film_point(const Camera& cam, const Vec3f& w, double& x, double& 
     if (cam.type == CameraType::Fisheye) {
         const double rho = std::hypot(q.x, q.y), theta = std::atan2(rho, q.z);
         const double r = theta / double(cam.half_fov);
-        if (!(r <= 1.0)) return false;
+        // (Straight behind, rho = 0, is the whole rim of a 360 degree fisheye: no one point.)
+        if (!(r <= 1.0) || (rho == 0.0 && q.z < 0.0)) return false;
         const double nx = rho > 0.0 ? r * q.x / rho : 0.0, ny = rho > 0.0 ? r * q.y / rho : 0.0;
         x = (nx + 1.0) * W * 0.5;
         y = H * 0.5 - ny * W * 0.5;
@@ -488,7 +489,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                             if (ix < wx0 || ix > wx1 || iy < wy0 || iy > wy1) continue;
                             splat(i, eye, edge, p0, p1, float(ix), float(iy), w, &p);
                         }
-                } else if (fx >= wx0 && fx <= wx1 && fy >= wy0 && fy <= wy1) {
+                } else if (fx >= wx0 && fx <= wx1 && fy >= wy0 && fy <= wy1 && cam.sees(float(fx), float(fy))) {
                     splat(i, eye, edge, p0, p1, float(fx), float(fy), w, &p);
                 }
                 continue;

@@ -3,7 +3,7 @@ forms (an environment map whose bilinear interpolation is linear between pixel b
 pixel's mean is its centre's value; a fisheye's image circle), derivative images of occluders
 and of the camera's parameters against finite differences (failing without the primary
 boundary terms), reverse mode against forward mode, and an occluder's position recovered
-through a fisheye."""
+through each."""
 
 import math
 
@@ -311,4 +311,29 @@ def test_recover_occluder_position_through_a_fisheye():
         history.append(float(offset.detach()))
     estimate = sum(history[-10:]) / 10
     print(f"occluder offset {start} -> {estimate:.3f} (truth {truth})")
+    assert abs(estimate - truth) < 0.1 * abs(start - truth)
+
+
+def test_recover_occluder_position_through_a_panorama():
+    # The occluder across the seam, moved along z: its far edge shows on both sides of the film.
+    def scene_at(offset):
+        scene = surround_scene("panorama", resolution=(16, 32))
+        mesh = scene.meshes[2]
+        mesh.vertices = mesh.vertices + torch.stack([torch.zeros(()), torch.zeros(()), offset])
+        return scene
+
+    truth, start = 0.0, 0.4
+    target = ep.render(scene_at(torch.tensor(truth)), spp=128, seed=100)
+    offset = torch.tensor(start, requires_grad=True)
+    optimizer = torch.optim.Adam([offset], lr=0.04, betas=(0.6, 0.9))
+    history = []
+    for step in range(30):
+        optimizer.zero_grad()
+        image = ep.render(scene_at(offset), spp=16, seed=step)
+        loss = (image - target).square().mean()
+        loss.backward()
+        optimizer.step()
+        history.append(float(offset.detach()))
+    estimate = sum(history[-10:]) / 10
+    print(f"occluder offset {start} -> {estimate:.3f} (truth {truth}): {[round(h, 3) for h in history]}")
     assert abs(estimate - truth) < 0.1 * abs(start - truth)
