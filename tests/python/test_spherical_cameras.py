@@ -270,6 +270,26 @@ def test_camera_derivative_matches_finite_differences(camera_type, name):
     assert_derivative_matches(scene, param, direction, eps)
 
 
+@pytest.mark.parametrize("camera_type", ["fisheye", "panorama"])
+def test_alpha_and_depth_derivatives_match_finite_differences(camera_type):
+    """The output channels' boundary terms use the same edge samples: alpha and depth of an
+    occluder moved sideways (alpha steps only at its outline)."""
+    scene = surround_scene(camera_type, resolution=(16, 16) if camera_type == "fisheye" else (16, 32))
+    vertices = scene.meshes[0].vertices
+    direction = x_direction(vertices)
+    names = ["alpha", "depth"]
+    d = ep.derivative_channels(scene, vertices, direction, names, spp=512, seed=1)
+    fd = ep.finite_difference_channels(scene, vertices, direction, names, eps=0.04, spp=512, seed=2)
+    interior = ep.derivative_channels(scene, vertices, direction, names, spp=64, seed=1, primary_edges=False)
+    for name in names:
+        error = relative_l1(d[name], fd[name])
+        print(f"{camera_type} {name}: relative L1 error {error:.3f}, interior alone "
+              f"{relative_l1(interior[name], fd[name]):.3f}")
+        assert float(fd[name].abs().max()) > 0.05
+        assert error <= L1_TOLERANCE
+        assert relative_l1(interior[name], fd[name]) > 2 * L1_TOLERANCE
+
+
 @pytest.mark.parametrize("camera_type,name", [("fisheye", "occluder"), ("fisheye", "fov"),
                                                ("panorama", "occluder"), ("panorama", "position")])
 def test_autograd_equals_derivative_image(camera_type, name):
