@@ -167,6 +167,24 @@ bool spherical_film_point(const Camera& cam, const Vec3f& w, double& x, double& 
     return std::isfinite(x) && std::isfinite(y);
 }
 
+// The smallest angle between the unit direction f and the directions from the camera's
+// position to the points of a segment (a, b: its ends relative to the position): at an end, or
+// where the great circle through the ends' directions comes nearest f, if that lies between them.
+double min_angle_from(const Vec3d& a, const Vec3d& b, const Vec3d& f) {
+    auto angle = [](const Vec3d& u, const Vec3d& v) { return std::atan2(length(cross(u, v)), dot(u, v)); };
+    const Vec3d ua = normalize(a), ub = normalize(b);
+    double best = std::min(angle(ua, f), angle(ub, f));
+    const Vec3d n = cross(ua, ub);
+    const double nl = length(n);
+    if (!(nl > 0.0)) return best;
+    const Vec3d un = n / nl, p = f - un * dot(f, un);
+    const double pl = length(p);
+    if (!(pl > 0.0)) return best;
+    const Vec3d up = p / pl;
+    if (dot(cross(ua, up), un) >= 0.0 && dot(cross(up, ub), un) >= 0.0) best = std::min(best, angle(up, f));
+    return best;
+}
+
 // Fisheye and panorama: the derivatives of the unit direction of film point (x, y) with respect
 // to x and y (world vectors).
 void spherical_film_tangents(const Camera& cam, double x, double y, Vec3d& dx, Vec3d& dy) {
@@ -292,6 +310,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 if (!(fe.weight > 0.0)) continue;
             }
             const Vec3d a(m.vertex(e.v0) - cam.position), b(m.vertex(e.v1) - cam.position);
+            // A fisheye sees nothing beyond half its fov from its axis (up to rounding).
+            if (cam.type == CameraType::Fisheye && min_angle_from(a, b, Vec3d(cam.forward)) > double(cam.half_fov) + 1e-5)
+                continue;
             len = std::atan2(length(cross(a, b)), dot(a, b)) * fe.weight;
         } else {
             // Folds and creases (shading or texture jumps) at full density. A smooth edge that

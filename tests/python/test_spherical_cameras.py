@@ -240,16 +240,24 @@ def test_occluder_derivative_matches_finite_differences(camera_type, mesh, axis,
     assert_derivative_matches(scene, vertices, direction, eps=0.04)
 
 
-def test_uniform_edge_sampling_agrees():
+@pytest.mark.parametrize("camera_type", ["fisheye", "panorama"])
+def test_uniform_edge_sampling_agrees(camera_type):
     """Edges picked by world length (the baseline) have the same expectation as edges picked
-    by the angle they subtend."""
-    scene = surround_scene("panorama", pixel_filter="gaussian", resolution=(16, 32))
-    vertices = scene.meshes[2].vertices
+    by the angle they subtend (for a fisheye, of the edges that reach into its field of view:
+    here a narrow one, 40 degrees, whose rim cuts the quad ahead)."""
+    if camera_type == "fisheye":
+        scene = surround_scene("fisheye", fov=40.0, resolution=(16, 16))
+        mesh, axis = 0, 0
+    else:
+        scene = surround_scene("panorama", pixel_filter="gaussian", resolution=(16, 32))
+        mesh, axis = 2, 2
+    vertices = scene.meshes[mesh].vertices
     direction = torch.zeros_like(vertices)
-    direction[:, 2] = 1.0
+    direction[:, axis] = 1.0
+    height, width = scene.camera.resolution
     importance = ep.derivative_image(scene, vertices, direction, spp=512, seed=1)
     uniform = ep.derivative_image(scene, vertices, direction, spp=512, seed=2, edge_sampling="uniform",
-                                  edge_samples=16 * 32 * 2048)
+                                  edge_samples=height * width * 2048)
     error = relative_l1(uniform, importance)
     print(f"relative L1 distance {error:.3f}")
     assert error < 0.05
