@@ -124,17 +124,20 @@ def test_fisheye_matches_the_equidistant_closed_form(fov):
     image = ep.render(scene, spp=spp, max_bounces=0, seed=2).double()
     expected, std = fisheye_expected(values, (height, width), fov, axes)
     error = (image - expected).abs()
-    # Monte Carlo noise per pixel plus the quadrature's error where the image circle cuts a
-    # pixel (a 24 x 24 grid: a few cells of the pixel's 576 misclassified).
-    bound = 6 * std / math.sqrt(spp) + 0.01
+    # Monte Carlo noise per pixel plus the quadrature's error: 0.01 where the image circle cuts
+    # a pixel (a 24 x 24 grid: a few cells of the pixel's 576 misclassified), 0.001 elsewhere.
+    c = (torch.arange(width, dtype=torch.float64) + 0.5 - width / 2).abs()
+    near, far = (c - 0.5).clamp(min=0), c + 0.5
+    cut = ((near[None, :] ** 2 + near[:, None] ** 2) <= (width / 2) ** 2) & \
+          ((far[None, :] ** 2 + far[:, None] ** 2) >= (width / 2) ** 2)
+    bound = 6 * std / math.sqrt(spp) + torch.where(cut, 0.01, 0.001)[..., None]
     worst = float((error / bound).max())
     print(f"fisheye {fov}: max error {float(error.max()):.2e}, worst error / bound {worst:.2f}")
     assert worst <= 1.0
     # The corners lie outside the image circle: black.
     assert float(image[0, 0].abs().max()) == 0.0 and float(image[-1, -1].abs().max()) == 0.0
-    # A perspective-like radius (tan) or the equisolid one would not match.
-    wrong, _ = fisheye_expected(values, (height, width), 2 * math.degrees(math.atan(math.radians(fov) / 2))
-                                if fov < 180 else fov * 0.8, axes)
+    # The check is sharp: the image of a fov 5% narrower would fail it.
+    wrong, _ = fisheye_expected(values, (height, width), fov * 0.95, axes)
     assert float(((image - wrong).abs() / bound).max()) > 2.0
 
 
