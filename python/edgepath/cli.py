@@ -237,6 +237,8 @@ def _cmd_info(args) -> None:
     print(f"bounds: min {_fmt(lo)}, max {_fmt(hi)}")
     view = f"ortho_scale {float(c.ortho_scale):.4g}" if c.camera_type == "orthographic" else \
         f"fov {float(c.fov):.4g} deg"
+    if c.camera_type == "panorama":
+        view = "360 x 180 deg"
     if c.camera_type == "thinlens":
         view += (f", aperture_radius {float(c.aperture_radius):.4g}, "
                  f"focus_distance {float(c.focus_distance):.4g}")

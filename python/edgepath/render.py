@@ -28,7 +28,7 @@ from .scene import (Camera, EnvironmentMap, Material, Mesh, PointLight, Scene, S
 
 SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
-CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2}
+CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2, "fisheye": 3, "panorama": 4}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
 MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
 LIGHT_SAMPLING = {"area": False, "solid_angle": True}

@@ -27,11 +27,14 @@ def frame_from_to_world(to_world: torch.Tensor) -> Tuple[torch.Tensor, torch.Ten
 
 
 class Camera:
-    """A pinhole (``camera_type="perspective"``), thin lens (``"thinlens"``) or orthographic camera.
+    """A pinhole (``camera_type="perspective"``), thin lens (``"thinlens"``), orthographic,
+    fisheye (``"fisheye"``, equidistant) or panorama (``"panorama"``, equirectangular) camera.
 
     Place it with ``position``/``look_at``/``up`` (tensors of shape (3,)), or with ``to_world``
     (4x4 camera-to-world matrix, see ``frame_from_to_world``), not both. ``resolution`` is
-    (height, width) of the full film. ``fov``: horizontal field of view in degrees;
+    (height, width) of the full film. ``fov``: horizontal field of view in degrees (a fisheye's
+    full angle across the film's width, up to 360; outside its image circle the film is black;
+    a panorama covers every direction and ignores it);
     ``ortho_scale``: half the width of an orthographic view; both a float or a 0-d tensor.
     ``aperture_radius`` and ``focus_distance`` (a float or a 0-d tensor each, both
     differentiable): a thin lens's aperture (a disk around ``position``, 0 = a pinhole) and the

@@ -17,6 +17,7 @@ struct FilmEdge {
     size_t edge;  // in Scene::edges()
     double ax, ay, bx, by;
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
+    double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
 };
 
 // The share of the samples per unit film length given to a smooth edge that does not fold: the
@@ -145,6 +146,99 @@ bool film_point(const Camera& cam, const Eye& eye, const Vec3f& p, const Vec3f& 
     return std::isfinite(x) && std::isfinite(y);
 }
 
+// Fisheye and panorama (scene/desc.h): the film point (x, y) that sees world direction w (unit)
+// from the camera's position. False outside a fisheye's image circle.
+bool spherical_film_point(const Camera& cam, const Vec3f& w, double& x, double& y) {
+    const Vec3d q = camera_axes(cam, w);
+    const double W = cam.width, H = cam.height;
+    if (cam.type == CameraType::Fisheye) {
+        const double rho = std::hypot(q.x, q.y), theta = std::atan2(rho, q.z);
+        const double r = theta / double(cam.half_fov);
+        // (Straight behind, rho = 0, is the whole rim of a 360 degree fisheye: no one point.)
+        if (!(r <= 1.0) || (rho == 0.0 && q.z < 0.0)) return false;
+        const double nx = rho > 0.0 ? r * q.x / rho : 0.0, ny = rho > 0.0 ? r * q.y / rho : 0.0;
+        x = (nx + 1.0) * W * 0.5;
+        y = H * 0.5 - ny * W * 0.5;
+    } else {
+        const double phi = std::atan2(q.x, q.z), lat = std::atan2(q.y, std::hypot(q.x, q.z));
+        x = (phi / kCameraPi + 1.0) * W * 0.5;
+        y = (1.0 - lat / (kCameraPi * 0.5)) * H * 0.5;
+    }
+    return std::isfinite(x) && std::isfinite(y);
+}
+
+// The smallest angle between the unit direction f and the directions from the camera's
+// position to the points of a segment (a, b: its ends relative to the position): at an end, or
+// where the great circle through the ends' directions comes nearest f, if that lies between them.
+double min_angle_from(const Vec3d& a, const Vec3d& b, const Vec3d& f) {
+    auto angle = [](const Vec3d& u, const Vec3d& v) { return std::atan2(length(cross(u, v)), dot(u, v)); };
+    const Vec3d ua = normalize(a), ub = normalize(b);
+    double best = std::min(angle(ua, f), angle(ub, f));
+    const Vec3d n = cross(ua, ub);
+    const double nl = length(n);
+    if (!(nl > 0.0)) return best;
+    const Vec3d un = n / nl, p = f - un * dot(f, un);
+    const double pl = length(p);
+    if (!(pl > 0.0)) return best;
+    const Vec3d up = p / pl;
+    if (dot(cross(ua, up), un) >= 0.0 && dot(cross(up, ub), un) >= 0.0) best = std::min(best, angle(up, f));
+    return best;
+}
+
+// Fisheye and panorama: the derivatives of the unit direction of film point (x, y) with respect
+// to x and y (world vectors).
+void spherical_film_tangents(const Camera& cam, double x, double y, Vec3d& dx, Vec3d& dy) {
+    const double W = cam.width, H = cam.height;
+    const Vec3d R(cam.right), U(cam.up), F(cam.forward);
+    double ax, bx, cx, ay, by, cy;  // d(a, b, c) / dx and / dy, d = a right + b up + c forward
+    if (cam.type == CameraType::Fisheye) {
+        const double h = cam.half_fov;
+        const double nx = 2.0 * x / W - 1.0, ny = (1.0 - 2.0 * y / H) * H / W;
+        const double r = std::hypot(nx, ny), theta = r * h;
+        // s = sin(theta) / r and s'(r) / r, by their series near the centre
+        double s, ds_r;
+        if (r > 1e-4) {
+            s = std::sin(theta) / r;
+            ds_r = (h * std::cos(theta) * r - std::sin(theta)) / (r * r * r);
+        } else {
+            s = h - h * h * h * r * r / 6.0;
+            ds_r = -h * h * h / 3.0;
+        }
+        // sin(theta) / r times h, the factor of dc / dn
+        const double c_r = r > 1e-4 ? -std::sin(theta) * h / r : -h * h;
+        // dn/dx = (2 / W, 0), dn/dy = (0, -2 / W)
+        const double kx = 2.0 / W, ky = -2.0 / W;
+        ax = (s + nx * nx * ds_r) * kx;
+        bx = nx * ny * ds_r * kx;
+        cx = c_r * nx * kx;
+        ay = nx * ny * ds_r * ky;
+        by = (s + ny * ny * ds_r) * ky;
+        cy = c_r * ny * ky;
+    } else {
+        const double phi = (2.0 * x / W - 1.0) * kCameraPi, lat = (1.0 - 2.0 * y / H) * kCameraPi * 0.5;
+        const double dphi = 2.0 * kCameraPi / W, dlat = -kCameraPi / H;
+        ax = std::cos(lat) * std::cos(phi) * dphi;
+        bx = 0.0;
+        cx = -std::cos(lat) * std::sin(phi) * dphi;
+        ay = -std::sin(lat) * std::sin(phi) * dlat;
+        by = std::cos(lat) * dlat;
+        cy = -std::sin(lat) * std::cos(phi) * dlat;
+    }
+    dx = R * ax + U * bx + F * cx;
+    dy = R * ay + U * by + F * cy;
+}
+
+// The film length per unit displacement of a world direction along tangent vector t (at a
+// point where the film's tangents are dx, dy): the norm of the film displacement whose
+// direction change is t. Zero where the map is singular (a panorama's poles).
+double spherical_jacobian(const Vec3d& dx, const Vec3d& dy, const Vec3d& t) {
+    const double g00 = dot(dx, dx), g01 = dot(dx, dy), g11 = dot(dy, dy);
+    const double det = g00 * g11 - g01 * g01;
+    if (!(det > 0.0)) return 0.0;
+    const double b0 = dot(dx, t), b1 = dot(dy, t);
+    return std::hypot((g11 * b0 - g01 * b1) / det, (g00 * b1 - g01 * b0) / det);
+}
+
 // The parameter t of the point p0 + t (p1 - p0) of segment (p0, p1) nearest to the line
 // o + s d (d unit).
 float closest_on_segment(const Vec3f& p0, const Vec3f& p1, const Vec3f& o, const Vec3f& d) {
@@ -175,6 +269,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     const bool camera_wanted = slots.camera.wanted();
     // The baseline: every edge, silhouette or not, by world length, points not stratified.
     const bool uniform = opt.edge_sampling == EdgeSampling::Uniform;
+    // Fisheye and panorama: the film is a non-linear map of the direction from the camera's
+    // position; edges are sampled in world space and each point mapped to the film.
+    const bool spherical = is_spherical(cam.type);
     const int nv = layout.num_values;
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
@@ -202,8 +299,21 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const Mesh& m = scene.meshes[size_t(e.mesh)];
         FilmEdge fe;
         double len;
+        fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
         if (uniform) {
-            len = length(m.vertex(e.v1) - m.vertex(e.v0));  // world length; the film part is found per sample
+            len = fe.world;  // world length; the film part is found per sample
+        } else if (spherical) {
+            // Folds (and the smooth edges by their weight, as below), by the angle they subtend
+            // at the camera's position; the points of an edge by world length.
+            if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
+                fe.weight = smooth_edge_weight(m, e);
+                if (!(fe.weight > 0.0)) continue;
+            }
+            const Vec3d a(m.vertex(e.v0) - cam.position), b(m.vertex(e.v1) - cam.position);
+            // A fisheye sees nothing beyond half its fov from its axis (up to rounding).
+            if (cam.type == CameraType::Fisheye && min_angle_from(a, b, Vec3d(cam.forward)) > double(cam.half_fov) + 1e-5)
+                continue;
+            len = std::atan2(length(cross(a, b)), dot(a, b)) * fe.weight;
         } else {
             // Folds and creases (shading or texture jumps) at full density. A smooth edge that
             // does not fold separates different values of the geometric normal, and steps where
@@ -245,49 +355,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     for_each_chunk(opt, n, 4096, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
         RayCounters counters;
-        for (int64_t i = begin; i < end; ++i) {
-            Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
-            const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
-            const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
-                                             cumulative.begin()) - 1,
-                                      film_edges.size() - 1);
-            const FilmEdge& fe = film_edges[k];
-            const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
-            const Edge& edge = scene.edges()[fe.edge];
-            const Mesh& m = scene.meshes[size_t(edge.mesh)];
-            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
-            float x, y;
-            double point_weight = sample_weight / fe.weight;
-            // A thin lens: this sample's lens point, the eye the sample sees the edge from.
-            const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
-            if (uniform) {
-                double fx, fy, jacobian;
-                if (!film_point(cam, eye, p0 + (p1 - p0) * float(t), normalize(p1 - p0), fx, fy, jacobian)) continue;
-                if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
-                x = float(fx);
-                y = float(fy);
-                point_weight *= jacobian;
-            } else {
-                x = float(fe.ax + (fe.bx - fe.ax) * t);
-                y = float(fe.ay + (fe.by - fe.ay) * t);
-                if (thin_lens) {
-                    // The edge point the camera's position sees there, seen from the lens point:
-                    // drawn with density 1 / total per unit film length from the position, it
-                    // has density (jacobian_centre / jacobian_lens) / total per unit film length
-                    // from the lens point.
-                    const Vec2f sc = cam.screen(x, y);
-                    const Vec3f dir = normalize(p1 - p0);
-                    const Vec3f p = p0 + (p1 - p0) * closest_on_segment(p0, p1, cam.position,
-                                                                        normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
-                    double fx, fy, j_lens, cx, cy, j_centre;
-                    if (!film_point(cam, eye, p, dir, fx, fy, j_lens) || !film_point(cam, centre, p, dir, cx, cy, j_centre))
-                        continue;
-                    if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1 || !(j_centre > 0.0)) continue;
-                    x = float(fx);
-                    y = float(fy);
-                    point_weight *= j_lens / j_centre;
-                }
-            }
+        // The boundary term of edge `edge` at film point (x, y): the side function's film gradient,
+        // the two sides and the splat of the jump through the pixel filter. `point_weight`: the
+        // film length the sample stands for (fisheye and panorama: per unit of the edge point's
+        // world length, given as edge_point).
+        auto splat = [&](int64_t i, const Eye& eye, const Edge& edge, const Vec3f& p0, const Vec3f& p1,
+                         float x, float y, double point_weight, const Vec3f* edge_point) {
             EdgeEye side_eye = camera_eye;
             side_eye.origin = eye.position;
 
@@ -296,7 +369,22 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             const EdgeSideGradient g = edge_side_gradient(p0, p1, o, d);
             double gx, gy;
-            if (has_eye(cam.type)) {
+            if (spherical) {
+                // d is the film point's unit direction: the side function's film gradient is its
+                // direction gradient along the film's tangents; the film length per unit world
+                // length of the edge point is the norm of the film displacement that turns the
+                // direction as moving along the edge does.
+                Vec3d tx, ty;
+                spherical_film_tangents(cam, x, y, tx, ty);
+                const Vec3d dd(g.d_d);
+                gx = dot(dd, tx);
+                gy = dot(dd, ty);
+                const Vec3d to(*edge_point - cam.position), u(normalize(p1 - p0));
+                const double dist = length(to);
+                const Vec3d w = to / dist;
+                point_weight *= spherical_jacobian(tx, ty, (u - w * dot(w, u)) / dist);
+                if (!(point_weight > 0.0)) return;
+            } else if (has_eye(cam.type)) {
                 // d = normalize(D), D = focus w - a (a pinhole: focus 1, a = 0), w = forward + sx right
                 // + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
                 const Vec2f sc = cam.screen(x, y);
@@ -311,7 +399,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 gy = -dot(g.d_o, cam.up) * px_scale;
             }
             const double glen = std::hypot(gx, gy);
-            if (!(glen > 0.0) || !std::isfinite(glen)) continue;
+            if (!(glen > 0.0) || !std::isfinite(glen)) return;
 
             // Both sides, g > 0 (upper) and g < 0 (lower), in the limit at the edge point the
             // camera ray passes (edges/sides.h); none where that point is hidden.
@@ -321,7 +409,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const float edge_t = closest_on_segment(p0, p1, o, d);
             const float t_x = dot(p0 + (p1 - p0) * edge_t - o, d);
             EdgeSide first_u, first_l;
-            if (!edge_sides(scene, side_eye, edge, ray, edge_t, t_x, first_u, first_l)) continue;
+            if (!edge_sides(scene, side_eye, edge, ray, edge_t, t_x, first_u, first_l)) return;
             // The channels' values on both sides.
             float value_u[kMaxChannelValues], value_l[kMaxChannelValues], delta[kMaxChannelValues];
             if (hit_values) {
@@ -339,7 +427,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 delta[c] = value_u[c] - value_l[c];
                 jump = jump || delta[c] != 0.f;
             }
-            if (!jump) continue;
+            if (!jump) return;
             const float weight = float(point_weight / glen);
 
             // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
@@ -349,7 +437,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             auto for_each_pixel = [&](auto&& fn) {
                 for (int py = py0; py <= py1; ++py) {
                     const float ky = scene.filter.eval(oy - float(py));
-                    if (ky == 0.f) continue;
+                    if (ky == 0.f) return;
                     for (int px = px0; px <= px1; ++px) {
                         const float k = ky * scene.filter.eval(ox - float(px));
                         if (k != 0.f) fn(int64_t(py) * scene.out_width + px, k);
@@ -381,12 +469,81 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             } else {
                 add_side_gradient(1.f);
                 const float dg = float(sink.take_projection()) * weight;
-                if (dg == 0.f) continue;
+                if (dg == 0.f) return;
                 for_each_pixel([&](int64_t p, float k) {
                     for (int c = 0; c < nv; ++c)
                         if (delta[c] != 0.f) atomic_add(out + nv * p + c, k * dg * delta[c]);
                 });
             }
+        };
+        for (int64_t i = begin; i < end; ++i) {
+            Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
+            const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
+            const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
+                                             cumulative.begin()) - 1,
+                                      film_edges.size() - 1);
+            const FilmEdge& fe = film_edges[k];
+            const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
+            const Edge& edge = scene.edges()[fe.edge];
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            float x, y;
+            double point_weight = sample_weight / fe.weight;
+            // A thin lens: this sample's lens point, the eye the sample sees the edge from.
+            const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
+            if (spherical) {
+                // Drawn with density lengths[k] / total / world per unit world length; the film
+                // points that see it get its film length per unit world length (in splat).
+                const Vec3f p = p0 + (p1 - p0) * float(t);
+                double fx, fy;
+                if (!spherical_film_point(cam, normalize(p - cam.position), fx, fy)) continue;
+                const double w = sample_weight * fe.world / lengths[k];
+                if (cam.type == CameraType::Panorama) {
+                    // The film's images of the point: longitude wraps every W pixels, and rows past
+                    // a pole see the other half of the sphere (mirrored, half a turn around): a
+                    // filter reaching past the film's sides or rows sees these.
+                    const double W = cam.width, H = cam.height;
+                    const double rows[3][2] = {{fy, 0.0}, {-fy, 0.5 * W}, {2.0 * H - fy, 0.5 * W}};
+                    for (const auto& row : rows)
+                        for (int wrap = -2; wrap <= 2; ++wrap) {
+                            const double ix = fx + row[1] + wrap * W, iy = row[0];
+                            if (ix < wx0 || ix > wx1 || iy < wy0 || iy > wy1) continue;
+                            splat(i, eye, edge, p0, p1, float(ix), float(iy), w, &p);
+                        }
+                } else if (fx >= wx0 && fx <= wx1 && fy >= wy0 && fy <= wy1 && cam.sees(float(fx), float(fy))) {
+                    splat(i, eye, edge, p0, p1, float(fx), float(fy), w, &p);
+                }
+                continue;
+            }
+            if (uniform) {
+                double fx, fy, jacobian;
+                if (!film_point(cam, eye, p0 + (p1 - p0) * float(t), normalize(p1 - p0), fx, fy, jacobian)) continue;
+                if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
+                x = float(fx);
+                y = float(fy);
+                point_weight *= jacobian;
+            } else {
+                x = float(fe.ax + (fe.bx - fe.ax) * t);
+                y = float(fe.ay + (fe.by - fe.ay) * t);
+                if (thin_lens) {
+                    // The edge point the camera's position sees there, seen from the lens point:
+                    // drawn with density 1 / total per unit film length from the position, it
+                    // has density (jacobian_centre / jacobian_lens) / total per unit film length
+                    // from the lens point.
+                    const Vec2f sc = cam.screen(x, y);
+                    const Vec3f dir = normalize(p1 - p0);
+                    const Vec3f p = p0 + (p1 - p0) * closest_on_segment(p0, p1, cam.position,
+                                                                        normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
+                    double fx, fy, j_lens, cx, cy, j_centre;
+                    if (!film_point(cam, eye, p, dir, fx, fy, j_lens) || !film_point(cam, centre, p, dir, cx, cy, j_centre))
+                        continue;
+                    if (fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1 || !(j_centre > 0.0)) continue;
+                    x = float(fx);
+                    y = float(fy);
+                    point_weight *= j_lens / j_centre;
+                }
+            }
+            splat(i, eye, edge, p0, p1, x, y, point_weight, nullptr);
         }
     });
     for (GradSink& s : sinks) s.flush();

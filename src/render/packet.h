@@ -42,12 +42,14 @@ struct CameraSample {
     Vec2f lens;        // the lens sample (thin lens; otherwise the lens centre)
     Ray ray;
     FirstHit first;
+    bool outside = false;  // the film point lies outside a fisheye's image circle: black, not traced
 };
 
 // Calls fn(sample) for every camera sample of the output pixels [x0, x1) x [y0, y1), in order
 // (rows, pixels, samples), with the random numbers of Rng::for_sample(opt.seed, pixel, s) and the
 // first hits traced in packets (with opt.hide_emitters, past the emitters, as first_hit
-// finds them). Stops (returns false) once opt is cancelled.
+// finds them). A sample outside the camera's image (CameraSample::outside) has no hit; the
+// passes count it black. Stops (returns false) once opt is cancelled.
 template <class SampleFn>
 bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0, int y0, int x1, int y1,
                             SampleFn&& fn) {
@@ -70,9 +72,12 @@ bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0
             c.film = sample_film_point(scene, c.x + scene.crop_x, c.y + scene.crop_y, c.rng);
             c.lens = sample_lens_point(scene, c.rng);
             c.ray = rays[i] = scene.camera.generate_ray(c.film.x, c.film.y, c.lens.x, c.lens.y);
+            c.outside = !scene.camera.sees(c.film.x, c.film.y);
+            if (c.outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
         }
         intersect_packet(scene, rays, n, first);
         for (int i = 0; i < n; ++i) {
+            if (batch[i].outside) first[i] = FirstHit();
             batch[i].first = first[i];
             if (opt.hide_emitters && first[i].found && scene.meshes[size_t(first[i].hit.mesh)].is_emitter())
                 batch[i].first = first_hit(scene, rays[i], true);

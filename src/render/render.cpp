@@ -34,7 +34,7 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
         RayCounters c;
         double sum[3] = {0, 0, 0};
         for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
-            const Vec3f L = trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
+            const Vec3f L = cs.outside ? Vec3f(0.f) : trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
             for (int k = 0; k < 3; ++k) sum[k] += L[k];
             if (cs.s + 1 < opt.spp) return;
             float* out = image + (int64_t(cs.y) * scene.out_width + cs.x) * 3;
@@ -64,9 +64,9 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
             for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
                 if (hit_values) eval_hit_channels(scene, layout, cs.ray, cs.first.found, cs.first.hit, v);
                 if (radiance) {
-                    const Vec3f L = trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
+                    const Vec3f L = cs.outside ? Vec3f(0.f) : trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
                     for (int k = 0; k < 3; ++k) v[ro + k] = L[k];
-                } else {
+                } else if (!cs.outside) {
                     ++c.camera;
                 }
                 for (int k = 0; k < nv; ++k) sum[k] += v[k];
@@ -80,9 +80,12 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
         // Ids: of the ray through each pixel's centre.
         for (int y = y0; y < y1 && ni > 0; ++y)
             for (int x = x0; x < x1; ++x) {
-                const Ray ray = scene.camera.generate_ray(float(x + scene.crop_x) + 0.5f, float(y + scene.crop_y) + 0.5f);
-                const FirstHit first = first_hit(scene, ray, opt.hide_emitters);
-                ++c.camera;
+                const float fx = float(x + scene.crop_x) + 0.5f, fy = float(y + scene.crop_y) + 0.5f;
+                FirstHit first;
+                if (scene.camera.sees(fx, fy)) {
+                    first = first_hit(scene, scene.camera.generate_ray(fx, fy), opt.hide_emitters);
+                    ++c.camera;
+                }
                 eval_hit_ids(scene, layout, first.found, first.hit, ids + (int64_t(y) * scene.out_width + x) * ni);
             }
         tally.add(c);

@@ -105,7 +105,12 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
             rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (cs.pixel * uint64_t(opt.spp) + uint64_t(cs.s)));
             rec.film = cs.film;
             rec.lens = cs.lens;
-            if (full_paths) {
+            if (cs.outside) {
+                // Outside the image: black, nothing to differentiate.
+                rec.vertices.clear();
+                rec.escaped = false;
+                rec.camera_missed = rec.emitters_hidden = true;
+            } else if (full_paths) {
                 trace_path(scene, opt, cs.ray, cs.rng, c, &rec, &cs.first);
             } else {
                 rec.vertices.clear();

@@ -1,5 +1,6 @@
 // The camera: perspective (horizontal fov), thin lens (a perspective camera whose rays start on
-// a disk and meet on the plane of focus) or orthographic, given by position / look_at / up.
+// a disk and meet on the plane of focus), orthographic, fisheye (equidistant) or panorama
+// (equirectangular), given by position / look_at / up.
 // See scene/desc.h for the mapping from film points to rays.
 #pragma once
 #include <cmath>
@@ -10,8 +11,38 @@
 
 namespace edgepath {
 
-// Whether rays leave from an eye (perspective and thin lens: film points are directions).
+// Whether rays leave from an eye (all but the orthographic camera: film points are directions).
 inline bool has_eye(CameraType t) { return t != CameraType::Orthographic; }
+
+// Whether the film is a non-linear map of the direction from the camera's position (fisheye and
+// panorama): edges project to curves.
+inline bool is_spherical(CameraType t) { return t == CameraType::Fisheye || t == CameraType::Panorama; }
+
+constexpr double kCameraPi = 3.14159265358979323846;
+
+// The direction of film point (px, py) of a fisheye or panorama (scene/desc.h) in the camera's
+// axes: d = a right + b up + c forward (unit). `half_fov`: half the fisheye's fov, in radians.
+// False outside a fisheye's image circle.
+template <class T>
+bool spherical_direction(CameraType type, T half_fov, int width, int height, T px, T py, T& a, T& b, T& c) {
+    if (type == CameraType::Fisheye) {
+        const T nx = 2 * px / T(width) - 1, ny = (1 - 2 * py / T(height)) * T(height) / T(width);
+        const T r = std::sqrt(nx * nx + ny * ny);
+        if (!(r <= T(1))) return false;
+        const T theta = r * half_fov;
+        // sin(theta) / r, its limit half_fov at the centre
+        const T s = r > T(1e-7) ? std::sin(theta) / r : half_fov;
+        a = nx * s;
+        b = ny * s;
+        c = std::cos(theta);
+        return true;
+    }
+    const T phi = (2 * px / T(width) - 1) * T(kCameraPi), lat = (1 - 2 * py / T(height)) * T(kCameraPi / 2);
+    a = std::cos(lat) * std::sin(phi);
+    b = std::sin(lat);
+    c = std::cos(lat) * std::cos(phi);
+    return true;
+}
 
 // The lens sample of a pinhole: the centre of the aperture.
 constexpr float kLensCentre = 0.5f;
@@ -19,6 +50,7 @@ constexpr float kLensCentre = 0.5f;
 struct Camera {
     Vec3f position, forward, right, up;
     float tx = 1.f;  // tan(fov / 2) for perspective and thin lens, half view width for orthographic
+    float half_fov = 0.f;  // fov / 2 in radians (the fisheye's)
     CameraType type = CameraType::Perspective;
     float aperture = 0.f, focus = 1.f;  // thin lens: aperture radius, focus distance
     int width = 0, height = 0;  // full film
@@ -30,7 +62,10 @@ struct Camera {
         c.right = normalize(cross(c.forward, Vec3f::load(d.up)));
         c.up = cross(c.right, c.forward);
         c.type = d.type;
-        c.tx = has_eye(d.type) ? std::tan(d.fov * 0.5f * 3.14159265358979f / 180.f) : d.ortho_scale;
+        c.half_fov = float(double(d.fov) * kCameraPi / 360.0);
+        c.tx = d.type == CameraType::Orthographic ? d.ortho_scale
+               : is_spherical(d.type)             ? 1.f
+                                                  : std::tan(c.half_fov);
         c.aperture = d.aperture_radius;
         c.focus = d.focus_distance;
         c.width = d.width;
@@ -53,11 +88,25 @@ struct Camera {
         return (right * l.x + up * l.y) * aperture;
     }
 
-    // The ray of film point (px, py) and lens sample (lu, lv) (used by the thin lens only).
+    // Whether film point (px, py) sees the scene: false outside a fisheye's image circle (black,
+    // no ray traced).
+    bool sees(float px, float py) const {
+        if (type != CameraType::Fisheye) return true;
+        const float nx = 2.f * px / float(width) - 1.f, ny = (1.f - 2.f * py / float(height)) * float(height) / float(width);
+        return nx * nx + ny * ny <= 1.f;
+    }
+
+    // The ray of film point (px, py) and lens sample (lu, lv) (used by the thin lens only). Where
+    // the camera does not see (sees()), the ray along forward.
     Ray generate_ray(float px, float py, float lu = kLensCentre, float lv = kLensCentre) const {
         Vec2f s = screen(px, py);
         Ray r;
-        if (type == CameraType::Perspective) {
+        if (is_spherical(type)) {
+            float a = 0.f, b = 0.f, c = 1.f;
+            spherical_direction(type, half_fov, width, height, px, py, a, b, c);
+            r.origin = position;
+            r.dir = normalize(right * a + up * b + forward * c);
+        } else if (type == CameraType::Perspective) {
             r.origin = position;
             r.dir = normalize(forward + right * s.x + up * s.y);
         } else if (type == CameraType::ThinLens) {
@@ -110,6 +159,13 @@ void camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, TVec3
     TVec3<T> f = normalize(c.look_at - c.position);
     TVec3<T> r = normalize(cross(f, c.up));
     TVec3<T> u = cross(r, f);
+    if (is_spherical(c.type)) {
+        T a = T(0), b = T(0), cf = T(1);
+        spherical_direction(c.type, c.fov * T(kCameraPi / 360.0), c.width, c.height, px, py, a, b, cf);
+        o = c.position;
+        d = r * a + u * b + f * cf;
+        return;
+    }
     T tx = has_eye(c.type) ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
     T sx = (2 * px / T(c.width) - 1) * tx;
     T sy = (1 - 2 * py / T(c.height)) * tx * T(c.height) / T(c.width);
@@ -146,8 +202,24 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
     T ax = 2 * px / T(c.width) - 1, ay = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
     T sx = ax * tx, sy = ay * tx;
     TVec3<T> dposition(T(0)), df(T(0)), dr(T(0)), du(T(0));
-    T dsx, dsy;
-    if (c.type == CameraType::ThinLens) {
+    T dsx = T(0), dsy = T(0);
+    if (is_spherical(c.type)) {
+        // o = position; d = r a + u b + f cf, (a, b, cf) of the film point (and the fisheye's fov)
+        const T half_fov = c.fov * T(kCameraPi / 360.0);
+        T a = T(0), b = T(0), cf = T(1);
+        spherical_direction(c.type, half_fov, c.width, c.height, px, py, a, b, cf);
+        dposition += d_o;
+        dr += d_d * a;
+        du += d_d * b;
+        df += d_d * cf;
+        if (c.type == CameraType::Fisheye) {
+            // theta = r half_fov: a = nx sin(theta) / r, b = ny sin(theta) / r, cf = cos(theta)
+            const T nx = 2 * px / T(c.width) - 1, ny = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
+            const T rr = std::sqrt(nx * nx + ny * ny), theta = rr * half_fov;
+            const T dhalf = std::cos(theta) * (dot(d_d, r) * nx + dot(d_d, u) * ny) - std::sin(theta) * rr * dot(d_d, f);
+            grad[9] += dhalf * T(kCameraPi / 360.0);
+        }
+    } else if (c.type == CameraType::ThinLens) {
         // a = (r lx + u ly) aperture_radius; o = position + a; w = f + r sx + u sy;
         // d = normalize(w focus_distance - a)
         const Vec2f l = square_to_disk(lu, lv);
@@ -184,7 +256,9 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
     // sx = ax tx, sy = ay tx
     T dtx = dsx * ax + dsy * ay;
     // tx = tan(fov pi / 360) or ortho_scale
-    if (persp)
+    if (is_spherical(c.type))
+        ;  // no screen offsets
+    else if (persp)
         grad[9] += dtx * (1 + tx * tx) * T(3.14159265358979323846 / 360.0);
     else
         grad[10] += dtx;

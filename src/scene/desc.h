@@ -88,7 +88,7 @@ constexpr float kMaxRadiance = 1e16f;
 // edge samples (pixels times spp) in int64.
 constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;
 
-enum class CameraType { Perspective = 0, Orthographic = 1, ThinLens = 2 };
+enum class CameraType { Perspective = 0, Orthographic = 1, ThinLens = 2, Fisheye = 3, Panorama = 4 };
 enum class FilterType { Box = 0, Gaussian = 1, Tent = 2 };
 
 // Camera frame: forward = normalize(look_at - position), right = normalize(cross(forward, up)),
@@ -100,6 +100,12 @@ enum class FilterType { Box = 0, Gaussian = 1, Tent = 2 };
 // `aperture_radius` around the position in the plane of right and up, drawn per camera sample)
 // through the film point's point on the plane of focus at depth `focus_distance` (along
 // forward): direction focus_distance (forward + sx right + sy up) - a (Mitsuba's thinlens).
+// Fisheye (equidistant): with nx = 2 px / W - 1, ny = (1 - 2 py / H) H / W and r = |(nx, ny)|,
+// the direction at angle theta = r fov / 2 from forward, towards nx right + ny up (fov: the full
+// angle across the film's width, up to 360 degrees); film points with r > 1 (outside the image
+// circle) see nothing (black, not traced). Panorama (equirectangular): longitude
+// phi = (2 px / W - 1) pi, latitude lat = (1 - 2 py / H) pi / 2, direction
+// cos(lat) (sin(phi) right + cos(phi) forward) + sin(lat) up; fov unused.
 struct CameraDesc {
     float position[3] = {0, 0, 0};
     float look_at[3] = {0, 0, 1};

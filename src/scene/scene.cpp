@@ -92,6 +92,8 @@ void check_radiance(const TextureDesc& t, float scale, const std::string& field)
 }
 
 void validate_camera(const CameraDesc& c) {
+    if (int(c.type) < 0 || int(c.type) > int(CameraType::Panorama))
+        fail("camera.camera_type", "unknown camera type " + str(int(c.type)));
     check_coordinates(c.position, 3, "camera.position");
     check_coordinates(c.look_at, 3, "camera.look_at");
     check_coordinates(c.up, 3, "camera.up");
@@ -102,8 +104,10 @@ void validate_camera(const CameraDesc& c) {
     if (!(length(f) > 0.f)) fail("camera.look_at", "equals camera.position");
     Vec3f r = cross(normalize(f), Vec3f::load(c.up));
     if (!(length(r) > 1e-6f)) fail("camera.up", "is zero or parallel to the viewing direction");
-    if (has_eye(c.type) && !(c.fov > 0.f && c.fov < 180.f))
+    if ((c.type == CameraType::Perspective || c.type == CameraType::ThinLens) && !(c.fov > 0.f && c.fov < 180.f))
         fail("camera.fov", "must be in (0, 180) degrees, got " + str(c.fov));
+    if (c.type == CameraType::Fisheye && !(c.fov > 0.f && c.fov <= 360.f))
+        fail("camera.fov", "must be in (0, 360] degrees for a fisheye, got " + str(c.fov));
     if (c.type == CameraType::ThinLens) {
         if (!(c.aperture_radius >= 0.f && c.aperture_radius <= kMaxCoordinate))
             fail("camera.aperture_radius", "must be at least 0 and at most " + str(kMaxCoordinate) + ", got " +

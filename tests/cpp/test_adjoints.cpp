@@ -213,11 +213,11 @@ TEST(Adjoint, IntersectTriangle) {
     check_adjoint(f, adj, x, "intersect_triangle");
 }
 
-void camera_case(CameraType type, float lu = kLensCentre, float lv = kLensCentre) {
+void camera_case(CameraType type, float lu = kLensCentre, float lv = kLensCentre, double fov = 40,
+                 double px = 13.3, double py = 40.7) {
     // Inputs: position, look_at, up, fov, ortho_scale, aperture_radius, focus_distance; outputs:
     // origin, direction.
-    std::vector<double> x = {0.3, 0.5, -4, 0.1, -0.2, 0.3, 0.1, 1, 0.2, 40, 1.5, 0.3, 2.5};
-    const double px = 13.3, py = 40.7;
+    std::vector<double> x = {0.3, 0.5, -4, 0.1, -0.2, 0.3, 0.1, 1, 0.2, fov, 1.5, 0.3, 2.5};
     auto unpack = [type](const std::vector<double>& x) {
         TCameraParams<double> c;
         c.position = v3(x, 0);
@@ -242,7 +242,7 @@ void camera_case(CameraType type, float lu = kLensCentre, float lv = kLensCentre
         d_camera_ray(unpack(x), px, py, lu, lv, v3(yb, 0), v3(yb, 3), g.data());
         return g;
     };
-    const char* names[] = {"perspective", "orthographic", "thin lens"};
+    const char* names[] = {"perspective", "orthographic", "thin lens", "fisheye", "panorama"};
     check_adjoint(f, adj, x, names[int(type)]);
 }
 
@@ -253,6 +253,50 @@ TEST(Adjoint, CameraRay) {
     camera_case(CameraType::ThinLens, 0.8f, 0.35f);
     camera_case(CameraType::ThinLens, 0.1f, 0.7f);
     camera_case(CameraType::ThinLens, 0.3f, 0.05f);
+    // Fisheyes narrower and wider than a half sphere, off and near the centre of the film;
+    // a panorama's film point above the horizon and one below, behind the camera.
+    camera_case(CameraType::Fisheye, kLensCentre, kLensCentre, 40);
+    camera_case(CameraType::Fisheye, kLensCentre, kLensCentre, 250);
+    camera_case(CameraType::Fisheye, kLensCentre, kLensCentre, 190, 32.01, 24.02);
+    camera_case(CameraType::Panorama);
+    camera_case(CameraType::Panorama, kLensCentre, kLensCentre, 40, 61.5, 5.2);
+}
+
+TEST(Adjoint, SphericalCamerasMatchRenderCamera) {
+    CameraDesc d;
+    float pos[3] = {0.3f, 0.5f, -4.f}, at[3] = {0.1f, -0.2f, 0.3f}, up[3] = {0.1f, 1.f, 0.2f};
+    std::copy(pos, pos + 3, d.position);
+    std::copy(at, at + 3, d.look_at);
+    std::copy(up, up + 3, d.up);
+    d.width = 64;
+    d.height = 48;
+    for (CameraType type : {CameraType::Fisheye, CameraType::Panorama}) {
+        d.type = type;
+        d.fov = 230;
+        const Camera cam = Camera::from_desc(d);
+        const Ray r = cam.generate_ray(13.3f, 40.7f);
+        Vec3d o, dir;
+        camera_ray(TCameraParams<double>::from_desc(d), 13.3, 40.7, o, dir);
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_NEAR(r.origin[k], o[k], 1e-5);
+            EXPECT_NEAR(r.dir[k], dir[k], 1e-5);
+        }
+        EXPECT_NEAR(length(dir), 1.0, 1e-12);
+        // The film's centre looks along forward; a fisheye's film edge at half its fov from it.
+        const Ray c = cam.generate_ray(32.f, 24.f);
+        EXPECT_NEAR(dot(c.dir, cam.forward), 1.f, 1e-6f);
+        if (type == CameraType::Fisheye) {
+            EXPECT_NEAR(std::acos(double(dot(cam.generate_ray(64.f, 24.f).dir, cam.forward))), 115.0 * kCameraPi / 180.0, 1e-4);
+            EXPECT_TRUE(cam.sees(64.f, 24.f));
+            EXPECT_FALSE(cam.sees(63.f, 1.f));  // a corner: outside the image circle
+        } else {
+            // The film's left and right edges look backwards, its top row up.
+            EXPECT_NEAR(dot(cam.generate_ray(0.f, 24.f).dir, cam.forward), -1.f, 1e-6f);
+            EXPECT_NEAR(dot(cam.generate_ray(17.f, 0.f).dir, cam.up), 1.f, 1e-6f);
+            EXPECT_NEAR(dot(cam.generate_ray(48.f, 24.f).dir, cam.right), 1.f, 1e-6f);  // a quarter turn right
+            EXPECT_TRUE(cam.sees(63.f, 1.f));
+        }
+    }
 }
 
 TEST(Adjoint, CameraRayMatchesRenderCamera) {

@@ -190,7 +190,7 @@ def render_small(scene):
     (lambda s: setattr(s.camera, "resolution", (0, 64)), r"camera\.resolution"),
     (lambda s: setattr(s.camera, "resolution", (64.0, 64)), r"camera\.resolution"),
     (lambda s: setattr(s.camera, "position", torch.zeros(2)), r"camera\.position"),
-    (lambda s: setattr(s.camera, "camera_type", "fisheye"), r"camera\.camera_type"),
+    (lambda s: setattr(s.camera, "camera_type", "cylindrical"), r"camera\.camera_type"),
     (lambda s: setattr(s.camera, "pixel_filter", "lanczos"), r"camera\.pixel_filter"),
     (lambda s: setattr(s.camera, "fov", torch.ones(2)), r"camera\.fov"),
     (lambda s: setattr(s.camera, "to_world", torch.eye(4)), r"camera"),
