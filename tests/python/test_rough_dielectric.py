@@ -45,10 +45,10 @@ def test_rough_glass_matches_mitsuba():
     assert blocks[0] < 0.04 and blocks[1] < 0.4
 
 
-def glass_slab_scene(roughness=0.2, ior=1.5, light_offset=None, size=(10, 10)):
+def glass_slab_scene(roughness=0.2, ior=1.5, occluder=None, size=(10, 10)):
     """A rough glass slab (two parallel quads 0.3 apart, tilted 30 degrees) filling the view of
-    a camera, before an emitting quad of vertical stripes and a dim environment."""
-    z3 = torch.zeros(3)
+    a camera, before an emitting quad of vertical stripes and a dim environment; with
+    ``occluder`` (an offset), a dark square between the slab and the stripes."""
     glass = ep.Material(kind="dielectric", ior=ior, roughness=roughness)
     a = math.radians(30)
     normal = torch.tensor([math.sin(a), 0.0, math.cos(a)])
@@ -65,8 +65,11 @@ def glass_slab_scene(roughness=0.2, ior=1.5, light_offset=None, size=(10, 10)):
     luv = torch.tensor([[0.0, 1.0], [1.0, 1.0], [1.0, 0.0], [0.0, 0.0]])
     meshes = [ep.Mesh(vertices=face(torch.zeros(3)), indices=quad, material=glass),
               ep.Mesh(vertices=face(-0.3 * normal).flip(0).contiguous(), indices=quad, material=glass),
-              ep.Mesh(vertices=lv + (z3 if light_offset is None else light_offset), indices=li, uvs=luv,
-                      emission=stripes)]
+              ep.Mesh(vertices=lv, indices=li, uvs=luv, emission=stripes)]
+    if occluder is not None:
+        ov, oi = shapes.quad([[-0.3, -0.3, -0.8], [0.3, -0.3, -0.8], [0.3, 0.3, -0.8], [-0.3, 0.3, -0.8]])
+        meshes.append(ep.Mesh(vertices=ov + occluder, indices=oi,
+                              material=ep.Material(diffuse=torch.tensor([0.05, 0.05, 0.05]))))
     camera = ep.Camera(position=torch.tensor([0.0, 0.0, 3.0]), look_at=torch.zeros(3), fov=25,
                        resolution=size)
     return ep.Scene(camera=camera, meshes=meshes,
@@ -100,6 +103,30 @@ def test_rough_glass_derivatives_match_finite_differences(name, value, eps):
     assert float(fd_image.abs().mean()) > 0.5  # the image does change with the parameter
     assert error < 0.3
     assert ratio == pytest.approx(1.0, abs=0.05)
+
+
+@pytest.mark.slow  # about 10 s: thousands of samples for finite differences
+def test_occluder_seen_through_rough_glass_matches_finite_differences():
+    """A dark square moving sideways between the slab and the stripes: its outline is seen only
+    through the rough glass, so the derivative is the boundary term of the edges sampled at the
+    glass's vertices (interior term alone: relative L1 1.0). Measured at 4096 spp: relative L1
+    0.19 (0.29 at 1024 spp: the noise of both estimators)."""
+    spp, eps = 4096, 0.02
+    param = torch.zeros(3, requires_grad=True)
+    direction = torch.tensor([1.0, 0.0, 0.0])
+    scene = glass_slab_scene(occluder=param, size=(5, 5))
+    d_image = ep.derivative_image(scene, param, direction, spp=spp, seed=2, max_bounces=4)
+    interior = ep.derivative_image(scene, param, direction, spp=spp, seed=2, max_bounces=4,
+                                   secondary_edges=False)
+    with torch.no_grad():
+        plus, minus = (ep.render(glass_slab_scene(occluder=s * eps * direction, size=(5, 5)), spp=spp, seed=2,
+                                 max_bounces=4) for s in (0.5, -0.5))
+    fd_image = (plus - minus) / eps
+    error = relative_l1(d_image, fd_image)
+    print(f"relative L1 {error:.4f}, interior alone {relative_l1(interior, fd_image):.4f}")
+    assert float(fd_image.abs().mean()) > 0.5
+    assert error < 0.3
+    assert relative_l1(interior, fd_image) > 0.9
 
 
 def test_inverse_rendering_recovers_a_roughness():
