@@ -192,3 +192,17 @@ def test_rough_glass_roughness_must_be_non_negative():
     scene = glass_slab_scene(roughness=torch.tensor(-0.1))
     with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.roughness"):
         ep.render(scene, spp=1)
+
+
+def test_roughness_channel_of_rough_glass_and_its_gradient():
+    """The "roughness" output channel reports a dielectric's roughness (0 where smooth), and
+    its backward pass reaches the roughness: the slab fills the view, so the channel's mean
+    is the roughness and its derivative 1."""
+    roughness = torch.tensor(0.25, requires_grad=True)
+    channels = ep.render_channels(glass_slab_scene(roughness=roughness, size=(4, 4)), ["roughness"], spp=4)
+    values = channels["roughness"]
+    assert torch.allclose(values, torch.full_like(values, 0.25))
+    values.mean().backward()
+    assert roughness.grad is not None and float(roughness.grad) == pytest.approx(1.0, rel=1e-4)
+    smooth = ep.render_channels(glass_slab_scene(roughness=0.0, size=(4, 4)), ["roughness"], spp=4)["roughness"]
+    assert float(smooth.abs().max()) == 0.0
