@@ -96,9 +96,11 @@ class Material:
     "conductor": a smooth mirror reflecting ``specular`` at normal incidence (Schlick's
     Fresnel; 1.0 for a perfect mirror); ``diffuse`` and ``roughness`` are unused.
 
-    "dielectric": smooth glass, reflecting and refracting by the Fresnel equations with the
-    relative index of refraction ``ior`` (inside over outside; a float, shape (1,), or texture
-    (H, W)); two-sided; ``diffuse``, ``specular`` and ``roughness`` are unused.
+    "dielectric": glass, reflecting and refracting by the Fresnel equations with the relative
+    index of refraction ``ior`` (inside over outside; a float, shape (1,), or texture (H, W));
+    two-sided. Smooth where ``roughness`` is 0 (its default for this kind), elsewhere rough with
+    it as GGX alpha (Walter et al. 2007, as Mitsuba's ``roughdielectric``); ``diffuse`` and
+    ``specular`` are unused.
 
     ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs). Every tensor
     is differentiable, ``ior`` included.
@@ -109,11 +111,14 @@ class Material:
     differentiable in its texels, and in the vertices, normals and uvs through the frame."""
 
     def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
-                 roughness: Constant = 0.5, two_sided: bool = False,
+                 roughness: Optional[Constant] = None, two_sided: bool = False,
                  kind: str = "standard", ior: Constant = 1.5,
                  normal_map: Optional[torch.Tensor] = None):
         self.diffuse = diffuse
         self.specular = specular
+        # None: 0.5 (a dielectric: 0, smooth)
+        if roughness is None:
+            roughness = 0.0 if kind == "dielectric" else 0.5
         self.roughness = roughness
         self.two_sided = two_sided
         self.kind = kind

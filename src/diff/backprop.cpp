@@ -222,7 +222,7 @@ namespace {
 
 TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp) {
     BsdfParams p = scene.bsdf_params(sp);
-    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta};
+    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta, p.rough};
 }
 
 DeltaParams<float> delta_params(const TBsdfParams<float>& p) {
@@ -311,7 +311,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
 
         TBsdfParams<float> bp = bsdf_params_world(scene, sp);
-        const bool delta = bp.kind != MaterialKind::Standard;
+        const bool delta = is_delta_kind(bp.kind, bp.rough);
         const Vec3f ns = bend_normal(sp.ns, sp.ng, wo);
         DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
         float d_eta = 0.f;
@@ -365,6 +365,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             db.n += dl.n;
             db.wo += dl.wo;
             db.alpha += dl.alpha;
+            db.eta += dl.eta;
             Vec3f d_wl = dl.wi;
             if (ps && ps->intensity.wanted()) {
                 const Vec3f dI = ab * f * g;
@@ -414,7 +415,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
             if (mat.kind == MaterialKind::Dielectric) {
-                float de[1] = {d_eta};
+                float de[1] = {d_eta + db.eta};
                 d_texture(mat.ior, mats ? mats->ior : kNoSlot, sp.uv, de, sink, &ha.duv);
             }
         }

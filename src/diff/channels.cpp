@@ -37,7 +37,7 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
                 break;
             case Channel::VertexColor: ha.dcolor += Vec3f(a[0], a[1], a[2]); break;
             case Channel::Roughness:
-                if (mat.kind == MaterialKind::Standard)
+                if (mat.kind != MaterialKind::Conductor)
                     d_texture(mat.roughness, mats ? mats->roughness : none, g.sp.uv, a, sink, &ha.duv);
                 break;
             case Channel::Specular:

@@ -88,7 +88,9 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     if (!active()) return d_p;
     const EdgeSet& set = (position_matters || !has_wanted_set_) ? all_ : wanted_;
     if (set.edges.empty()) return d_p;
-    if (uniform_) {
+    // The hierarchy's lobe bound covers the side of wo only: a rough dielectric, which also
+    // transmits, picks its edges uniformly (unbiased, noisier).
+    if (uniform_ || bsdf.kind == MaterialKind::Dielectric) {
         // An edge by length, a point on it uniformly: density 1 / total per unit length.
         const double at = rng.next_double() * set.total;
         const size_t k = std::min(size_t(std::upper_bound(set.cumulative.begin(), set.cumulative.end(), at) -

@@ -96,8 +96,9 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
                 break;
             case Channel::VertexColor: store(values, o, mesh.color(hit.prim, sp.b1, sp.b2)); break;
             case Channel::Roughness:
-                // GGX alpha as given (the BSDF clamps it below at kMinRoughness); mirrors and glass are smooth.
-                values[o] = m.kind == MaterialKind::Standard ? eval_texture1(m.roughness, sp.uv) : 0.f;
+                // GGX alpha as given (the BSDF clamps it below at kMinRoughness); mirrors are smooth,
+                // glass where it is 0.
+                values[o] = m.kind != MaterialKind::Conductor ? eval_texture1(m.roughness, sp.uv) : 0.f;
                 break;
             case Channel::Specular:
                 store(values, o, m.kind != MaterialKind::Dielectric ? eval_texture3(m.specular, sp.uv) : Vec3f(0.f));

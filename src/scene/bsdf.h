@@ -2,12 +2,14 @@
 // Schlick Fresnel with `specular` as the reflectance at normal incidence). Directions are in the
 // local shading frame (z = shading normal), `wo` towards the viewer, `wi` towards the light.
 // One-sided unless `two_sided`: black when either direction is below the shading surface.
-// The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
+// The rough dielectric (Walter et al. 2007; scene/bsdf_diff.h holds its value) reflects and
+// transmits, from either side. The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
 // are zero, and bsdf_sample returns their one direction with its weight.
 #pragma once
 #include <cmath>
 #include "math/vec.h"
 #include "sampling/warp.h"
+#include "scene/bsdf_diff.h"
 #include "scene/desc.h"
 #include "scene/specular.h"
 
@@ -23,9 +25,11 @@ struct BsdfParams {
     bool two_sided = false;
     MaterialKind kind = MaterialKind::Standard;
     float eta = 1.5f;  // Dielectric: relative index of refraction
+    bool rough = false;  // Dielectric: rough (GGX with `alpha`) rather than smooth
 };
 
-inline bool is_delta(const BsdfParams& p) { return p.kind != MaterialKind::Standard; }
+inline bool is_delta(const BsdfParams& p) { return is_delta_kind(p.kind, p.rough); }
+inline bool is_rough_dielectric(const BsdfParams& p) { return p.kind == MaterialKind::Dielectric && p.rough; }
 
 inline DeltaParams<float> delta_params(const BsdfParams& p) {
     return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided};
@@ -81,6 +85,10 @@ inline bool orient(const BsdfParams& p, Vec3f& wo, Vec3f& wi) {
 
 // f(wo, wi) * cos(theta_i).
 inline Vec3f bsdf_eval(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (is_rough_dielectric(p)) {
+        detail::RoughDielectricTerms<float> r;
+        return Vec3f(detail::rough_dielectric_terms(p.alpha, p.eta, Vec3f(0.f, 0.f, 1.f), wo, wi, r) ? r.v : 0.f);
+    }
     if (is_delta(p)) return Vec3f(0.f);
     if (!orient(p, wo, wi)) return Vec3f(0.f);
     Vec3f result = p.diffuse * (wi.z * kInvPi);
@@ -102,7 +110,32 @@ inline float ggx_pdf(const Vec3f& wo, const Vec3f& wi, float a) {
     return ggx_G1(wo, h, a) * ggx_D(h, a) / (4.f * wo.z);
 }
 
+// Density of the rough dielectric's sampling (bsdf_sample): a visible normal h for wo turned to
+// its side, then reflection with probability F(wo . h), else refraction through h.
+inline float rough_dielectric_pdf(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (wo.z == 0.f || wi.z == 0.f) return 0.f;
+    const float e = wo.z < 0.f ? 1.f / p.eta : p.eta;
+    if (wo.z < 0.f) {
+        wo.z = -wo.z;
+        wi.z = -wi.z;
+    }
+    const bool reflect = wi.z > 0.f;
+    const Vec3f H = reflect ? wo + wi : wo + wi * e;
+    const float hl = length(H);
+    if (!(hl > 0.f)) return 0.f;
+    Vec3f h = H / hl;
+    if (h.z < 0.f) h = -h;
+    const float oh = dot(wo, h), ih = dot(wi, h);
+    if (!(oh > 0.f) || (reflect ? !(ih > 0.f) : !(ih < 0.f))) return 0.f;
+    const float F = detail::fresnel_dielectric(oh, e);
+    const float visible = ggx_G1(wo, h, p.alpha) * ggx_D(h, p.alpha) * oh / wo.z;
+    if (reflect) return F * visible / (4.f * oh);
+    const float den = oh + e * ih;
+    return (1.f - F) * visible * e * e * -ih / (den * den);
+}
+
 inline float bsdf_pdf(const BsdfParams& p, Vec3f wo, Vec3f wi) {
+    if (is_rough_dielectric(p)) return rough_dielectric_pdf(p, wo, wi);
     if (is_delta(p)) return 0.f;
     if (!orient(p, wo, wi)) return 0.f;
     float ps = specular_lobe_probability(p);
@@ -127,6 +160,31 @@ inline Vec3f ggx_sample_visible_normal(const Vec3f& wo, float a, float u1, float
 
 // Samples wi. Returns false when no direction could be produced (zero BSDF).
 inline bool bsdf_sample(const BsdfParams& p, Vec3f wo, float u_lobe, float u1, float u2, BsdfSample& out) {
+    if (is_rough_dielectric(p)) {
+        // Mirrored to wo's side (the model is symmetric under it, with 1 / eta from inside).
+        if (wo.z == 0.f) return false;
+        const float s = wo.z < 0.f ? -1.f : 1.f, e = wo.z < 0.f ? 1.f / p.eta : p.eta;
+        const Vec3f wu(wo.x, wo.y, s * wo.z);
+        const Vec3f h = ggx_sample_visible_normal(wu, p.alpha, u1, u2);
+        const float oh = dot(wu, h);
+        if (!(oh > 0.f)) return false;
+        const float F = detail::fresnel_dielectric(oh, e);
+        Vec3f wi;
+        if (u_lobe < F) {
+            wi = h * (2.f * oh) - wu;
+            if (!(wi.z > 0.f)) return false;
+        } else {
+            const float q = (1.f - oh * oh) / (e * e);
+            if (q >= 1.f) return false;
+            wi = h * (oh / e - std::sqrt(1.f - q)) - wu / e;
+            if (!(wi.z < 0.f)) return false;
+            out.refract = true;
+        }
+        wi = normalize(Vec3f(wi.x, wi.y, s * wi.z));
+        out.wi = wi;
+        out.pdf = rough_dielectric_pdf(p, wo, wi);
+        return out.pdf > 0.f;
+    }
     if (is_delta(p)) {
         const DeltaParams<float> d = delta_params(p);
         const Vec3f n(0.f, 0.f, 1.f);

@@ -19,12 +19,20 @@ struct TBsdfParams {
     bool two_sided = false;
     MaterialKind kind = MaterialKind::Standard;  // smooth kinds: zero here (scene/specular.h)
     T eta = T(1.5);
+    bool rough = false;  // Dielectric: the rough (GGX) one, evaluated here; otherwise smooth
 };
+
+// Whether the material scatters into isolated directions (scene/specular.h): the conductor,
+// and the dielectric unless rough.
+inline bool is_delta_kind(MaterialKind kind, bool rough) {
+    return kind == MaterialKind::Conductor || (kind == MaterialKind::Dielectric && !rough);
+}
 
 template <class T>
 struct DBsdf {
     TVec3<T> diffuse, specular, n, wo, wi;
     T alpha = 0;
+    T eta = 0;  // rough dielectric only
 };
 
 namespace detail {
@@ -91,6 +99,154 @@ bool ggx_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, c
     g.S = g.D * g.Go * g.Gi / (4 * co);
     return true;
 }
+
+// Fresnel reflectance of a dielectric interface for the cosine c > 0 of incidence and the
+// relative index e (the far side's over the near side's); 1 under total internal reflection.
+template <class T> T fresnel_dielectric(T c, T e) {
+    const T q = (1 - c * c) / (e * e);
+    if (q >= 1) return 1;
+    const T ct = std::sqrt(1 - q), a = e * ct, b = e * c;
+    const T rs = (c - a) / (c + a), rp = (b - ct) / (b + ct);
+    return (rs * rs + rp * rp) / 2;
+}
+template <class T> void d_fresnel_dielectric(T c, T e, T dF, T& dc, T& de) {
+    const T q = (1 - c * c) / (e * e);
+    if (q >= 1) return;
+    const T ct = std::sqrt(1 - q), a = e * ct, b = e * c;
+    const T rs = (c - a) / (c + a), rp = (b - ct) / (b + ct);
+    // F = (rs^2 + rp^2) / 2
+    const T drs = dF * rs, drp = dF * rp;
+    // rs = (c - a) / (c + a), rp = (b - ct) / (b + ct)
+    const T ua = (c + a) * (c + a), ub = (b + ct) * (b + ct);
+    dc += drs * 2 * a / ua;
+    const T da = -drs * 2 * c / ua;
+    const T db = drp * 2 * ct / ub;
+    T dct = -drp * 2 * b / ub;
+    // a = e ct, b = e c
+    de += da * ct + db * c;
+    dct += da * e;
+    dc += db * e;
+    // ct = sqrt(1 - q), q = (1 - c^2) / e^2
+    if (ct > 0) {
+        const T dq = -dct / (2 * ct);
+        dc += dq * (-2 * c / (e * e));
+        de += dq * (-2 * (1 - c * c) / (e * e * e));
+    }
+}
+
+// The rough dielectric (Walter et al. 2007, GGX with separable Smith shadowing) at (wo, wi),
+// world space, and its intermediates. With N = s n the normal on wo's side (s = sign(n . wo)),
+// co = N . wo > 0 and ci = N . wi: reflection where ci > 0, transmission where ci < 0. e is the
+// index on wi's side over wo's for a transmission (eta or 1 / eta). The microfacet normal h is
+// wo + wi (reflection) or wo + e wi (transmission), normalised and turned to N's side; wo must
+// see its front (oh = wo . h > 0) and wi its front (reflection) or back (transmission). Value
+// (f times |N . wi|, radiance, so scaled by 1 / e^2 across the interface):
+//   reflection:   F D Go Gi / (4 co)
+//   transmission: oh |ih| (1 - F) D Go Gi / (co (oh + e ih)^2),  ih = wi . h < 0
+// with F the Fresnel reflectance at oh. False where it is zero by geometry.
+template <class T>
+struct RoughDielectricTerms {
+    T s, co, ci, e, hl, sg, ch, oh, ih, D, Go, Gi, F, den, v;
+    TVec3<T> H, h0, h;
+    bool reflect;
+};
+template <class T>
+bool rough_dielectric_terms(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi,
+                            RoughDielectricTerms<T>& r) {
+    const T c = dot(n, wo);
+    if (c == 0) return false;
+    r.s = c < 0 ? T(-1) : T(1);
+    r.co = r.s * c;
+    r.ci = r.s * dot(n, wi);
+    if (r.ci == 0) return false;
+    r.e = c < 0 ? 1 / eta : eta;
+    r.reflect = r.ci > 0;
+    r.H = r.reflect ? wo + wi : wo + wi * r.e;
+    r.hl = length(r.H);
+    if (!(r.hl > 0)) return false;
+    r.h0 = r.H / r.hl;
+    const T c0 = r.s * dot(n, r.h0);
+    r.sg = c0 < 0 ? T(-1) : T(1);
+    r.h = r.h0 * r.sg;
+    r.ch = r.sg * c0;
+    r.oh = dot(wo, r.h);
+    r.ih = dot(wi, r.h);
+    if (!(r.oh > 0) || (r.reflect ? !(r.ih > 0) : !(r.ih < 0))) return false;
+    r.D = ggx_d(r.ch, alpha);
+    r.Go = smith_g1(r.co, r.oh, alpha);
+    r.Gi = smith_g1(r.ci, r.ih, alpha);
+    r.F = fresnel_dielectric(r.oh, r.e);
+    if (r.reflect) {
+        r.den = 0;
+        r.v = r.F * r.D * r.Go * r.Gi / (4 * r.co);
+    } else {
+        r.den = r.oh + r.e * r.ih;
+        r.v = r.oh * -r.ih * (1 - r.F) * r.D * r.Go * r.Gi / (r.co * r.den * r.den);
+    }
+    return true;
+}
+
+// Adds the adjoint of the rough dielectric's value for its adjoint dv to (dn, dwo, dwi, dalpha, deta).
+template <class T>
+void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T dv,
+                        TVec3<T>& dn, TVec3<T>& dwo, TVec3<T>& dwi, T& dalpha, T& deta) {
+    RoughDielectricTerms<T> r;
+    if (!rough_dielectric_terms(alpha, eta, n, wo, wi, r)) return;
+    T dF = 0, dD = 0, dGo = 0, dGi = 0, dco = 0, dci = 0, doh = 0, dih = 0, de = 0, dch = 0;
+    if (r.reflect) {
+        // v = F D Go Gi / (4 co)
+        const T k = dv / (4 * r.co);
+        dF = k * r.D * r.Go * r.Gi;
+        dD = k * r.F * r.Go * r.Gi;
+        dGo = k * r.F * r.D * r.Gi;
+        dGi = k * r.F * r.D * r.Go;
+        dco = -dv * r.v / r.co;
+    } else {
+        // v = oh (-ih) (1 - F) D Go Gi / (co den^2)
+        const T base = r.oh * -r.ih / (r.co * r.den * r.den);
+        dF = -dv * base * r.D * r.Go * r.Gi;
+        const T k = dv * base * (1 - r.F);
+        dD = k * r.Go * r.Gi;
+        dGo = k * r.D * r.Gi;
+        dGi = k * r.D * r.Go;
+        doh += dv * (-r.ih) * (1 - r.F) * r.D * r.Go * r.Gi / (r.co * r.den * r.den);
+        dih += -dv * r.oh * (1 - r.F) * r.D * r.Go * r.Gi / (r.co * r.den * r.den);
+        dco = -dv * r.v / r.co;
+        const T dden = -2 * dv * r.v / r.den;
+        // den = oh + e ih
+        doh += dden;
+        de += dden * r.ih;
+        dih += dden * r.e;
+    }
+    // F = fresnel(oh, e)
+    d_fresnel_dielectric(r.oh, r.e, dF, doh, de);
+    // D = D(ch), Go = G1(co, oh), Gi = G1(ci, ih)
+    d_ggx_d(r.ch, alpha, dD, dch, dalpha);
+    d_smith_g1(r.co, r.oh, alpha, dGo, dco, dalpha);
+    d_smith_g1(r.ci, r.ih, alpha, dGi, dci, dalpha);
+    // ch = s n . h, oh = wo . h, ih = wi . h
+    const TVec3<T> dh = n * (r.s * dch) + wo * doh + wi * dih;
+    dn += r.h * (r.s * dch);
+    dwo += r.h * doh;
+    dwi += r.h * dih;
+    // h = sg H / |H|
+    const TVec3<T> dh0 = dh * r.sg;
+    const TVec3<T> dH = (dh0 - r.h0 * dot(r.h0, dh0)) / r.hl;
+    // H = wo + wi, or wo + e wi
+    dwo += dH;
+    if (r.reflect) {
+        dwi += dH;
+    } else {
+        dwi += dH * r.e;
+        de += dot(dH, wi);
+    }
+    // co = s n . wo, ci = s n . wi
+    dn += (wo * dco + wi * dci) * r.s;
+    dwo += n * (r.s * dco);
+    dwi += n * (r.s * dci);
+    // e = eta (wo outside) or 1 / eta
+    deta += r.s > 0 ? de : -de * r.e * r.e;
+}
 }  // namespace detail
 
 // The shading normal the BSDF uses, bent towards the viewer where the interpolated normal
@@ -128,6 +284,10 @@ void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, c
 // f(wo, wi) * cos(theta_i), world space; n unit shading normal, wo/wi unit.
 template <class T>
 TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi) {
+    if (p.kind == MaterialKind::Dielectric && p.rough) {
+        detail::RoughDielectricTerms<T> r;
+        return TVec3<T>(detail::rough_dielectric_terms(p.alpha, p.eta, n, wo, wi, r) ? r.v : T(0));
+    }
     if (p.kind != MaterialKind::Standard) return TVec3<T>(T(0));
     T co = dot(n, wo);
     if (p.two_sided && co < 0) {
@@ -146,6 +306,11 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
 template <class T>
 void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi,
                        const TVec3<T>& dr, DBsdf<T>& d) {
+    if (p.kind == MaterialKind::Dielectric && p.rough) {
+        // result = (v, v, v)
+        detail::d_rough_dielectric(p.alpha, p.eta, n, wo, wi, dr.x + dr.y + dr.z, d.n, d.wo, d.wi, d.alpha, d.eta);
+        return;
+    }
     if (p.kind != MaterialKind::Standard) return;
     T co = dot(n, wo);
     bool flipped = p.two_sided && co < 0;

@@ -21,15 +21,16 @@ struct TextureDesc {
 };
 
 // Standard: the diffuse + GGX model. Conductor: a smooth mirror, reflectance `specular` at
-// normal incidence (Schlick); `diffuse` and `roughness` unused. Dielectric: smooth glass with
+// normal incidence (Schlick); `diffuse` and `roughness` unused. Dielectric: glass with
 // relative index of refraction `ior` (inside over outside), reflecting and refracting by the
-// Fresnel equations; `diffuse`, `specular` and `roughness` unused, always two-sided.
+// Fresnel equations; smooth where `roughness` is 0, elsewhere rough with it as GGX alpha
+// (Walter et al. 2007); `diffuse` and `specular` unused, always two-sided.
 enum class MaterialKind { Standard = 0, Conductor = 1, Dielectric = 2 };
 
 struct MaterialDesc {
     TextureDesc diffuse;    // 3 channels, Lambertian albedo
     TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
-    TextureDesc roughness;  // 1 channel, GGX alpha
+    TextureDesc roughness;  // 1 channel, GGX alpha (Dielectric: 0 where smooth)
     TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric only)
     // 3 channels, tangent-space normal map (scene/normal_map.h); empty: none. Needs no uvs (the
     // barycentrics stand in) but follows them where given.

@@ -643,10 +643,14 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     const Mesh& mesh = meshes[sp.mesh];
     if (mesh.colors) p.diffuse = p.diffuse * mesh.color(sp.prim, sp.b1, sp.b2);
     p.specular = eval_texture3(m.specular, sp.uv);
-    p.alpha = std::max(eval_texture1(m.roughness, sp.uv), kMinRoughness);
+    const float roughness = eval_texture1(m.roughness, sp.uv);
+    p.alpha = std::max(roughness, kMinRoughness);
     p.two_sided = m.two_sided;
     p.kind = m.kind;
-    if (m.kind == MaterialKind::Dielectric) p.eta = eval_texture1(m.ior, sp.uv);
+    if (m.kind == MaterialKind::Dielectric) {
+        p.eta = eval_texture1(m.ior, sp.uv);
+        p.rough = roughness > 0.f;
+    }
     return p;
 }
 

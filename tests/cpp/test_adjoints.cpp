@@ -90,6 +90,82 @@ TEST(Adjoint, BsdfEvalWorld) {
     bsdf_case(true, Vec3d(0.1, 0.2, -1), Vec3d(0.3, -0.2, 0.8), Vec3d(-0.4, 0.3, 0.7), 0.5, "two-sided from below");
 }
 
+// The rough dielectric. Inputs: alpha, eta, n[3], wo[3], wi[3] (normalised inside); cases of
+// reflection and transmission from both sides.
+void rough_dielectric_case(Vec3d n, Vec3d wo, Vec3d wi, double alpha, double eta, const char* name) {
+    auto unpack = [](const std::vector<double>& x, TBsdfParams<double>& p, Vec3d& N, Vec3d& O, Vec3d& I) {
+        p.kind = MaterialKind::Dielectric;
+        p.rough = true;
+        p.two_sided = true;
+        p.alpha = x[0];
+        p.eta = x[1];
+        N = v3(x, 2);
+        O = v3(x, 5);
+        I = v3(x, 8);
+    };
+    std::vector<double> x = {alpha, eta};
+    for (const Vec3d& v : {normalize(n), normalize(wo), normalize(wi)}) x.insert(x.end(), {v.x, v.y, v.z});
+    Fn f = [&](const std::vector<double>& x) {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        unpack(x, p, N, O, I);
+        Vec3d r = bsdf_eval_world(p, N, O, I);
+        return std::vector<double>{r.x, r.y, r.z};
+    };
+    {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        unpack(x, p, N, O, I);
+        EXPECT_GT(bsdf_eval_world(p, N, O, I).x, 1e-3) << name << ": the case must not be zero";
+    }
+    auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        unpack(x, p, N, O, I);
+        DBsdf<double> d;
+        d_bsdf_eval_world(p, N, O, I, Vec3d(yb[0], yb[1], yb[2]), d);
+        std::vector<double> g(11);
+        g[0] = d.alpha;
+        g[1] = d.eta;
+        put(g, 2, d.n);
+        put(g, 5, d.wo);
+        put(g, 8, d.wi);
+        return g;
+    };
+    check_adjoint(f, adj, x, name);
+}
+
+TEST(Adjoint, RoughDielectricEvalWorld) {
+    const Vec3d n(0.1, 0.2, 1);
+    rough_dielectric_case(n, Vec3d(0.3, -0.2, 0.8), Vec3d(-0.4, 0.3, 0.7), 0.3, 1.5, "reflection outside");
+    rough_dielectric_case(n, Vec3d(0.3, -0.2, 0.8), Vec3d(-0.3, 0.1, -0.9), 0.3, 1.5, "transmission inwards");
+    rough_dielectric_case(n, Vec3d(0.2, 0.1, -0.9), Vec3d(-0.2, 0.3, 0.8), 0.4, 1.5, "transmission outwards");
+    rough_dielectric_case(n, Vec3d(0.2, 0.1, -0.9), Vec3d(-0.3, 0.2, -0.8), 0.25, 1.33, "reflection inside");
+    rough_dielectric_case(n, Vec3d(0.6, 0.1, 0.3), Vec3d(-0.5, 0.2, -0.6), 0.1, 1.7, "grazing, sharp");
+}
+
+// The world-space rough dielectric equals the sampler's local model.
+TEST(Adjoint, RoughDielectricWorldMatchesLocalModel) {
+    BsdfParams p;
+    p.kind = MaterialKind::Dielectric;
+    p.rough = true;
+    p.alpha = 0.3f;
+    p.eta = 1.4f;
+    TBsdfParams<float> q;
+    q.kind = MaterialKind::Dielectric;
+    q.rough = true;
+    q.alpha = p.alpha;
+    q.eta = p.eta;
+    const Vec3f n = normalize(Vec3f(0.2f, 0.9f, 0.1f));
+    const Frame fr(n);
+    const Vec3f wo = normalize(Vec3f(0.3f, 0.8f, -0.2f));
+    for (const Vec3f& wi : {normalize(Vec3f(-0.5f, 0.6f, 0.4f)), normalize(Vec3f(-0.2f, -0.9f, 0.3f))}) {
+        const Vec3f a = bsdf_eval(p, fr.to_local(wo), fr.to_local(wi)), b = bsdf_eval_world(q, n, wo, wi);
+        EXPECT_GT(a.x, 0.f);
+        EXPECT_NEAR(a.x, b.x, 1e-5f * (1 + a.x));
+    }
+}
+
 TEST(Adjoint, BsdfWorldMatchesLocalModel) {
     // The world-space evaluation used by the gradient pass equals the sampler's local model.
     BsdfParams p;

@@ -77,6 +77,71 @@ TEST(Bsdf, PdfIntegratesToOneAndSamplerMatchesIntegral) {
     }
 }
 
+// The rough dielectric reflects and transmits, from outside (eta) and inside (1 / eta): its
+// density integrates to the probability that sampling succeeds, its sampler's estimate agrees
+// with uniform sampling of the sphere, and with a small roughness the total weight approaches
+// the smooth interface's F + (1 - F) / e^2 (radiance, e the index ratio across it).
+TEST(Bsdf, RoughDielectricSamplerMatchesIntegralAndSmoothLimit) {
+    Rng rng(11, 3);
+    struct Case { float alpha, eta, wz; };
+    for (const Case& c : {Case{0.3f, 1.5f, 0.8f}, Case{0.3f, 1.5f, -0.8f}, Case{0.6f, 1.33f, 0.4f},
+                          Case{0.2f, 1.5f, -0.5f}}) {
+        BsdfParams p;
+        p.kind = MaterialKind::Dielectric;
+        p.rough = true;
+        p.two_sided = true;
+        p.alpha = c.alpha;
+        p.eta = c.eta;
+        const Vec3f wo = normalize(Vec3f(0.4f, -0.2f, c.wz));
+        Acc pdf_int, success, f_uniform, f_sampled, transmitted;
+        const int N = 400000;
+        for (int i = 0; i < N; ++i) {
+            const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
+            pdf_int.add(bsdf_pdf(p, wo, w) * 4.f * kPi);
+            const Vec3f f = bsdf_eval(p, wo, w);
+            EXPECT_EQ(f.x, f.z);
+            f_uniform.add(f.x * 4.f * kPi);
+            BsdfSample bs;
+            double g = 0, t = 0;
+            const bool ok = bsdf_sample(p, wo, rng.next_float(), rng.next_float(), rng.next_float(), bs);
+            success.add(ok ? 1.0 : 0.0);
+            if (ok) {
+                EXPECT_FALSE(bs.delta);
+                const float pdf = bsdf_pdf(p, wo, bs.wi);
+                EXPECT_NEAR(pdf, bs.pdf, 1e-3f * pdf + 1e-6f);
+                g = bsdf_eval(p, wo, bs.wi).x / bs.pdf;
+                if (bs.wi.z * wo.z < 0.f) t = g;
+            }
+            f_sampled.add(g);
+            transmitted.add(t);
+        }
+        EXPECT_GT(transmitted.mean(), 0.3) << "alpha " << c.alpha << " wz " << c.wz;
+        EXPECT_NEAR(pdf_int.mean(), success.mean(), 5 * std::hypot(pdf_int.se(), success.se()));
+        const double se = std::hypot(f_uniform.se(), f_sampled.se());
+        EXPECT_NEAR(f_uniform.mean(), f_sampled.mean(), 5 * se + 1e-6) << "alpha " << c.alpha << " wz " << c.wz;
+    }
+    for (float wz : {0.7f, -0.9f}) {
+        BsdfParams p;
+        p.kind = MaterialKind::Dielectric;
+        p.rough = true;
+        p.alpha = 0.01f;
+        p.eta = 1.5f;
+        const Vec3f wo = normalize(Vec3f(0.3f, 0.1f, wz));
+        const float F = dielectric_reflectance(p.eta, Vec3f(0.f, 0.f, 1.f), wo);
+        const float e = wz > 0.f ? p.eta : 1.f / p.eta;
+        const double expected = F + (F < 1.f ? (1.f - F) / (e * e) : 0.f);
+        Acc sum;
+        for (int i = 0; i < 100000; ++i) {
+            BsdfSample bs;
+            double g = 0;
+            if (bsdf_sample(p, wo, rng.next_float(), rng.next_float(), rng.next_float(), bs))
+                g = bsdf_eval(p, wo, bs.wi).x / bs.pdf;
+            sum.add(g);
+        }
+        EXPECT_NEAR(sum.mean(), expected, 0.02 * expected) << "wz " << wz;
+    }
+}
+
 TEST(Bsdf, OneSidedIsBlackFromBelowAndReciprocal) {
     BsdfParams p = test_materials()[2];
     Vec3f a = normalize(Vec3f(0.3f, 0.1f, 0.9f)), b = normalize(Vec3f(-0.5f, 0.2f, 0.6f));

@@ -119,8 +119,8 @@ UNSUPPORTED = [
     ('<shape type="cylinder"/>', "unsupported shape type 'cylinder'"),
     ('<emitter type="projector"><float name="scale" value="2"/></emitter>',
      "unsupported emitter type 'projector'"),
-    ('<shape type="rectangle"><bsdf type="roughdielectric"/></shape>',
-     "unsupported bsdf type 'roughdielectric'"),
+    ('<shape type="rectangle"><bsdf type="thindielectric"/></shape>',
+     "unsupported bsdf type 'thindielectric'"),
     ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="dielectric"/></bsdf></shape>',
      "twosided cannot hold a dielectric"),
     ('<shape type="rectangle"><bsdf type="dielectric"><float name="int_ior" value="20"/>'

@@ -1,5 +1,5 @@
 """BSDFs of Mitsuba scene files (diffuse, conductor, roughconductor, roughplastic, dielectric,
-twosided, normalmap), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
+roughdielectric, twosided, normalmap), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
 approximately where Mitsuba's model differs (see docs/scene-files.md)."""
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ DIFFUSE_KEYS = {"diffuse": "reflectance"}
 BSDF_KEYS = {"diffuse": DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
                                                        "roughness": "alpha"},
              "roughconductor": {"roughness": "alpha"}, "conductor": {},
-             "dielectric": {"ior": "eta"}}
+             "dielectric": {"ior": "eta"}, "roughdielectric": {"ior": "eta", "roughness": "alpha"}}
 
 
 def load_bsdf(ctx: Reader, node: Node) -> Material:
@@ -195,7 +195,20 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
         if kind == "conductor":
             return Material(kind="conductor", specular=f0)
         return Material(diffuse=torch.zeros(3), specular=f0, roughness=alpha)
-    if kind == "dielectric":
+    if kind in ("dielectric", "roughdielectric"):
+        alpha = 0.0
+        if kind == "roughdielectric":
+            dist = ctx.string_value(props["distribution"]) if "distribution" in props else "beckmann"
+            if dist != "ggx":
+                ctx.fail(props.get("distribution", node),
+                         f"distribution '{dist}'{'' if 'distribution' in props else ' (the default)'}: "
+                         "a roughdielectric supports only ggx (give <string name=\"distribution\" "
+                         "value=\"ggx\"/>)")
+            alpha = roughness_alpha(ctx, node, props)
+            if isinstance(alpha, float) and not alpha > 0:
+                ctx.fail(node, f"alpha = {alpha:g}: a roughdielectric needs alpha > 0 (use dielectric)")
+            if isinstance(alpha, float):
+                alpha = torch.tensor(alpha, dtype=torch.float32)
         int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["bk7"])
         ext_ior = ior_value(ctx, node, props, "ext_ior", NAMED_IOR["air"])
         if not int_ior > 0 or not ext_ior > 0:
@@ -210,7 +223,7 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
                     ctx.fail(props[name], f"{name} other than 1 is not supported")
                 props.pop(name)
         ctx.leftovers(node, props, "bsdf")
-        return Material(kind="dielectric", ior=torch.tensor(eta, dtype=torch.float32))
+        return Material(kind="dielectric", ior=torch.tensor(eta, dtype=torch.float32), roughness=alpha)
     if kind == "roughplastic":
         alpha = roughness_alpha(ctx, node, props)
         int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["polypropylene"])
@@ -230,4 +243,4 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
         ctx.leftovers(node, props, "bsdf")
         return Material(diffuse=diffuse, specular=specular.contiguous(), roughness=alpha)
     ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, conductor, "
-                   "roughconductor, roughplastic, dielectric, twosided, normalmap)")
+                   "roughconductor, roughplastic, dielectric, roughdielectric, twosided, normalmap)")
