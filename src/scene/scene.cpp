@@ -11,6 +11,7 @@
 
 #include "scene/geometry.h"
 #include "scene/normal_map.h"
+#include "sampling/spherical_triangle.h"
 
 namespace edgepath {
 
@@ -427,6 +428,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.two_sided_emission = md.two_sided_emission;
         m.spot = md.spot;
         m.solid_angle = md.sample_solid_angle;
+        m.spherical_triangle = md.sample_spherical_triangle && !md.sample_solid_angle;
         std::copy(md.spot_profile, md.spot_profile + kSpotParams, m.spot_profile);
     }
     point_lights = desc.point_lights;
@@ -759,6 +761,41 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
         ls.pdf = light_distribution.pmf(li) / (2.f * kPi * omc);
         return ls.pdf > 0.f && std::isfinite(ls.pdf);
     }
+    const Mesh& lm = meshes[size_t(lt.mesh)];
+    if (lm.spherical_triangle) {
+        const int32_t* tri = lm.indices + 3 * lt.prim;
+        const Vec3d v0(lm.vertex(tri[0])), v1(lm.vertex(tri[1])), v2(lm.vertex(tri[2])), pd(p);
+        const SphericalTriangle st(pd, v0, v1, v2);
+        if (st.usable()) {
+            // A direction uniform in the triangle's solid angle, then where it meets the
+            // triangle (clamped into it against rounding).
+            const Vec3d w = st.sample(u1, u2);
+            TriangleHit<double> h;
+            if (!intersect_triangle(pd, w, v0, v1, v2, h) || !(h.t > 0)) return false;
+            double b1 = std::clamp(h.b1, 0.0, 1.0), b2 = std::clamp(h.b2, 0.0, 1.0);
+            if (b1 + b2 > 1.0) {
+                const double s = b1 + b2;
+                b1 /= s;
+                b2 /= s;
+            }
+            SurfacePoint q = surface_point(lt.mesh, lt.prim, float(b1), float(b2));
+            const Vec3f d(w);
+            ls.radiance = emitted(q, -d);
+            if (is_black(ls.radiance)) return false;
+            ls.dir = d;
+            ls.dist = float(h.t);
+            ls.hit.mesh = lt.mesh;
+            ls.hit.prim = lt.prim;
+            ls.hit.b1 = float(b1);
+            ls.hit.b2 = float(b2);
+            ls.hit.t = float(h.t);
+            ls.p = q.p;
+            ls.p_error = q.p_error;
+            ls.ng = q.ng;
+            ls.pdf = float(double(light_distribution.pmf(li)) / st.solid_angle);
+            return ls.pdf > 0.f && std::isfinite(ls.pdf);
+        }
+    }
     Vec2f b = square_to_triangle(u1, u2);
     SurfacePoint q = surface_point(lt.mesh, lt.prim, b.x, b.y);
     Vec3f d = q.p - p;
@@ -794,6 +831,13 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
         return light_distribution.pmf(int(m.light_offset)) / (2.f * kPi * omc);
     }
     int64_t li = m.light_offset + q.prim;
+    if (m.spherical_triangle) {
+        // The same choice as sample_area_light's, from the same point and corners.
+        const int32_t* tri = m.indices + 3 * q.prim;
+        const SphericalTriangle st(Vec3d(p), Vec3d(m.vertex(tri[0])), Vec3d(m.vertex(tri[1])),
+                                   Vec3d(m.vertex(tri[2])));
+        if (st.usable()) return float(double(light_distribution.pmf(int(li))) / st.solid_angle);
+    }
     Vec3f d = q.p - p;
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);

@@ -66,6 +66,7 @@ struct Mesh {
     bool solid_angle = false;  // sampled by the solid angle of its bounding sphere (desc.h)
     Vec3f sphere_center;       // that sphere, when solid_angle (set by Scene::build_lights)
     float sphere_radius = 0.f;
+    bool spherical_triangle = false;  // triangles sampled by their solid angle (desc.h)
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 

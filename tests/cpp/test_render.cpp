@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "edgepath.h"
@@ -545,6 +546,83 @@ TEST(Render, SphereLightSampledBySolidAngle) {
     }
     for (int i = 0; i < 3; ++i)
         EXPECT_NEAR(estimate[0][i], estimate[1][i], 0.01 * estimate[1][i]) << "point " << i << ": " << estimate[0][i] << " by solid angle, " << estimate[1][i] << " by area";
+}
+
+
+// A quad light sampled by spherical triangles: at points below it, near (each triangle
+// subtending up to about 2 sr) and far (below the bound: left to area sampling), every
+// sample's density is the one light_pdf gives its point (MIS needs both to agree); light_pdf
+// integrates to one over the directions towards the light; the irradiance estimates equal
+// the closed form (Lambert's polygon formula), with a lower variance than area sampling's
+// where the light is near.
+TEST(Render, QuadLightSampledBySphericalTriangles) {
+    struct Acc {
+        double s = 0, s2 = 0;
+        long n = 0;
+        void add(double v) { s += v; s2 += v * v; ++n; }
+        double mean() const { return s / n; }
+        double se() const { return std::sqrt(std::max(0.0, s2 / n - mean() * mean()) / n); }
+    };
+    MeshData lamp = make_quad(Vec3f(-0.6f, 0.3f, -0.5f), Vec3f(1.2f, 0, 0), Vec3f(0, 0, 1.f));  // normal -y
+    ConstTex black({0, 0, 0}), rough({0.5f}), le({2.f, 2.f, 2.f});
+    std::vector<Vec3d> poly;
+    for (int k = 0; k < 4; ++k) poly.push_back(Vec3d(Vec3f::load(lamp.vertices.data() + 3 * k)));
+    const Vec3f points[4] = {Vec3f(0, 0, 0), Vec3f(0.5f, 0.1f, 0.4f), Vec3f(1.2f, 0.f, -0.3f), Vec3f(30.f, -5.f, 10.f)};
+    const Vec3f n(0, 1, 0);
+    double variance[2][4] = {};
+    for (int mode = 0; mode < 2; ++mode) {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 8, 8, 45);
+        d.materials.push_back(material(black, black, rough));
+        d.meshes.push_back(lamp.desc(0));
+        d.meshes[0].emission = le.desc();
+        d.meshes[0].sample_spherical_triangle = mode == 0;
+        auto scene = build_scene(d);
+        Rng rng = Rng::for_sample(3, 0, 0);
+        const int N = 100000;
+        for (int i = 0; i < 4; ++i) {
+            Acc acc;
+            int checked = 0;
+            for (int s = 0; s < N; ++s) {
+                LightSample ls;
+                const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+                if (!scene->sample_area_light(points[i], u0, u1, u2, ls)) {
+                    acc.add(0.0);
+                    continue;
+                }
+                const SurfacePoint q = scene->surface_point(ls.hit);
+                ASSERT_GT(dot(q.ng, -ls.dir), 0.f);
+                if (checked++ < 2000) EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 2e-4f * ls.pdf);
+                acc.add(ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf);
+            }
+            const double expect = 2.0 * polygon_irradiance(Vec3d(points[i]), Vec3d(n), poly);
+            EXPECT_NEAR(acc.mean(), expect, 5 * acc.se() + 1e-6 * expect) << "mode " << mode << " point " << i;
+            variance[mode][i] = acc.se() * acc.se() * N;
+
+            // light_pdf over the directions of the light's bounding cone (radius 0.79 around
+            // its centre; the whole sphere from inside it): sum over the triangles of the probability of landing on each.
+            const Vec3d centre(0, 0.3, 0), pd(points[i]);
+            const double dist = length(centre - pd), radius = 0.79;
+            const double omc = dist > radius ? 1 - std::sqrt(1 - radius * radius / (dist * dist)) : 2.0;
+            const Frame frame(Vec3f(normalize(centre - pd)));
+            Acc integral;
+            for (int s = 0; s < N; ++s) {
+                const float cos_t = 1.f - rng.next_float() * float(omc), phi = 2.f * kPi * rng.next_float();
+                const float sin_t = std::sqrt(std::max(0.f, 1.f - cos_t * cos_t));
+                const Vec3f w = frame.to_world(Vec3f(std::cos(phi) * sin_t, std::sin(phi) * sin_t, cos_t));
+                Hit h;
+                const bool hit = scene->intersect(Ray{points[i], w}, h);
+                integral.add(hit ? scene->light_pdf(points[i], scene->surface_point(h)) * 2 * M_PI * omc : 0.0);
+            }
+            EXPECT_NEAR(integral.mean(), 1.0, 5 * integral.se()) << "mode " << mode << " point " << i;
+        }
+    }
+    // The same estimate at the far point (area sampling in both modes); a lower variance near.
+    EXPECT_DOUBLE_EQ(variance[0][3], variance[1][3]);
+    for (int i = 0; i < 4; ++i)
+        std::printf("point %d: variance %.4g by spherical triangles, %.4g by area\n", i, variance[0][i], variance[1][i]);
+    for (int i = 0; i < 3; ++i)
+        EXPECT_LT(variance[0][i], 0.7 * variance[1][i]) << "point " << i << ": " << variance[0][i] << " by solid angle, " << variance[1][i] << " by area";
 }
 
 }  // namespace
