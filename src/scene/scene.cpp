@@ -11,7 +11,6 @@
 
 #include "scene/geometry.h"
 #include "scene/normal_map.h"
-#include "sampling/spherical_triangle.h"
 
 namespace edgepath {
 
@@ -771,7 +770,8 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
         // A small mesh sampled by spherical triangles: its triangle by the solid angle each
         // shows p (u, now within the mesh's bin, picks it).
         double w[kSphericalPickMax];
-        const double total = spherical_pick_weights(lm, Vec3d(p), w);
+        SphericalTriangle tris[kSphericalPickMax];
+        const double total = spherical_pick_weights(lm, Vec3d(p), w, tris);
         if (!(total > 0)) return false;
         const double target = double(u) * total;
         double acc = 0;
@@ -783,15 +783,17 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
             if (target < acc) break;
         }
         if (prim < 0) return false;
-        return sample_light_triangle(lt.mesh, prim, p, u1, u2, double(light_distribution.pmf(li)) * w[prim] / total, ls);
+        return sample_light_triangle(lt.mesh, prim, p, u1, u2, double(light_distribution.pmf(li)) * w[prim] / total, ls,
+                                     &tris[prim]);
     }
     return sample_light_triangle(lt.mesh, lt.prim, p, u1, u2, double(light_distribution.pmf(li)), ls);
 }
 
-double Scene::spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w) const {
+double Scene::spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w, SphericalTriangle* tris) const {
     double total = 0;
     for (int64_t t = 0; t < m.num_triangles; ++t) {
         w[t] = 0;
+        tris[t] = SphericalTriangle();
         if (m.is_degenerate(t)) continue;
         const int32_t* tri = m.indices + 3 * t;
         const Vec3d v0(m.vertex(tri[0])), v1(m.vertex(tri[1])), v2(m.vertex(tri[2]));
@@ -799,7 +801,8 @@ double Scene::spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w) c
         // A one-sided emitter lights only the side of its face normal.
         const double side = dot(n, p - v0);
         if (m.two_sided_emission ? side == 0 : !(side > 0)) continue;
-        const SphericalTriangle st(p, v0, v1, v2);
+        SphericalTriangle& st = tris[t];
+        st = SphericalTriangle(p, v0, v1, v2);
         if (st.usable()) {
             w[t] = st.solid_angle;
         } else {
@@ -816,12 +819,12 @@ double Scene::spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w) c
 }
 
 bool Scene::sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
-                                  LightSample& ls) const {
+                                  LightSample& ls, const SphericalTriangle* seen) const {
     const Mesh& lm = meshes[size_t(mesh)];
     if (lm.spherical_triangle) {
         const int32_t* tri = lm.indices + 3 * prim;
         const Vec3d v0(lm.vertex(tri[0])), v1(lm.vertex(tri[1])), v2(lm.vertex(tri[2])), pd(p);
-        const SphericalTriangle st(pd, v0, v1, v2);
+        const SphericalTriangle st = seen ? *seen : SphericalTriangle(pd, v0, v1, v2);
         if (st.usable()) {
             // A direction uniform in the triangle's solid angle, then where it meets the
             // triangle (clamped into it against rounding).
@@ -887,22 +890,25 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
         return light_distribution.pmf(int(m.light_offset)) / (2.f * kPi * omc);
     }
     double pmf;
+    SphericalTriangle st;
     if (m.spherical_by_mesh) {
         // The pick sample_area_light makes from the same point.
         double w[kSphericalPickMax];
-        const double total = spherical_pick_weights(m, Vec3d(p), w);
+        SphericalTriangle tris[kSphericalPickMax];
+        const double total = spherical_pick_weights(m, Vec3d(p), w, tris);
         if (!(total > 0) || !(w[q.prim] > 0)) return 0.f;
         pmf = double(light_distribution.pmf(int(m.light_offset))) * w[q.prim] / total;
+        st = tris[q.prim];
     } else {
         pmf = double(light_distribution.pmf(int(m.light_offset + q.prim)));
-    }
-    if (m.spherical_triangle) {
-        // The same choice as sample_light_triangle's, from the same point and corners.
-        const int32_t* tri = m.indices + 3 * q.prim;
-        const SphericalTriangle st(Vec3d(p), Vec3d(m.vertex(tri[0])), Vec3d(m.vertex(tri[1])),
+        if (m.spherical_triangle) {
+            const int32_t* tri = m.indices + 3 * q.prim;
+            st = SphericalTriangle(Vec3d(p), Vec3d(m.vertex(tri[0])), Vec3d(m.vertex(tri[1])),
                                    Vec3d(m.vertex(tri[2])));
-        if (st.usable()) return float(pmf / st.solid_angle);
+        }
     }
+    // The same choice as sample_light_triangle's, from the same point and corners.
+    if (st.usable()) return float(pmf / st.solid_angle);
     Vec3f d = q.p - p;
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);

@@ -12,6 +12,7 @@
 #include "math/ray.h"
 #include "scene/edges.h"
 #include "scene/filter.h"
+#include "sampling/spherical_triangle.h"
 #include "sampling/distribution.h"
 #include "scene/bsdf.h"
 #include "scene/camera.h"
@@ -268,11 +269,13 @@ private:
     // Weights w[t] of picking each triangle of a spherical_by_mesh mesh from p: its solid
     // angle (an estimate where too small or large to sample by it), 0 where p is behind a
     // one-sided emitter's face; returns their sum.
-    double spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w) const;
+    // The triangles as seen from p go to tris[t].
+    double spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w, SphericalTriangle* tris) const;
     // A light sample on triangle `prim` of `mesh` picked with probability pmf: by its solid
     // angle for spherical_triangle meshes where usable, otherwise a point uniform on it.
+    // `seen`: the triangle as seen from p, when already computed.
     bool sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
-                               LightSample& ls) const;
+                               LightSample& ls, const SphericalTriangle* seen = nullptr) const;
 
     RTCScene rtc_ = nullptr;
     bool refittable_ = false;  // the BVH was built for refitting
