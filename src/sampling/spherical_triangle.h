@@ -11,7 +11,8 @@ namespace edgepath {
 
 // Solid angles outside these bounds are left to area sampling: below, the triangle is small
 // enough that area sampling is within a few percent of uniform in solid angle (its density
-// varies across the triangle by about the triangle's angular size, sqrt(omega)); above, it
+// varies across the triangle by about its angular size, sqrt(omega), relatively, unless seen
+// edge-on); above, it
 // wraps nearly half the sphere around the point and the construction loses its accuracy.
 constexpr double kMinSphericalTriangle = 3e-4;
 constexpr double kMaxSphericalTriangle = 6.2;
