@@ -640,5 +640,47 @@ TEST(Render, QuadLightSampledBySphericalTriangles) {
     }
 }
 
+
+// The side a lamp sampled by spherical triangles lights: from above a one-sided quad facing
+// down no sample is drawn; made two-sided, the estimate there equals the closed form.
+TEST(Render, SphericalTriangleLightSides) {
+    MeshData lamp = make_quad(Vec3f(-0.6f, 0.3f, -0.5f), Vec3f(1.2f, 0, 0), Vec3f(0, 0, 1.f));  // normal -y
+    const std::vector<Vec3d> poly = {Vec3d(-0.6, 0.3, -0.5), Vec3d(0.6, 0.3, -0.5), Vec3d(0.6, 0.3, 0.5),
+                                     Vec3d(-0.6, 0.3, 0.5)};
+    ConstTex black({0, 0, 0}), rough({0.5f}), le({2.f, 2.f, 2.f});
+    const Vec3f p(0.2f, 0.7f, -0.1f), n(0, -1, 0);
+    for (int two_sided = 0; two_sided < 2; ++two_sided) {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 8, 8, 45);
+        d.materials.push_back(material(black, black, rough));
+        d.meshes.push_back(lamp.desc(0));
+        d.meshes[0].emission = le.desc();
+        d.meshes[0].two_sided_emission = two_sided == 1;
+        d.meshes[0].sample_spherical_triangle = true;
+        auto scene = build_scene(d);
+        Rng rng = Rng::for_sample(4, 0, 0);
+        const int N = 20000;
+        double sum = 0, sum2 = 0;
+        int drawn = 0;
+        for (int s = 0; s < N; ++s) {
+            LightSample ls;
+            const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+            if (!scene->sample_area_light(p, u0, u1, u2, ls)) continue;
+            ++drawn;
+            EXPECT_NEAR(ls.pdf, scene->light_pdf(p, scene->surface_point(ls.hit)), 2e-4f * ls.pdf);
+            const double v = ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf;
+            sum += v;
+            sum2 += v * v;
+        }
+        if (two_sided == 0) {
+            EXPECT_EQ(drawn, 0);
+            continue;
+        }
+        EXPECT_EQ(drawn, N);
+        const double mean = sum / N, se = std::sqrt(std::max(0.0, sum2 / N - mean * mean) / N);
+        EXPECT_NEAR(mean, 2.0 * polygon_irradiance(Vec3d(p), Vec3d(n), poly), 5 * se + 1e-9);
+    }
+}
+
 }  // namespace
 }  // namespace edgepath
