@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Runs the benchmark (forward and backward passes), then the kept scene and many-views
-# measurement (bench/persist.py), the backward-pass memory measurement, the secondary-edge
+# measurement (bench/persist.py), light sampling at equal time (bench/light_sampling.py), the
+# backward-pass memory measurement, the secondary-edge
 # samplers' equal-time comparison and, when the mitsuba package is installed
 # (pip install -e '.[bench]'), the comparison with Mitsuba 3 (bench/mitsuba_compare.py).
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
@@ -33,6 +34,13 @@ if python -c "import edgepath" 2>/dev/null; then
     python "$root/bench/persist.py"
 else
     echo "bench/persist.py skipped: the edgepath package is not importable (make setup)"
+fi
+# Light sampling at equal time: area against solid-angle sampling (a square lamp, a sphere
+# light), as the relative noise per pixel each reaches in area sampling's time.
+if python -c "import edgepath" 2>/dev/null; then
+    python "$root/bench/light_sampling.py"
+else
+    echo "bench/light_sampling.py skipped: the edgepath package is not importable (make setup)"
 fi
 # Memory of a large backward pass, in a process of its own (peak RSS is per process).
 "$bin" --backward-memory --size 1024 --spp 16

@@ -197,6 +197,8 @@ edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string&
         floats(d, "spot_profile", f, m.spot_profile, edgepath::kSpotParams);
     }
     if (has(d, "sample_solid_angle")) m.sample_solid_angle = scalar<bool>(d, "sample_solid_angle", f);
+    if (has(d, "sample_spherical_triangle"))
+        m.sample_spherical_triangle = scalar<bool>(d, "sample_spherical_triangle", f);
     return m;
 }
 

@@ -31,7 +31,7 @@ EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2, "fisheye": 3, "panorama": 4}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
 MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
-LIGHT_SAMPLING = {"area": False, "solid_angle": True}
+LIGHT_SAMPLING = {"area": 0, "solid_angle": 1, "spherical_triangle": 2}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
 
@@ -743,6 +743,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
     vertices = v.float_tensor(mesh.vertices, f + ".vertices", ("N", 3))
     indices = v.index_tensor(mesh.indices, f + ".indices", ("M", 3))
     rows = indices.shape[0]
+    light_sampling = v.choice(getattr(mesh, "light_sampling", "area"), f + ".light_sampling",
+                              LIGHT_SAMPLING)
     out = {
         "vertices": _param(flat, ("meshes", i, "vertices"), vertices),
         "indices": indices,
@@ -753,8 +755,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "emission": None,
         "colors": None,
         "two_sided_emission": v.boolean(mesh.two_sided_emission, f + ".two_sided_emission"),
-        "sample_solid_angle": v.choice(getattr(mesh, "light_sampling", "area"),
-                                       f + ".light_sampling", LIGHT_SAMPLING),
+        "sample_solid_angle": light_sampling == 1,
+        "sample_spherical_triangle": light_sampling == 2,
         "material": i,
     }
     if mesh.uvs is not None:

@@ -182,7 +182,9 @@ class Mesh:
     by power, a point uniformly on it) or "solid_angle" (a direction uniformly in the cone of
     the mesh's bounding sphere, towards the first of its triangles along it: for small convex
     lights around a point, such as ``lights.sphere_light``, whose visible side it samples
-    evenly)."""
+    evenly) or "spherical_triangle" (a triangle by power, then a direction uniformly in the
+    solid angle it subtends, falling back to area sampling where that angle is below 3e-4 sr
+    or above 6.2 sr: for large lights close to what they light, such as a quad over a floor)."""
 
     def __init__(self, vertices: torch.Tensor, indices: torch.Tensor,
                  uvs: Optional[torch.Tensor] = None, normals: Optional[torch.Tensor] = None,

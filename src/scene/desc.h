@@ -66,6 +66,15 @@ struct MeshDesc {
     // every sample lands on the side it shows. Otherwise (and from inside the sphere, where
     // it is not sampled) by area, triangle by triangle.
     bool sample_solid_angle = false;
+    // An emitter sampled triangle by triangle with a direction uniform in the solid angle the
+    // triangle subtends (a spherical triangle,
+    // sampling/spherical_triangle.h), where that angle is neither tiny nor near a hemisphere;
+    // elsewhere by area. A mesh of at most 16 triangles (a quad) picks its triangle by the
+    // solid angle each shows the shading point (none behind a one-sided face), a larger one
+    // by power as area sampling does. For large lights near what they light (a quad over a floor), whose
+    // area samples' density dist^2 / cos varies widely over the light. Ignored when
+    // sample_solid_angle is set.
+    bool sample_spherical_triangle = false;
 };
 
 // A light at a point (a delta light, as Mitsuba's `point` and `spot`): it radiates `intensity`

@@ -399,6 +399,7 @@ void Scene::set_views(const SceneDesc& desc) {
         m.two_sided_emission = md.two_sided_emission;
         m.spot = md.spot;
         m.solid_angle = md.sample_solid_angle;
+        m.spherical_triangle = md.sample_spherical_triangle && !md.sample_solid_angle;
         std::copy(md.spot_profile, md.spot_profile + kSpotParams, m.spot_profile);
     }
     point_lights = desc.point_lights;
@@ -479,6 +480,7 @@ void Scene::build_lights() {
         m.light_offset = -1;
         if (!m.is_emitter()) continue;
         m.light_offset = int64_t(lights.size());
+        m.spherical_by_mesh = m.spherical_triangle && m.num_triangles <= kSphericalPickMax;
         double power = luminance(texture_mean3(m.emission)) * (m.two_sided_emission ? 2.0 : 1.0);
         double total = 0.0;
         Vec3f lo, hi;  // the box of the triangles' vertices
@@ -491,7 +493,7 @@ void Scene::build_lights() {
                 lo = min(lo, v);
                 hi = max(hi, v);
             }
-            if (m.solid_angle) continue;
+            if (m.solid_angle || m.spherical_by_mesh) continue;
             lights.push_back({int(i), t, area});
             light_weights.push_back(area * power);
         }
@@ -503,6 +505,10 @@ void Scene::build_lights() {
                 m.sphere_radius = std::max(m.sphere_radius, length(m.vertex(m.indices[t]) - m.sphere_center));
             // Float rounding of the distances: the sphere must contain every vertex.
             m.sphere_radius *= 1.f + 1e-6f;
+            lights.push_back({int(i), -1, float(total)});
+            light_weights.push_back(total * power);
+        } else if (m.spherical_by_mesh) {
+            // One entry for the mesh; its triangle is picked from the shading point.
             lights.push_back({int(i), -1, float(total)});
             light_weights.push_back(total * power);
         }
@@ -694,7 +700,7 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
     float u = std::min(u0, 0.99999994f);
     int li = light_distribution.sample(u);
     const EmissiveTriangle& lt = lights[li];
-    if (lt.prim < 0) {
+    if (lt.prim < 0 && meshes[size_t(lt.mesh)].solid_angle) {
         // By solid angle: a direction uniform in the bounding sphere's cone, then the first of
         // the mesh's triangles along it.
         const Mesh& m = meshes[size_t(lt.mesh)];
@@ -735,8 +741,98 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
         ls.pdf = light_distribution.pmf(li) / (2.f * kPi * omc);
         return ls.pdf > 0.f && std::isfinite(ls.pdf);
     }
+    const Mesh& lm = meshes[size_t(lt.mesh)];
+    if (lt.prim < 0) {
+        // A small mesh sampled by spherical triangles: its triangle by the solid angle each
+        // shows p (u, now within the mesh's bin, picks it).
+        double w[kSphericalPickMax];
+        SphericalTriangle tris[kSphericalPickMax];
+        const double total = spherical_pick_weights(lm, Vec3d(p), w, tris);
+        if (!(total > 0)) return false;
+        const double target = double(u) * total;
+        double acc = 0;
+        int64_t prim = -1;
+        for (int64_t t = 0; t < lm.num_triangles; ++t) {
+            if (!(w[t] > 0)) continue;
+            prim = t;
+            acc += w[t];
+            if (target < acc) break;
+        }
+        if (prim < 0) return false;
+        return sample_light_triangle(lt.mesh, prim, p, u1, u2, double(light_distribution.pmf(li)) * w[prim] / total, ls,
+                                     &tris[prim]);
+    }
+    return sample_light_triangle(lt.mesh, lt.prim, p, u1, u2, double(light_distribution.pmf(li)), ls);
+}
+
+double Scene::spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w, SphericalTriangle* tris) const {
+    double total = 0;
+    for (int64_t t = 0; t < m.num_triangles; ++t) {
+        w[t] = 0;
+        tris[t] = SphericalTriangle();
+        if (m.is_degenerate(t)) continue;
+        const int32_t* tri = m.indices + 3 * t;
+        const Vec3d v0(m.vertex(tri[0])), v1(m.vertex(tri[1])), v2(m.vertex(tri[2]));
+        const Vec3d n = cross(v1 - v0, v2 - v0);
+        // A one-sided emitter lights only the side of its face normal.
+        const double side = dot(n, p - v0);
+        if (m.two_sided_emission ? side == 0 : !(side > 0)) continue;
+        SphericalTriangle& st = tris[t];
+        st = SphericalTriangle(p, v0, v1, v2);
+        if (st.usable()) {
+            w[t] = st.solid_angle;
+        } else {
+            // Too small or too large to sample by solid angle: its projected area over the
+            // squared distance, from the centroid, at most a hemisphere.
+            const Vec3d d = (v0 + v1 + v2) / 3.0 - p;
+            const double d2 = dot(d, d);
+            w[t] = std::min(2.0 * M_PI, 0.5 * std::abs(dot(n, d)) / (d2 * std::sqrt(d2)));
+        }
+        if (!std::isfinite(w[t])) w[t] = 0;
+        total += w[t];
+    }
+    return total;
+}
+
+bool Scene::sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
+                                  LightSample& ls, const SphericalTriangle* seen) const {
+    const Mesh& lm = meshes[size_t(mesh)];
+    if (lm.spherical_triangle) {
+        const int32_t* tri = lm.indices + 3 * prim;
+        const Vec3d v0(lm.vertex(tri[0])), v1(lm.vertex(tri[1])), v2(lm.vertex(tri[2])), pd(p);
+        const SphericalTriangle st = seen ? *seen : SphericalTriangle(pd, v0, v1, v2);
+        if (st.usable()) {
+            // A direction uniform in the triangle's solid angle, then where it meets the
+            // triangle (clamped into it against rounding).
+            const Vec3d w = st.sample(u1, u2);
+            TriangleHit<double> h;
+            if (!intersect_triangle(pd, w, v0, v1, v2, h) || !(h.t > 0)) return false;
+            double b1 = std::clamp(h.b1, 0.0, 1.0), b2 = std::clamp(h.b2, 0.0, 1.0);
+            if (b1 + b2 > 1.0) {
+                const double s = b1 + b2;
+                b1 /= s;
+                b2 /= s;
+            }
+            SurfacePoint q = surface_point(mesh, prim, float(b1), float(b2));
+            const Vec3f d(w);
+            ls.radiance = emitted(q, -d);
+            if (is_black(ls.radiance)) return false;
+            ls.dir = d;
+            ls.dist = float(h.t);
+            ls.hit.mesh = mesh;
+            ls.hit.prim = prim;
+            ls.hit.b1 = float(b1);
+            ls.hit.b2 = float(b2);
+            ls.hit.t = float(h.t);
+            ls.p = q.p;
+            ls.p_error = q.p_error;
+            ls.ng = q.ng;
+            ls.pdf = float(pmf / st.solid_angle);
+            return ls.pdf > 0.f && std::isfinite(ls.pdf);
+        }
+    }
     Vec2f b = square_to_triangle(u1, u2);
-    SurfacePoint q = surface_point(lt.mesh, lt.prim, b.x, b.y);
+    SurfacePoint q = surface_point(mesh, prim, b.x, b.y);
     Vec3f d = q.p - p;
     float dist2 = length_squared(d);
     if (!(dist2 > 0.f)) return false;
@@ -748,15 +844,15 @@ bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, Ligh
     if (is_black(ls.radiance)) return false;
     ls.dir = d;
     ls.dist = dist;
-    ls.hit.mesh = lt.mesh;
-    ls.hit.prim = lt.prim;
+    ls.hit.mesh = mesh;
+    ls.hit.prim = prim;
     ls.hit.b1 = b.x;
     ls.hit.b2 = b.y;
     ls.hit.t = dist;
     ls.p = q.p;
     ls.p_error = q.p_error;
     ls.ng = q.ng;
-    ls.pdf = light_distribution.pmf(li) / lt.area * dist2 / cos_l;
+    ls.pdf = float(pmf) / lm.triangle_area(prim) * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }
 
@@ -769,12 +865,31 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
         if (!light_cone(m, p, axis, omc)) return 0.f;
         return light_distribution.pmf(int(m.light_offset)) / (2.f * kPi * omc);
     }
-    int64_t li = m.light_offset + q.prim;
+    double pmf;
+    SphericalTriangle st;
+    if (m.spherical_by_mesh) {
+        // The pick sample_area_light makes from the same point.
+        double w[kSphericalPickMax];
+        SphericalTriangle tris[kSphericalPickMax];
+        const double total = spherical_pick_weights(m, Vec3d(p), w, tris);
+        if (!(total > 0) || !(w[q.prim] > 0)) return 0.f;
+        pmf = double(light_distribution.pmf(int(m.light_offset))) * w[q.prim] / total;
+        st = tris[q.prim];
+    } else {
+        pmf = double(light_distribution.pmf(int(m.light_offset + q.prim)));
+        if (m.spherical_triangle) {
+            const int32_t* tri = m.indices + 3 * q.prim;
+            st = SphericalTriangle(Vec3d(p), Vec3d(m.vertex(tri[0])), Vec3d(m.vertex(tri[1])),
+                                   Vec3d(m.vertex(tri[2])));
+        }
+    }
+    // The same choice as sample_light_triangle's, from the same point and corners.
+    if (st.usable()) return float(pmf / st.solid_angle);
     Vec3f d = q.p - p;
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);
     if (!(cos_l > 0.f)) return 0.f;
-    return light_distribution.pmf(int(li)) / lights[li].area * dist2 / cos_l;
+    return float(pmf) / m.triangle_area(q.prim) * dist2 / cos_l;
 }
 
 }  // namespace edgepath

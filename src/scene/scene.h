@@ -12,6 +12,7 @@
 #include "math/ray.h"
 #include "scene/edges.h"
 #include "scene/filter.h"
+#include "sampling/spherical_triangle.h"
 #include "sampling/distribution.h"
 #include "scene/bsdf.h"
 #include "scene/camera.h"
@@ -48,6 +49,10 @@ inline RTCRayHit to_rtc_ray_hit(const Ray& ray) {
     return rh;
 }
 
+// Meshes sampled by spherical triangles with at most this many triangles pick one by the
+// solid angle it shows the shading point (each sample weighs them all); larger ones by power.
+constexpr int64_t kSphericalPickMax = 16;
+
 struct Mesh {
     const float* vertices = nullptr;
     int64_t num_vertices = 0;
@@ -66,6 +71,10 @@ struct Mesh {
     bool solid_angle = false;  // sampled by the solid angle of its bounding sphere (desc.h)
     Vec3f sphere_center;       // that sphere, when solid_angle (set by Scene::build_lights)
     float sphere_radius = 0.f;
+    bool spherical_triangle = false;  // triangles sampled by their solid angle (desc.h)
+    // With at most kSphericalPickMax triangles: one light entry for the mesh, its triangle
+    // picked by the solid angle each shows the shading point (set by Scene::build_lights).
+    bool spherical_by_mesh = false;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
 
@@ -85,6 +94,12 @@ struct Mesh {
                Vec3f::load(colors + 3 * int64_t(t[2])) * b2;
     }
     // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
+    // Area of triangle f (as Scene::build_lights computes it).
+    float triangle_area(int64_t f) const {
+        const int32_t* t = indices + 3 * f;
+        const Vec3f a = vertex(t[0]), b = vertex(t[1]), c = vertex(t[2]);
+        return 0.5f * length(cross(b - a, c - a));
+    }
     bool is_degenerate(int64_t f) const {
         const int32_t* t = indices + 3 * f;
         return is_degenerate_triangle(vertex(t[0]), vertex(t[1]), vertex(t[2]));
@@ -251,6 +266,16 @@ private:
     // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and
     // 1 - cos of its half angle; false if p is inside the sphere.
     bool light_cone(const Mesh& m, const Vec3f& p, Vec3f& axis, float& one_minus_cos) const;
+    // Weights w[t] of picking each triangle of a spherical_by_mesh mesh from p: its solid
+    // angle (an estimate where too small or large to sample by it), 0 where p is behind a
+    // one-sided emitter's face; returns their sum.
+    // The triangles as seen from p go to tris[t].
+    double spherical_pick_weights(const Mesh& m, const Vec3d& p, double* w, SphericalTriangle* tris) const;
+    // A light sample on triangle `prim` of `mesh` picked with probability pmf: by its solid
+    // angle for spherical_triangle meshes where usable, otherwise a point uniform on it.
+    // `seen`: the triangle as seen from p, when already computed.
+    bool sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
+                               LightSample& ls, const SphericalTriangle* seen = nullptr) const;
 
     RTCScene rtc_ = nullptr;
     bool refittable_ = false;  // the BVH was built for refitting

@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <vector>
 
 #include "edgepath.h"
@@ -547,6 +548,140 @@ TEST(Render, SphereLightSampledBySolidAngle) {
     }
     for (int i = 0; i < 3; ++i)
         EXPECT_NEAR(estimate[0][i], estimate[1][i], 0.01 * estimate[1][i]) << "point " << i << ": " << estimate[0][i] << " by solid angle, " << estimate[1][i] << " by area";
+}
+
+
+// A quad light sampled by spherical triangles, whole (2 triangles: picked by the solid angle
+// each shows) and as a 5 x 5 grid (50: picked by power): at points below it, near (each
+// triangle subtending up to about 2 sr) and far (below the bound: left to area sampling),
+// every sample's density is the one light_pdf gives its point (MIS needs both to agree);
+// light_pdf integrates to one over the directions towards the light; the irradiance estimates
+// equal the closed form (Lambert's polygon formula), with a lower variance than area
+// sampling's where the light is near.
+TEST(Render, QuadLightSampledBySphericalTriangles) {
+    struct Acc {
+        double s = 0, s2 = 0;
+        long n = 0;
+        void add(double v) { s += v; s2 += v * v; ++n; }
+        double mean() const { return s / n; }
+        double se() const { return std::sqrt(std::max(0.0, s2 / n - mean() * mean()) / n); }
+    };
+    for (int grid : {1, 5}) {
+        MeshData lamp;
+        for (int gi = 0; gi < grid; ++gi)
+            for (int gj = 0; gj < grid; ++gj) {
+                MeshData cell = make_quad(Vec3f(-0.6f + 1.2f * gi / grid, 0.3f, -0.5f + 1.f * gj / grid),
+                                          Vec3f(1.2f / grid, 0, 0), Vec3f(0, 0, 1.f / grid));  // normal -y
+                if (gi == 0 && gj == 0) lamp = cell;
+                else lamp.append(cell);
+            }
+        const std::vector<Vec3d> poly = {Vec3d(-0.6, 0.3, -0.5), Vec3d(0.6, 0.3, -0.5), Vec3d(0.6, 0.3, 0.5),
+                                         Vec3d(-0.6, 0.3, 0.5)};
+        ConstTex black({0, 0, 0}), rough({0.5f}), le({2.f, 2.f, 2.f});
+        const Vec3f points[4] = {Vec3f(0, 0, 0), Vec3f(0.5f, 0.1f, 0.4f), Vec3f(1.2f, 0.f, -0.3f),
+                                 Vec3f(30.f, -5.f, 10.f)};
+        const Vec3f n(0, 1, 0);
+        double variance[2][4] = {};
+        for (int mode = 0; mode < 2; ++mode) {
+            SceneDesc d;
+            d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 8, 8, 45);
+            d.materials.push_back(material(black, black, rough));
+            d.meshes.push_back(lamp.desc(0));
+            d.meshes[0].emission = le.desc();
+            d.meshes[0].sample_spherical_triangle = mode == 0;
+            auto scene = build_scene(d);
+            Rng rng = Rng::for_sample(3, 0, 0);
+            const int N = 100000;
+            for (int i = 0; i < 4; ++i) {
+                Acc acc;
+                int checked = 0;
+                for (int s = 0; s < N; ++s) {
+                    LightSample ls;
+                    const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+                    if (!scene->sample_area_light(points[i], u0, u1, u2, ls)) {
+                        acc.add(0.0);
+                        continue;
+                    }
+                    const SurfacePoint q = scene->surface_point(ls.hit);
+                    ASSERT_GT(dot(q.ng, -ls.dir), 0.f);
+                    if (checked++ < 2000) EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 2e-4f * ls.pdf);
+                    acc.add(ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf);
+                }
+                const double expect = 2.0 * polygon_irradiance(Vec3d(points[i]), Vec3d(n), poly);
+                EXPECT_NEAR(acc.mean(), expect, 5 * acc.se() + 1e-6 * expect) << "mode " << mode << " point " << i;
+                variance[mode][i] = acc.se() * acc.se() * N;
+
+                // light_pdf over the directions of the light's bounding cone (radius 0.79 around
+                // its centre; the whole sphere from inside it): the sum over the triangles of the
+                // probability of landing on each, one.
+                const Vec3d centre(0, 0.3, 0), pd(points[i]);
+                const double dist = length(centre - pd), radius = 0.79;
+                const double omc = dist > radius ? 1 - std::sqrt(1 - radius * radius / (dist * dist)) : 2.0;
+                const Frame frame(Vec3f(normalize(centre - pd)));
+                Acc integral;
+                for (int s = 0; s < N; ++s) {
+                    const float cos_t = 1.f - rng.next_float() * float(omc), phi = 2.f * kPi * rng.next_float();
+                    const float sin_t = std::sqrt(std::max(0.f, 1.f - cos_t * cos_t));
+                    const Vec3f w = frame.to_world(Vec3f(std::cos(phi) * sin_t, std::sin(phi) * sin_t, cos_t));
+                    Hit h;
+                    const bool hit = scene->intersect(Ray{points[i], w}, h);
+                    integral.add(hit ? scene->light_pdf(points[i], scene->surface_point(h)) * 2 * M_PI * omc : 0.0);
+                }
+                EXPECT_NEAR(integral.mean(), 1.0, 5 * integral.se()) << "mode " << mode << " point " << i;
+            }
+        }
+        for (int i = 0; i < 4; ++i)
+            std::printf("%d x %d quads, point %d: variance %.4g by spherical triangles, %.4g by area\n", grid, grid, i,
+                        variance[0][i], variance[1][i]);
+        // The grid's triangles are picked by power, as area sampling picks them, and that pick's
+        // noise dominates (measured: 0.90 to 0.91 of area sampling's variance; 0.016 to 0.043
+        // for the whole quad).
+        for (int i = 0; i < 3; ++i)
+            EXPECT_LT(variance[0][i], (grid == 1 ? 0.2 : 0.95) * variance[1][i])
+                << "point " << i << ": " << variance[0][i] << " by solid angle, " << variance[1][i] << " by area";
+    }
+}
+
+
+// The side a lamp sampled by spherical triangles lights: from above a one-sided quad facing
+// down no sample is drawn; made two-sided, the estimate there equals the closed form.
+TEST(Render, SphericalTriangleLightSides) {
+    MeshData lamp = make_quad(Vec3f(-0.6f, 0.3f, -0.5f), Vec3f(1.2f, 0, 0), Vec3f(0, 0, 1.f));  // normal -y
+    const std::vector<Vec3d> poly = {Vec3d(-0.6, 0.3, -0.5), Vec3d(0.6, 0.3, -0.5), Vec3d(0.6, 0.3, 0.5),
+                                     Vec3d(-0.6, 0.3, 0.5)};
+    ConstTex black({0, 0, 0}), rough({0.5f}), le({2.f, 2.f, 2.f});
+    const Vec3f p(0.2f, 0.7f, -0.1f), n(0, -1, 0);
+    for (int two_sided = 0; two_sided < 2; ++two_sided) {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, -5), Vec3f(0, 0, 0), 8, 8, 45);
+        d.materials.push_back(material(black, black, rough));
+        d.meshes.push_back(lamp.desc(0));
+        d.meshes[0].emission = le.desc();
+        d.meshes[0].two_sided_emission = two_sided == 1;
+        d.meshes[0].sample_spherical_triangle = true;
+        auto scene = build_scene(d);
+        Rng rng = Rng::for_sample(4, 0, 0);
+        const int N = 20000;
+        double sum = 0, sum2 = 0;
+        int drawn = 0;
+        for (int s = 0; s < N; ++s) {
+            LightSample ls;
+            const float u0 = rng.next_float(), u1 = rng.next_float(), u2 = rng.next_float();
+            if (!scene->sample_area_light(p, u0, u1, u2, ls)) continue;
+            ++drawn;
+            EXPECT_NEAR(ls.pdf, scene->light_pdf(p, scene->surface_point(ls.hit)), 2e-4f * ls.pdf);
+            const double v = ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf;
+            sum += v;
+            sum2 += v * v;
+        }
+        if (two_sided == 0) {
+            EXPECT_EQ(drawn, 0);
+            continue;
+        }
+        EXPECT_EQ(drawn, N);
+        const double mean = sum / N, se = std::sqrt(std::max(0.0, sum2 / N - mean * mean) / N);
+        EXPECT_NEAR(mean, 2.0 * polygon_irradiance(Vec3d(p), Vec3d(n), poly), 5 * se + 1e-9);
+    }
 }
 
 }  // namespace

@@ -7,10 +7,12 @@
 
 #include "sampling/distribution.h"
 #include "sampling/rng.h"
+#include "sampling/spherical_triangle.h"
 #include "sampling/warp.h"
 #include "scene/bsdf.h"
 #include "scene/envmap.h"
 #include "scene/filter.h"
+#include "scene/geometry.h"
 
 namespace edgepath {
 namespace {
@@ -271,6 +273,104 @@ TEST(Envmap, FootprintDerivativeMatchesFiniteDifferences) {
             EXPECT_NEAR(dl[i], fd, 2e-2f * (1.f + std::abs(fd))) << "trial " << trial << " component " << i;
         }
     }
+}
+
+// Solid angle of the spherical triangle with corners towards u, v, w from the origin (the
+// closed form of Van Oosterom and Strackee, written out here again as the reference).
+double solid_angle_of(const Vec3d& u, const Vec3d& v, const Vec3d& w) {
+    const Vec3d a = normalize(u), b = normalize(v), c = normalize(w);
+    return 2.0 * std::atan2(std::abs(dot(a, cross(b, c))), 1.0 + dot(a, b) + dot(b, c) + dot(c, a));
+}
+
+// Spherical triangle sampling: the solid angle against a brute-force count of uniform sphere
+// directions; every sample in the triangle; the samples spread over its four midpoint
+// sub-triangles in proportion to their closed-form solid angles (a histogram, chi-square);
+// their mean direction equal to the closed-form first moment (1/omega) (1/2) sum theta_i n_i
+// over the edges (arc length theta_i, unit normal n_i of the edge's plane).
+TEST(SphericalTriangle, UniformInSolidAngle) {
+    struct Case { Vec3d p, v0, v1, v2; };
+    const Case cases[] = {
+        {Vec3d(0, 0, 0), Vec3d(-1, 1, -1), Vec3d(1, 1, -1), Vec3d(0, 1, 1)},         // about 1.5 sr
+        {Vec3d(0.1, 0.05, 0), Vec3d(-1, 0.1, -1), Vec3d(1, 0.1, -1), Vec3d(1, 0.1, 1)},  // nearly a hemisphere
+        {Vec3d(0, 0, 0), Vec3d(3, 0.2, 0.1), Vec3d(3.5, 0.9, -0.4), Vec3d(2.5, 0.1, 0.5)},  // small, oblique
+        {Vec3d(0.3, -0.2, 0.4), Vec3d(0, 2, 0), Vec3d(0.2, 2, 0), Vec3d(-5, 0.01, 0.3)},   // a sliver
+    };
+    for (int ci = 0; ci < 4; ++ci) {
+        const Case& k = cases[ci];
+        const SphericalTriangle st(k.p, k.v0, k.v1, k.v2);
+        ASSERT_TRUE(st.usable()) << "case " << ci;
+        const Vec3d A = k.v0 - k.p, B = k.v1 - k.p, C = k.v2 - k.p;
+        EXPECT_NEAR(st.solid_angle, solid_angle_of(A, B, C), 1e-12) << "case " << ci;
+        // The count: the fraction of uniform directions through the triangle is omega / 4 pi.
+        Rng rng = Rng::for_sample(5, uint64_t(ci), 0);
+        long inside = 0;
+        const long M = 400000;
+        for (long s = 0; s < M; ++s) {
+            const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
+            TriangleHit<double> h;
+            if (intersect_triangle(k.p, Vec3d(w), k.v0, k.v1, k.v2, h) && h.t > 0 && h.b1 >= 0 &&
+                h.b2 >= 0 && h.b1 + h.b2 <= 1)
+                ++inside;
+        }
+        const double frac = st.solid_angle / (4 * M_PI);
+        EXPECT_NEAR(double(inside) / M, frac, 5 * std::sqrt(frac * (1 - frac) / M)) << "case " << ci;
+
+        // Midpoint sub-triangles (corners 0, 1, 2 and the middle): their solid angles.
+        const Vec3d m01 = 0.5 * (A + B), m12 = 0.5 * (B + C), m20 = 0.5 * (C + A);
+        const double sub[4] = {solid_angle_of(A, m01, m20), solid_angle_of(B, m12, m01),
+                               solid_angle_of(C, m20, m12), solid_angle_of(m01, m12, m20)};
+        EXPECT_NEAR(sub[0] + sub[1] + sub[2] + sub[3], st.solid_angle, 1e-9 * st.solid_angle);
+        // The first moment: (1/2) sum over edges of arc length times the edge plane's normal,
+        // oriented with the corners' winding.
+        const Vec3d a = normalize(A), b = normalize(B), c = normalize(C);
+        const double sign = dot(a, cross(b, c)) > 0 ? 1.0 : -1.0;
+        Vec3d moment(0.0);
+        const Vec3d corners[3] = {a, b, c};
+        for (int e = 0; e < 3; ++e) {
+            const Vec3d& x = corners[e];
+            const Vec3d& y = corners[(e + 1) % 3];
+            const Vec3d n = cross(x, y);
+            const double theta = std::atan2(length(n), dot(x, y));
+            moment += (0.5 * sign * theta / length(n)) * n;
+        }
+        const Vec3d mean_expected = moment / st.solid_angle;
+
+        const long N = 200000;
+        long count[4] = {0, 0, 0, 0};
+        Acc mean[3];
+        long outside = 0;
+        for (long s = 0; s < N; ++s) {
+            const Vec3d w = st.sample(rng.next_float(), rng.next_float());
+            ASSERT_NEAR(length(w), 1.0, 1e-12);
+            TriangleHit<double> h;
+            const bool hit = intersect_triangle(k.p, w, k.v0, k.v1, k.v2, h) && h.t > 0;
+            const double b1 = h.b1, b2 = h.b2, b0 = 1 - b1 - b2;
+            if (!hit || b1 < -1e-9 || b2 < -1e-9 || b0 < -1e-9) {
+                ++outside;
+                continue;
+            }
+            ++count[b0 > 0.5 ? 0 : b1 > 0.5 ? 1 : b2 > 0.5 ? 2 : 3];
+            mean[0].add(w.x);
+            mean[1].add(w.y);
+            mean[2].add(w.z);
+        }
+        EXPECT_EQ(outside, 0) << "case " << ci;
+        double chi2 = 0;
+        for (int j = 0; j < 4; ++j) {
+            const double expected = N * sub[j] / st.solid_angle;
+            chi2 += (count[j] - expected) * (count[j] - expected) / expected;
+        }
+        // 3 degrees of freedom: P(chi2 > 16.3) = 0.001.
+        EXPECT_LT(chi2, 16.3) << "case " << ci << ": " << count[0] << " " << count[1] << " " << count[2] << " " << count[3];
+        for (int j = 0; j < 3; ++j)
+            EXPECT_NEAR(mean[j].mean(), mean_expected[j], 5 * mean[j].se() + 1e-9)
+                << "case " << ci << " axis " << j;
+    }
+    // Left to area sampling: p in the triangle's plane, a far triangle (below the bound),
+    // and a corner at p.
+    EXPECT_FALSE(SphericalTriangle(Vec3d(5, 0, 0), Vec3d(0, 0, 0), Vec3d(1, 0, 0), Vec3d(0, 1, 0)).usable());
+    EXPECT_FALSE(SphericalTriangle(Vec3d(0, 0, 100), Vec3d(0, 0, 0), Vec3d(1, 0, 0), Vec3d(0, 1, 0)).usable());
+    EXPECT_FALSE(SphericalTriangle(Vec3d(0, 0, 0), Vec3d(0, 0, 0), Vec3d(1, 0, 0), Vec3d(0, 1, 1)).usable());
 }
 
 TEST(Filter, GaussianSamplerMatchesWeights) {
