@@ -96,7 +96,10 @@ struct Envmap {
     // The texels and weights alone (dweight left unset), and the position inside the cell (tx, ty):
     // what a lookup needs.
     void weights(const Vec3f& world_dir, Footprint& f, float& tx, float& ty) const {
-        Vec2f p = position(world_dir);
+        weights_at(position(world_dir), f, tx, ty);
+    }
+    // The same at a texel-space position (position()).
+    void weights_at(const Vec2f& p, Footprint& f, float& tx, float& ty) const {
         int x0 = std::min(int(p.x), cols - 1), y0 = std::min(int(p.y), rows - 1);
         tx = p.x - float(x0);
         ty = tex.height > 1 ? p.y - float(y0) : 0.f;
@@ -112,20 +115,27 @@ struct Envmap {
         f.weight[3] = tx * ty;
     }
 
-    Vec3f eval(const Vec3f& world_dir) const {
+    Vec3f eval(const Vec3f& world_dir) const { return eval_at(position(world_dir)); }
+    // The value towards world_dir and the density sample() gives it, from one position lookup.
+    Vec3f eval(const Vec3f& world_dir, float& pdf_out) const {
+        const Vec2f p = position(world_dir);
+        pdf_out = pdf_at(p);
+        return eval_at(p);
+    }
+    Vec3f eval_at(const Vec2f& p) const {
         // The weights only: a lookup of the forward pass needs no derivatives.
         Footprint f;
         float tx, ty;
-        weights(world_dir, f, tx, ty);
+        weights_at(p, f, tx, ty);
         Vec3f v(0.f);
         for (int k = 0; k < 4; ++k) v += texel(f.texel[k]) * f.weight[k];
         return v * scale;
     }
     Vec3f texel(int64_t index) const { return Vec3f::load(tex.data + index * tex.channels); }
 
-    float pdf(const Vec3f& world_dir) const {
+    float pdf(const Vec3f& world_dir) const { return dist.valid() ? pdf_at(position(world_dir)) : 0.f; }
+    float pdf_at(const Vec2f& p) const {
         if (!dist.valid()) return 0.f;
-        Vec2f p = position(world_dir);
         int c = std::min(int(p.x), cols - 1), r = std::min(int(p.y), rows - 1);
         float sin_theta = std::sin(p.y / float(rows) * kPi);
         if (sin_theta <= 0.f) return 0.f;
