@@ -1,6 +1,8 @@
 #pragma once
 #include <algorithm>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 #include "math/vec.h"
 
@@ -37,6 +39,21 @@ inline Vec3f triangle_point_error(const Vec3f& v0, const Vec3f& v1, const Vec3f&
     return (a(v0, b0) + a(v1, b1) + a(v2, b2)) * rounding_gamma(7) + Vec3f(edge * rounding_gamma(4));
 }
 
+// The next float above x (towards +infinity), as std::nextafter(x, +inf) gives it, inline: by
+// its bits (one up for a positive x, one down for a negative one; both zeros go to the smallest
+// positive subnormal; infinity and NaN stay).
+inline float next_float_up(float x) {
+    if (!(x < std::numeric_limits<float>::infinity())) return x;  // +inf, NaN
+    if (x == 0.f) return std::numeric_limits<float>::denorm_min();
+    uint32_t b;
+    std::memcpy(&b, &x, sizeof b);
+    b = x > 0.f ? b + 1 : b - 1;
+    std::memcpy(&x, &b, sizeof b);
+    return x;
+}
+// The next float below x (towards -infinity): next_float_up mirrored.
+inline float next_float_down(float x) { return -next_float_up(-x); }
+
 // p (error bound p_error, geometric normal n) moved along n, to the side of w, past its error
 // box: by dot(|n|, p_error), then each moved component one more float away from p (the sum
 // itself rounds).
@@ -46,9 +63,9 @@ inline Vec3f offset_ray_origin(const Vec3f& p, const Vec3f& p_error, const Vec3f
     Vec3f o = p + offset;
     for (int i = 0; i < 3; ++i) {
         if (offset[i] > 0.f)
-            o[i] = std::nextafter(o[i], std::numeric_limits<float>::infinity());
+            o[i] = next_float_up(o[i]);
         else if (offset[i] < 0.f)
-            o[i] = std::nextafter(o[i], -std::numeric_limits<float>::infinity());
+            o[i] = next_float_down(o[i]);
     }
     return o;
 }

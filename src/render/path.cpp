@@ -112,8 +112,12 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         ++counters.bounce;
         if (!scene.intersect(ray, hit)) {
             if (scene.has_envmap && counted) {
-                float w = weighted ? mis_power(bs.pdf, scene.env_pdf(dir)) : 1.f;
-                L += beta * scene.envmap.eval(dir) * w;
+                // The value and, for the weight, the density (as scene.env_pdf gives it) from
+                // one lookup of the direction.
+                float env_pdf = 0.f;
+                const Vec3f Le = weighted && scene.env_sampled ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
+                float w = weighted ? mis_power(bs.pdf, env_pdf) : 1.f;
+                L += beta * Le * w;
                 if (record) {
                     record->escaped = true;
                     record->escape_weight = w;

@@ -22,6 +22,14 @@ public:
                 pmf_[i] = float(std::max(0.0, weights[i]) / total_);
             }
         if (n_ > 0) cdf_[n_] = 1.0;
+        // The guide table: for each of n equal slices of [0, 1), the last bin whose cdf is at
+        // or below the slice's start (one pass, the cdf being monotone).
+        guide_.assign(size_t(n_ > 0 ? n_ : 0), 0);
+        for (int j = 0, i = 0; j < n_; ++j) {
+            const double start = double(j) / double(n_);
+            while (i + 1 < n_ && cdf_[i + 1] <= start) ++i;
+            guide_[size_t(j)] = i;
+        }
     }
 
     int size() const { return n_; }
@@ -32,8 +40,18 @@ public:
     // Picks a bin; `u` in [0,1) becomes the position inside the bin, in [0,1).
     int sample(float& u) const {
         double uu = u;
-        int i = int(std::upper_bound(cdf_.begin(), cdf_.end(), uu) - cdf_.begin()) - 1;
-        i = std::clamp(i, 0, n_ - 1);
+        int i;
+        if (uu >= 0.0 && uu < 1.0 && n_ > 0) {
+            // The last bin with cdf <= u, as the binary search below finds it: from the guide
+            // table's entry for u's slice, forwards (and backwards, where rounding put u's
+            // slice a step beyond u).
+            i = guide_[size_t(std::min(int(uu * double(n_)), n_ - 1))];
+            while (i > 0 && cdf_[i] > uu) --i;
+            while (i + 1 < n_ && cdf_[i + 1] <= uu) ++i;
+        } else {
+            i = int(std::upper_bound(cdf_.begin(), cdf_.end(), uu) - cdf_.begin()) - 1;
+            i = std::clamp(i, 0, n_ - 1);
+        }
         while (pmf_[i] == 0.f && i > 0) --i;  // never land on an empty bin at a cdf plateau
         double width = cdf_[i + 1] - cdf_[i];
         u = width > 0 ? float(std::clamp((uu - cdf_[i]) / width, 0.0, 0.99999994)) : 0.f;
@@ -45,6 +63,7 @@ private:
     double total_ = 0;
     std::vector<double> cdf_;
     std::vector<float> pmf_;
+    std::vector<int> guide_;
 };
 
 // Rows by a marginal, then a column within the row. Density over the unit square is

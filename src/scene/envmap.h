@@ -71,21 +71,11 @@ struct Envmap {
         Vec3f dweight[4];  // d weight / d local direction
     };
 
+    // The footprint with its weights' derivatives (the gradient pass).
     Footprint footprint(const Vec3f& world_dir) const {
         Footprint f;
-        Vec2f p = position(world_dir);
-        int x0 = std::min(int(p.x), cols - 1), y0 = std::min(int(p.y), rows - 1);
-        float tx = p.x - float(x0), ty = tex.height > 1 ? p.y - float(y0) : 0.f;
-        int x1 = (x0 + 1) % cols, y1 = std::min(y0 + 1, tex.height - 1);
-        const int64_t W = tex.width;
-        f.texel[0] = y0 * W + x0;
-        f.texel[1] = y0 * W + x1;
-        f.texel[2] = y1 * W + x0;
-        f.texel[3] = y1 * W + x1;
-        f.weight[0] = (1 - tx) * (1 - ty);
-        f.weight[1] = tx * (1 - ty);
-        f.weight[2] = (1 - tx) * ty;
-        f.weight[3] = tx * ty;
+        float tx, ty;
+        weights(world_dir, f, tx, ty);
         // x = W atan2(d.x, -d.z) / (2 pi) - 1/2, y = rows acos(d.y) / pi.
         Vec3f d = to_local(world_dir);
         float r2 = d.x * d.x + d.z * d.z;
@@ -103,17 +93,49 @@ struct Envmap {
         return f;
     }
 
-    Vec3f eval(const Vec3f& world_dir) const {
-        Footprint f = footprint(world_dir);
+    // The texels and weights alone (dweight left unset), and the position inside the cell (tx, ty):
+    // what a lookup needs.
+    void weights(const Vec3f& world_dir, Footprint& f, float& tx, float& ty) const {
+        weights_at(position(world_dir), f, tx, ty);
+    }
+    // The same at a texel-space position (position()).
+    void weights_at(const Vec2f& p, Footprint& f, float& tx, float& ty) const {
+        int x0 = std::min(int(p.x), cols - 1), y0 = std::min(int(p.y), rows - 1);
+        tx = p.x - float(x0);
+        ty = tex.height > 1 ? p.y - float(y0) : 0.f;
+        int x1 = (x0 + 1) % cols, y1 = std::min(y0 + 1, tex.height - 1);
+        const int64_t W = tex.width;
+        f.texel[0] = y0 * W + x0;
+        f.texel[1] = y0 * W + x1;
+        f.texel[2] = y1 * W + x0;
+        f.texel[3] = y1 * W + x1;
+        f.weight[0] = (1 - tx) * (1 - ty);
+        f.weight[1] = tx * (1 - ty);
+        f.weight[2] = (1 - tx) * ty;
+        f.weight[3] = tx * ty;
+    }
+
+    Vec3f eval(const Vec3f& world_dir) const { return eval_at(position(world_dir)); }
+    // The value towards world_dir and the density sample() gives it, from one position lookup.
+    Vec3f eval(const Vec3f& world_dir, float& pdf_out) const {
+        const Vec2f p = position(world_dir);
+        pdf_out = pdf_at(p);
+        return eval_at(p);
+    }
+    Vec3f eval_at(const Vec2f& p) const {
+        // The weights only: a lookup of the forward pass needs no derivatives.
+        Footprint f;
+        float tx, ty;
+        weights_at(p, f, tx, ty);
         Vec3f v(0.f);
         for (int k = 0; k < 4; ++k) v += texel(f.texel[k]) * f.weight[k];
         return v * scale;
     }
     Vec3f texel(int64_t index) const { return Vec3f::load(tex.data + index * tex.channels); }
 
-    float pdf(const Vec3f& world_dir) const {
+    float pdf(const Vec3f& world_dir) const { return dist.valid() ? pdf_at(position(world_dir)) : 0.f; }
+    float pdf_at(const Vec2f& p) const {
         if (!dist.valid()) return 0.f;
-        Vec2f p = position(world_dir);
         int c = std::min(int(p.x), cols - 1), r = std::min(int(p.y), rows - 1);
         float sin_theta = std::sin(p.y / float(rows) * kPi);
         if (sin_theta <= 0.f) return 0.f;

@@ -4,11 +4,15 @@
 
 #include <atomic>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <limits>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
 #include "edgepath.h"
+#include "math/ray.h"
 #include "sampling/rng.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
@@ -81,6 +85,33 @@ TEST(RayOffset, SpawnedRaysNeverHitTheirOwnTriangle) {
 
 // A shadow ray between two points of two parallel triangles facing each other is unoccluded
 // (it must neither hit its own triangle nor the target's), at any placement.
+// The inline steps to the neighbouring floats agree with std::nextafter bit for bit: zeros of
+// both signs, subnormals, the largest finite values, infinities, and random bit patterns.
+TEST(RayOffset, NextFloatAgreesWithNextafter) {
+    const float inf = std::numeric_limits<float>::infinity();
+    std::vector<float> xs = {0.f, -0.f, std::numeric_limits<float>::denorm_min(), -std::numeric_limits<float>::denorm_min(),
+                             std::numeric_limits<float>::min(), -std::numeric_limits<float>::min(),
+                             std::numeric_limits<float>::max(), -std::numeric_limits<float>::max(), inf, -inf, 1.f, -1.f};
+    Rng rng(9, 0);
+    for (int i = 0; i < 100000; ++i) {
+        const uint32_t b = rng.next_u32();
+        float x;
+        std::memcpy(&x, &b, sizeof b);
+        if (!std::isnan(x)) xs.push_back(x);
+    }
+    auto bits = [](float v) {
+        uint32_t b;
+        std::memcpy(&b, &v, sizeof b);
+        return b;
+    };
+    for (float x : xs) {
+        ASSERT_EQ(bits(next_float_up(x)), bits(std::nextafter(x, inf))) << x;
+        ASSERT_EQ(bits(next_float_down(x)), bits(std::nextafter(x, -inf))) << x;
+    }
+    EXPECT_TRUE(std::isnan(next_float_up(std::numeric_limits<float>::quiet_NaN())));
+    EXPECT_TRUE(std::isnan(next_float_down(std::numeric_limits<float>::quiet_NaN())));
+}
+
 TEST(RayOffset, ShadowRaysReachTheirTarget) {
     Rng rng(3, 2);
     for (double place : {0.0, 1e4, 1e5}) {

@@ -2,6 +2,7 @@
 // densities, estimators agree with direct integration.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -172,6 +173,43 @@ TEST(Distribution, SamplesFollowWeights) {
     for (int k = 0; k < 4; ++k) {
         double p = d.pmf(k);
         EXPECT_NEAR(count[k] / double(N), p, 5 * std::sqrt(p * (1 - p) / N) + 1e-9);
+    }
+}
+
+// The guide table picks the bin a binary search over the same cdf picks, for skewed weights
+// (one bin holding almost everything, runs of empty bins) and for u at the bins' borders.
+TEST(Distribution, GuideTableAgreesWithBinarySearch) {
+    Rng rng(5, 1);
+    for (int trial = 0; trial < 40; ++trial) {
+        const int n = 1 + int(rng.next_float() * 300.f);
+        std::vector<double> w(static_cast<size_t>(n), 0.0);
+        for (int i = 0; i < n; ++i) {
+            const float r = rng.next_float();
+            w[size_t(i)] = r < 0.3f ? 0.0 : (r < 0.35f ? 1e6 : double(rng.next_float()));
+        }
+        if (trial % 2 == 0) w[size_t(n / 2)] = 1e9;
+        const Distribution1D d(w);
+        // The cdf as build() computes it.
+        std::vector<double> cdf(size_t(n) + 1, 0.0);
+        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] = cdf[size_t(i)] + w[size_t(i)];
+        const double total = cdf[size_t(n)];
+        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] /= total;
+        cdf[size_t(n)] = 1.0;
+        std::vector<float> us;
+        for (int k = 0; k < 2000; ++k) us.push_back(rng.next_float());
+        for (int i = 0; i <= n; ++i) {
+            const float c = float(cdf[size_t(i)]);
+            for (float u : {c, std::nextafter(c, 0.f), std::nextafter(c, 1.f)})
+                if (u >= 0.f && u < 1.f) us.push_back(u);
+        }
+        for (float u0 : us) {
+            const double uu = u0;
+            int want = int(std::upper_bound(cdf.begin(), cdf.end(), uu) - cdf.begin()) - 1;
+            want = std::clamp(want, 0, n - 1);
+            while (d.pmf(want) == 0.f && want > 0) --want;
+            float u = u0;
+            ASSERT_EQ(d.sample(u), want) << "n " << n << " u " << u0;
+        }
     }
 }
 
