@@ -14,10 +14,10 @@
 //   smooth    - two faces at an angle in a mesh with shading normals: a silhouette only;
 //   shared    - more than two faces (non-manifold): kept once per pair of consecutive faces
 //               around it, each pair treated as a two-face edge (never assumed away).
-// Edges between two faces of the same orientation whose float corners lie exactly in one plane,
-// with the same shading, uvs and colours, are dropped (never a silhouette, never a shading
-// discontinuity; faces at any angle, however small, fold where the eye lies between their
-// planes); degenerate edges (both ends at one position) too.
+// Edges between two faces of the same orientation within 1e-5 rad of one plane (the rounding of
+// a plane's float corners), with the same shading, uvs and colours, are dropped (never a
+// silhouette, never a shading discontinuity; faces at a larger angle, however small, fold where
+// the eye lies between their planes); degenerate edges (both ends at one position) too.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -34,6 +34,9 @@ struct Edge {
     int32_t v0 = -1, v1 = -1;  // vertex indices in the mesh (of the first face that has the edge)
     int64_t f0 = -1, f1 = -1;  // adjacent triangles; f1 = -1 on a boundary
     EdgeKind kind = EdgeKind::Boundary;
+    // Two faces less than 1.4e-3 rad from one plane (1 - cos below 1e-6): sampled by the camera's
+    // pass, left out of the surfaces' (edges/secondary.cpp; docs/gradients.md, known limitations).
+    bool nearly_flat = false;
 };
 
 // All the edges of one mesh (mesh index `mesh` is stored in each edge).

@@ -52,17 +52,15 @@ TEST(Edges, SmoothSphereWithSeamIsClosed) {
     auto c = count_kinds(edges);
     EXPECT_EQ(c[EdgeKind::Boundary], 0);
     EXPECT_EQ(c[EdgeKind::Crease], 0);
-    // Closed: 86 distinct positions, 168 faces, so E = V + F - 2 = 252 edges. The 72 diagonals
-    // of the quads of the 6 non-polar bands are dropped only where the quad's float corners are
-    // exactly in one plane (the quads are planar only up to rounding).
-    EXPECT_LE(int(edges.size()), 252);
-    EXPECT_GE(int(edges.size()), 252 - 72);
+    // Closed: 86 distinct positions, 168 faces, so E = V + F - 2 = 252 edges; the 72 diagonals
+    // of the planar quads of the 6 non-polar bands are flat (up to the rounding of their float
+    // corners) and dropped.
+    EXPECT_EQ(int(edges.size()), 252 - 72);
 }
 
 TEST(Edges, NearlyCoplanarFacesKeepTheirEdge) {
     // Two faces 1e-4 rad apart fold where the eye lies between their planes (a scan's nearly flat
-    // neighbours seen edge-on at its outline): their edge is kept; two faces of one plane given
-    // exactly are not.
+    // neighbours seen edge-on at its outline): their edge is kept; two faces of one plane are not.
     for (float lift : {0.f, 1e-4f}) {
         MeshData m;
         m.vertices = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, lift};
