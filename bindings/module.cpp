@@ -304,6 +304,22 @@ struct SceneCache {
     std::shared_ptr<edgepath::Scene> scene;
 };
 
+// One of the kept scene's counts (scene_build_counts, scene_hierarchy_counts; zeros before its
+// first build) as a dict of builds, refits and reuses. Waits for a call that holds the scene.
+nb::dict cache_counts(SceneCache& c, edgepath::SceneBuildCounts (*count)(const edgepath::Scene&)) {
+    edgepath::SceneBuildCounts n;
+    {
+        nb::gil_scoped_release release;
+        std::lock_guard<std::mutex> lock(c.mutex);
+        if (c.scene) n = count(*c.scene);
+    }
+    nb::dict d;
+    d["builds"] = n.builds;
+    d["refits"] = n.refits;
+    d["reuses"] = n.reuses;
+    return d;
+}
+
 // The built scene one call uses: the cache's, updated and held (locked) for the call, or a
 // scene of its own when there is no cache or another thread holds it.
 struct CallScene {
@@ -786,38 +802,11 @@ NB_MODULE(_core, m) {
                            "gradient functions, which update it from their description.")
         .def(nb::init<>())
         .def(
-            "counts",
-            [](SceneCache& c) {
-                nb::dict d;
-                edgepath::SceneBuildCounts n;
-                {
-                    // Waits for a call that holds the scene.
-                    nb::gil_scoped_release release;
-                    std::lock_guard<std::mutex> lock(c.mutex);
-                    if (c.scene) n = edgepath::scene_build_counts(*c.scene);
-                }
-                d["builds"] = n.builds;
-                d["refits"] = n.refits;
-                d["reuses"] = n.reuses;
-                return d;
-            },
+            "counts", [](SceneCache& c) { return cache_counts(c, edgepath::scene_build_counts); },
             "How often the kept scene was built, refitted and reused (zeros before its first "
             "build; a failed update drops it and starts the counts again).")
         .def(
-            "hierarchy_counts",
-            [](SceneCache& c) {
-                nb::dict d;
-                edgepath::SceneBuildCounts n;
-                {
-                    nb::gil_scoped_release release;
-                    std::lock_guard<std::mutex> lock(c.mutex);
-                    if (c.scene) n = edgepath::scene_hierarchy_counts(*c.scene);
-                }
-                d["builds"] = n.builds;
-                d["refits"] = n.refits;
-                d["reuses"] = n.reuses;
-                return d;
-            },
+            "hierarchy_counts", [](SceneCache& c) { return cache_counts(c, edgepath::scene_hierarchy_counts); },
             "How often gradient passes on the kept scene built, refitted and reused its edge "
             "hierarchy (zeros before the first, and after a failed update).");
 
