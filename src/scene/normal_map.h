@@ -33,18 +33,25 @@ inline bool normal_map_tangent(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu,
     return true;
 }
 
+// The tangent frame (s, t, n) the texture's values are in: s from dpdu, t = n x s; where there
+// is no tangent, Frame(n)'s axes. True when s came from dpdu.
+inline bool normal_map_frame(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, Vec3f& s, Vec3f& t) {
+    if (normal_map_tangent(n, has_dpdu, dpdu, s)) {
+        t = cross(n, s);
+        return true;
+    }
+    const Frame f(n);
+    s = f.s;
+    t = f.t;
+    return false;
+}
+
 // The mapped normal for unit shading normal n and texture value v (n itself when the mapped
 // direction is zero).
 inline Vec3f map_normal(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v) {
     const Vec3f m = v * 2.f - Vec3f(1.f);
     Vec3f s, t;
-    if (normal_map_tangent(n, has_dpdu, dpdu, s)) {
-        t = cross(n, s);
-    } else {
-        const Frame f(n);
-        s = f.s;
-        t = f.t;
-    }
+    normal_map_frame(n, has_dpdu, dpdu, s, t);
     const Vec3f w = s * m.x + t * m.y + n * m.z;
     const float l = length(w);
     return l > 0.f ? w / l : n;
@@ -56,14 +63,7 @@ inline void d_map_normal(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const
                          Vec3f& dn, Vec3f& ddpdu, Vec3f& dv) {
     const Vec3f m = v * 2.f - Vec3f(1.f);
     Vec3f s, t;
-    const bool tangent = normal_map_tangent(n, has_dpdu, dpdu, s);
-    if (tangent) {
-        t = cross(n, s);
-    } else {
-        const Frame f(n);
-        s = f.s;
-        t = f.t;
-    }
+    const bool tangent = normal_map_frame(n, has_dpdu, dpdu, s, t);
     const Vec3f w = s * m.x + t * m.y + n * m.z;
     if (!(length(w) > 0.f)) {
         dn += d_out;
