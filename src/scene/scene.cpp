@@ -267,9 +267,25 @@ void validate(const SceneDesc& desc) {
                 fail(f + ".ior", "a plastic's ior must be one value, got " + str(md.ior.num_values()));
             if (std::abs(md.ior.data[0] - 1.f) < kMinCoatIndexContrast)
                 fail(f + ".ior", "a plastic's coating needs an index other than 1, got " + str(md.ior.data[0]));
+            // Nonlinear: kd / (1 - kd R) stays finite and positive for albedos up to 1 (R < 1).
+            if (md.nonlinear)
+                for (int64_t k = 0; k < md.diffuse.num_values(); ++k)
+                    if (md.diffuse.data[k] > 1.f)
+                        fail(f + ".diffuse", "a nonlinear plastic's diffuse must be at most 1, got " +
+                                                 str(md.diffuse.data[k]) + " at flat index " + str(k));
         }
     }
-    for (size_t i = 0; i < desc.meshes.size(); ++i) validate_mesh(desc.meshes[i], int(i), int(desc.materials.size()));
+    for (size_t i = 0; i < desc.meshes.size(); ++i) {
+        const MeshDesc& m = desc.meshes[i];
+        validate_mesh(m, int(i), int(desc.materials.size()));
+        // Vertex colours multiply a nonlinear plastic's diffuse: at most 1 too.
+        if (m.colors && desc.materials[size_t(m.material)].kind == MaterialKind::Plastic &&
+            desc.materials[size_t(m.material)].nonlinear)
+            for (int64_t k = 0; k < m.num_vertices * 3; ++k)
+                if (m.colors[k] > 1.f)
+                    fail("meshes[" + str(i) + "].colors", "on a nonlinear plastic, colours must be at most 1, got " +
+                                                              str(m.colors[k]) + " at flat index " + str(k));
+    }
     if (desc.has_envmap) {
         check_texture(desc.envmap.values, 3, "envmap.values", true);
         check_finite(desc.envmap.to_world, 9, "envmap.to_world");

@@ -158,6 +158,20 @@ def test_plastic_parameters_must_be_constants(field, kwargs, message):
         ep.render(scene, spp=1)
 
 
+def test_nonlinear_plastic_albedo_above_one_is_refused():
+    """kd / (1 - kd R) would pass through infinity for kd >= 1 / R: a nonlinear plastic's
+    albedo (its diffuse, and vertex colours over it) is at most 1."""
+    scene = plastic_scene(diffuse=torch.tensor([1.2, 0.5, 0.5]), nonlinear=True)
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.diffuse: a nonlinear plastic's diffuse must be "
+                                         r"at most 1, got 1\.2"):
+        ep.render(scene, spp=1)
+    scene = plastic_scene(nonlinear=True)
+    scene.meshes[0].colors = torch.full((4, 3), 1.5)
+    with pytest.raises(ValueError, match=r"meshes\[0\]\.colors: on a nonlinear plastic, colours must be at most 1"):
+        ep.render(scene, spp=1)
+    ep.render(plastic_scene(diffuse=torch.tensor([1.2, 0.5, 0.5])), spp=1)  # linear: 1 - R whatever kd
+
+
 def test_plastic_index_of_one_is_refused():
     scene = plastic_scene(ior=1.0)
     with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.ior: a plastic's coating needs an index other than 1"):
