@@ -41,8 +41,8 @@ inline DeltaParams<float> delta_params(const BsdfParams& p) {
 }
 
 inline TBsdfParams<float> world_params(const BsdfParams& p) {
-    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha,  p.two_sided, p.kind,
-                              p.eta,     p.rough,    p.coat,   p.nonlinear};
+    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta, p.rough, p.coat,
+                              p.nonlinear};
 }
 
 struct BsdfSample {

@@ -8,6 +8,8 @@
 #include <mutex>
 #include <vector>
 
+#include <tbb/parallel_for.h>
+
 #include "scene/bsdf_diff.h"
 
 namespace edgepath {
@@ -106,11 +108,14 @@ const Quadrature& quadrature(double e) {
 
 double mu_at(int i) { return std::max(1e-6, double(i) / (kCoatResolution - 1)); }
 
-// R: 2 mean(mu albedo_reflected(mu, 1 / eta)) over the table's cosines.
+// R: 2 mean(mu albedo_reflected(mu, 1 / eta)) over the table's cosines (in parallel, summed in
+// order).
 double internal_reflectance(double a, double eta) {
     const Quadrature& q = quadrature(1 / eta);
+    double terms[kCoatResolution];
+    tbb::parallel_for(0, kCoatResolution, [&](int i) { terms[i] = mu_at(i) * albedo(mu_at(i), a, 1 / eta, true, q); });
     double sum = 0;
-    for (int i = 0; i < kCoatResolution; ++i) sum += mu_at(i) * albedo(mu_at(i), a, 1 / eta, true, q);
+    for (double t : terms) sum += t;
     return 2 * sum / kCoatResolution;
 }
 
@@ -167,13 +172,13 @@ CoatTable make_coat_table(float alpha, float eta, bool smooth) {
     // Central differences of the quadratures (smooth functions of alpha and eta).
     const double ha = 1e-4 * std::max(a, 0.01), he = 1e-4 * e;
     const Quadrature& q = quadrature(e);
-    for (int i = 0; i < kCoatResolution; ++i) {
+    tbb::parallel_for(0, kCoatResolution, [&](int i) {
         const double mu = mu_at(i);
         t.t[i] = float(albedo(mu, a, e, false, q));
         t.dt_dalpha[i] = float((albedo(mu, a + ha, e, false, q) - albedo(mu, a - ha, e, false, q)) / (2 * ha));
         t.dt_deta[i] = float((albedo(mu, a, e + he, false, quadrature(e + he)) -
                               albedo(mu, a, e - he, false, quadrature(e - he))) / (2 * he));
-    }
+    });
     t.r = float(internal_reflectance(a, e));
     t.dr_dalpha = float((internal_reflectance(a + ha, e) - internal_reflectance(a - ha, e)) / (2 * ha));
     t.dr_deta = float((internal_reflectance(a, e + he) - internal_reflectance(a, e - he)) / (2 * he));

@@ -174,7 +174,8 @@ def test_nonlinear_plastic_albedo_above_one_is_refused():
 
 def test_plastic_index_of_one_is_refused():
     scene = plastic_scene(ior=1.0)
-    with pytest.raises(ValueError, match=r"meshes\[0\]\.material\.ior: a plastic's coating needs an index other than 1"):
+    with pytest.raises(ValueError,
+                       match=r"meshes\[0\]\.material\.ior: a plastic's coating needs an index other than 1"):
         ep.render(scene, spp=1)
 
 
