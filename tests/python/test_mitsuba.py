@@ -503,6 +503,8 @@ def test_bsdfs(tmp_path):
     assert names["ek.specular"] is s.bsdfs["ek"].specular
     assert names["gold.bsdf.specular"] is gold.specular
     assert names["pl.diffuse_reflectance.value"] is pl.diffuse
+    assert names["pl.specular_reflectance.value"] is pl.specular and names["pl.eta"] is pl.ior
+    assert names["pl.alpha.value"] is pl.roughness
     assert "gold.bsdf.diffuse" in names  # a conductor's (black) diffuse: no Mitsuba name
     # Shapes a and b share one BSDF: its tensors are listed once, under its id.
     assert not any(name.startswith(("a.bsdf", "b.bsdf")) for name in names)

@@ -46,8 +46,9 @@ NAMED_IOR = {
 DIFFUSE_KEYS = {"diffuse": "reflectance"}
 BSDF_KEYS = {"diffuse": DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
                                                        "specular": "specular_reflectance",
-                                                       "roughness": "alpha"},
-             "plastic": {"diffuse": "diffuse_reflectance", "specular": "specular_reflectance"},
+                                                       "roughness": "alpha", "ior": "eta"},
+             "plastic": {"diffuse": "diffuse_reflectance", "specular": "specular_reflectance",
+                         "ior": "eta"},
              "roughconductor": {"roughness": "alpha"}, "conductor": {},
              "dielectric": {"ior": "eta"}, "roughdielectric": {"ior": "eta", "roughness": "alpha"}}
 
