@@ -35,7 +35,8 @@ def test_plastic_matches_mitsuba(name):
     against Mitsuba 3's image: the mean of each channel within 2%, and Mitsuba's metric on 4 x 4
     blocks within its indirect-light conformance thresholds (0.04 mean, 0.4 max). Measured at
     256 spp: means within 0.21% / 0.28%, blocks 0.009 / 0.058 (rough) and 0.014 / 0.077
-    (smooth)."""
+    (smooth). The sum of a Lambert and a Schlick GGX lobe that the loader made of a
+    roughplastic before was 13-17% brighter in the rough scene's means."""
     loaded = ep.load_mitsuba(SCENE_DIR / f"{name}.xml")
     ref = ep.imread(SCENE_DIR / f"{name}.exr")[..., :3].float()
     image = loaded.render(spp=256)
