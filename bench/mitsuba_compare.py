@@ -288,6 +288,10 @@ def forward(mi, dr, ep, args, folder):
           f"{args.bounces + 1}), {args.threads} threads, median of {args.runs} interleaved runs",
           ["scene", "edgepath s", "Mitsuba s", "ratio", "edgepath cpu s", "Mitsuba cpu s", "cpu ratio",
            "image means differ", "edgepath rays/sample (camera / shadow / bounce)"], rows)
+    # Issue 18's target: the forward pass at least as fast as Mitsuba's at equal spp, in CPU time.
+    ratios = [float(r[6]) for r in rows]
+    verdict = "met" if min(ratios) >= 1 else f"not met (edgepath at {min(ratios):.2f}x Mitsuba's speed at worst)"
+    print(f"target, forward at least as fast as Mitsuba at equal spp (cpu ratio >= 1 on both scenes): {verdict}")
 
 
 def shadow_gradient(mi, dr, ep, args, folder):
