@@ -56,6 +56,19 @@ def test_scenes_load_welded(tmp_path):
     assert loaded.shapes["shape0"].indices.shape[0] > 99000  # the same sphere() as above, bumped
 
 
+def test_rays_per_sample(tmp_path):
+    # The counts the forward table prints beside the times: one camera ray per sample; at most
+    # max_bounces continuations; the scan scene (an area light and a sky) traces shadow rays
+    # towards both, so more than one per sample on average, fewer than two per vertex.
+    mc = load_script()
+    xml, _ = mc.make_scan(str(tmp_path), 16, 1, 3)
+    loaded = write(tmp_path, xml)
+    camera, shadow, bounce = mc.rays_per_sample(loaded.scene, 16, 2, 2)
+    assert camera == 1.0
+    assert 0.3 < bounce <= 2.0
+    assert 1.0 < shadow <= 2.0 * (1.0 + bounce)
+
+
 def test_skipped_without_mitsuba(tmp_path):
     # The script run with the mitsuba package hidden.
     code = ("import runpy, sys; sys.modules['mitsuba'] = None; sys.argv = ['mitsuba_compare.py']; "
