@@ -21,6 +21,8 @@
 //                  [--forward-only]
 //   edgepath_bench --backward-memory [--size N] [--spp N]
 //   edgepath_bench --secondary-only [--size N] [--spp N] [--seeds N] [--threads N]
+//   edgepath_bench --backward-only [--secondary-survival P]   (the secondary term's roulette by
+//                  class, RenderOptions::secondary_survival, in the backward table)
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
 // the renderer alone. --forward-only stops after the forward tables (A/B runs of two builds).
@@ -89,6 +91,7 @@ struct Options {
     bool forward_only = false;     // only: the forward-pass tables (for A/B runs of two builds)
     int seeds = 8;                 // --secondary-only: renders per sampler
     int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
+    float secondary_survival = 1.f;  // RenderOptions::secondary_survival of the backward table
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -97,7 +100,8 @@ struct Options {
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
                  "                      [--secondary-only [--seeds N] [--case 0-3]]  (alone: secondary-edge samplers' MSE)\n"
-                 "                      [--render-only] [--backward-only] [--forward-only]\n",
+                 "                      [--render-only] [--backward-only] [--forward-only]\n"
+                 "                      [--secondary-survival P]  (the backward table's roulette floor, default 1)\n",
                  msg);
     std::exit(status);
 }
@@ -133,6 +137,13 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--forward-only") o.forward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
+        else if (a == "--secondary-survival") {
+            const char* v = value();
+            char* end = nullptr;
+            o.secondary_survival = std::strtof(v, &end);
+            if (end == v || *end != '\0' || !(o.secondary_survival > 0.f && o.secondary_survival <= 1.f))
+                usage((std::string("--secondary-survival: expected a number in (0, 1], got '") + v + "'").c_str());
+        }
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -640,7 +651,7 @@ struct BackwardResult {
 
 // Median forward and backward (every parameter wanted, adjoint = 1) times.
 BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int spp, int bounces, int threads,
-                             int runs) {
+                             int runs, float survival) {
     std::shared_ptr<const Scene> scene = build_scene(desc);
     const size_t n = size_t(image_width(*scene)) * image_height(*scene) * 3;
     std::vector<float> image(n), adjoint(n, 1.f);
@@ -650,6 +661,7 @@ BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int
     ro.max_bounces = bounces;
     ro.num_threads = threads;
     ro.seed = 3;
+    ro.secondary_survival = survival;
     BackwardResult r{name, bounces, 0, 0, 0, 0, 0, 0};
     const Timing forward = time_ms_cpu(runs, [&] { render(*scene, ro, image.data()); });
     const Timing backward = time_ms_cpu(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
@@ -909,9 +921,9 @@ void backward_section(const Options& o, BenchScene& bs,
                     "(cpu) backward/forward"});
     std::vector<BackwardResult> back;
     for (int bounces : o.bounces)
-        back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
+        back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs, o.secondary_survival));
     const TriangleScene tri(256);
-    back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs));
+    back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs, o.secondary_survival));
     for (const BackwardResult& r : back) {
         const std::string config = r.scene + " threads=" + std::to_string(o.threads) + " bounces=" + std::to_string(r.bounces);
         record("backward", config, "forward_ms", r.forward_ms, "ms");
