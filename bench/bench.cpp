@@ -21,6 +21,11 @@
 //                  [--forward-only]
 //   edgepath_bench --backward-memory [--size N] [--spp N]
 //   edgepath_bench --secondary-only [--size N] [--spp N] [--seeds N] [--threads N]
+//   edgepath_bench --backward-only [--secondary-survival P]   (the secondary term's roulette by
+//                  class, RenderOptions::secondary_survival, in the backward table)
+//   edgepath_bench --survival-compare [--secondary-survival P] [--size N] [--spp N] [--seeds N]
+//                  [--bounces 1,3]   (that roulette against none on the benchmark scene: the
+//                  variance over seeds of every gradient, times the pass's CPU time)
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
 // the renderer alone. --forward-only stops after the forward tables (A/B runs of two builds).
@@ -89,6 +94,8 @@ struct Options {
     bool forward_only = false;     // only: the forward-pass tables (for A/B runs of two builds)
     int seeds = 8;                 // --secondary-only: renders per sampler
     int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
+    float secondary_survival = 1.f;  // RenderOptions::secondary_survival of the backward table
+    bool survival_compare = false;   // only: the roulette by class against none, at equal time
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -97,7 +104,9 @@ struct Options {
                  "                      [--no-all-cores] [--teapot N] [--image out.png] [--csv out.csv]\n"
                  "                      [--backward-memory]  (alone: peak RSS of one backward pass)\n"
                  "                      [--secondary-only [--seeds N] [--case 0-3]]  (alone: secondary-edge samplers' MSE)\n"
-                 "                      [--render-only] [--backward-only] [--forward-only]\n",
+                 "                      [--render-only] [--backward-only] [--forward-only]\n"
+                 "                      [--secondary-survival P]  (the backward table's roulette floor, default 1)\n"
+                 "                      [--survival-compare]  (alone: that roulette against none at equal time)\n",
                  msg);
     std::exit(status);
 }
@@ -130,9 +139,17 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--backward-memory") o.backward_memory = true;
         else if (a == "--secondary-only") o.secondary_only = true;
         else if (a == "--backward-only") o.backward_only = true;
+        else if (a == "--survival-compare") o.survival_compare = true;
         else if (a == "--forward-only") o.forward_only = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
+        else if (a == "--secondary-survival") {
+            const char* v = value();
+            char* end = nullptr;
+            o.secondary_survival = std::strtof(v, &end);
+            if (end == v || *end != '\0' || !(o.secondary_survival > 0.f && o.secondary_survival <= 1.f))
+                usage((std::string("--secondary-survival: expected a number in (0, 1], got '") + v + "'").c_str());
+        }
         else if (a == "--image") o.image_path = value();
         else if (a == "--csv") o.csv_path = value();
         else if (a == "--bounces") {
@@ -640,7 +657,7 @@ struct BackwardResult {
 
 // Median forward and backward (every parameter wanted, adjoint = 1) times.
 BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int spp, int bounces, int threads,
-                             int runs) {
+                             int runs, float survival) {
     std::shared_ptr<const Scene> scene = build_scene(desc);
     const size_t n = size_t(image_width(*scene)) * image_height(*scene) * 3;
     std::vector<float> image(n), adjoint(n, 1.f);
@@ -650,6 +667,7 @@ BackwardResult time_backward(const std::string& name, const SceneDesc& desc, int
     ro.max_bounces = bounces;
     ro.num_threads = threads;
     ro.seed = 3;
+    ro.secondary_survival = survival;
     BackwardResult r{name, bounces, 0, 0, 0, 0, 0, 0};
     const Timing forward = time_ms_cpu(runs, [&] { render(*scene, ro, image.data()); });
     const Timing backward = time_ms_cpu(runs, [&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); });
@@ -909,9 +927,9 @@ void backward_section(const Options& o, BenchScene& bs,
                     "(cpu) backward/forward"});
     std::vector<BackwardResult> back;
     for (int bounces : o.bounces)
-        back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs));
+        back.push_back(time_backward("benchmark", bs.desc, o.spp, bounces, o.threads, o.runs, o.secondary_survival));
     const TriangleScene tri(256);
-    back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs));
+    back.push_back(time_backward("single triangle 256x256", tri.desc, 4, 1, o.threads, o.runs, o.secondary_survival));
     for (const BackwardResult& r : back) {
         const std::string config = r.scene + " threads=" + std::to_string(o.threads) + " bounces=" + std::to_string(r.bounces);
         record("backward", config, "forward_ms", r.forward_ms, "ms");
@@ -934,6 +952,63 @@ void backward_section(const Options& o, BenchScene& bs,
                    "backward)");
 }
 
+// The secondary term's roulette by class (RenderOptions::secondary_survival = P) against none, on
+// the benchmark scene with every parameter wanted and an adjoint of 1: for each seed, the
+// gradient pass's output (every buffer) and its process CPU time, the two settings alternating.
+// The sum over all gradient values of their variance over seeds, times the mean CPU time, is the
+// cost of a given accuracy; the ratio (roulette over none) below 1 means less error at equal time.
+int survival_compare(const Options& o, BenchScene& bs) {
+    const float p = o.secondary_survival < 1.f ? o.secondary_survival : 0.1f;
+    std::printf("edgepath benchmark: the secondary term's roulette by class (floor %g) against none\n", p);
+    std::printf("settings : %dx%d pixels, %d spp, %d seeds, %d threads; every parameter wanted, adjoint 1\n", o.size,
+                o.size, o.spp, o.seeds, o.threads);
+    std::shared_ptr<const Scene> scene = build_scene(bs.desc);
+    const size_t n = size_t(o.size) * o.size * 3;
+    std::vector<float> adjoint(n, 1.f);
+    Table table({"bounces", "survival", "variance (sum over gradients)", "cpu ms", "variance x ms", "ratio"});
+    for (int bounces : o.bounces) {
+        double var[2] = {0, 0}, ms[2] = {0, 0};
+        std::vector<std::vector<double>> sum(2), sq(2);
+        for (int seed = 0; seed < o.seeds; ++seed)
+            for (int k = 0; k < 2; ++k) {
+                const int which = (seed % 2 == 0) ? k : 1 - k;  // each first in turn
+                AllGradients grads(bs.desc);
+                RenderOptions ro;
+                ro.spp = o.spp;
+                ro.max_bounces = bounces;
+                ro.num_threads = o.threads;
+                ro.seed = uint64_t(seed + 1);
+                ro.secondary_survival = which == 0 ? 1.f : p;
+                if (seed == 0 && k == 0) render_gradients(*scene, ro, adjoint.data(), grads.slots);  // warm-up
+                for (auto& b : grads.buffers) std::fill(b.begin(), b.end(), 0.f);
+                ms[which] += time_once_cpu([&] { render_gradients(*scene, ro, adjoint.data(), grads.slots); }).cpu_ms;
+                size_t i = 0;
+                for (const auto& b : grads.buffers) i += b.size();
+                if (sum[which].empty()) sum[which].assign(i, 0.0), sq[which].assign(i, 0.0);
+                i = 0;
+                for (const auto& b : grads.buffers)
+                    for (float v : b) {
+                        sum[which][i] += v;
+                        sq[which][i] += double(v) * v;
+                        ++i;
+                    }
+            }
+        for (int k = 0; k < 2; ++k) {
+            for (size_t i = 0; i < sum[k].size(); ++i) {
+                const double m = sum[k][i] / o.seeds;
+                var[k] += (sq[k][i] - o.seeds * m * m) / (o.seeds - 1);
+            }
+            ms[k] /= o.seeds;
+        }
+        for (int k = 0; k < 2; ++k)
+            table.add({std::to_string(bounces), k == 0 ? "1" : fmt(p, 2), fmt(var[k], 6), fmt(ms[k], 1),
+                       fmt(var[k] * ms[k], 4), k == 0 ? "" : fmt((var[1] * ms[1]) / (var[0] * ms[0]), 3)});
+    }
+    table.print("The roulette by class at equal time: variance over seeds of every gradient value (summed), "
+                "times the gradient pass's mean process CPU time; ratio below 1: less error at equal time");
+    return 0;
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
     if (o.backward_memory) {
@@ -942,6 +1017,11 @@ int main(int argc, char** argv) {
         return backward_memory(o, bs);
     }
     if (o.secondary_only) return secondary_only(o);
+    if (o.survival_compare) {
+        BenchScene bs;
+        build_bench_scene(bs, o);
+        return survival_compare(o, bs);
+    }
     if (o.backward_only) {
         BenchScene bs;
         build_bench_scene(bs, o);

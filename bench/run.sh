@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # Runs the benchmark (forward and backward passes), then the kept scene and many-views
 # measurement (bench/persist.py), light sampling at equal time (bench/light_sampling.py), the
-# backward-pass memory measurement, the secondary-edge
-# samplers' equal-time comparison and, when the mitsuba package is installed
+# backward-pass memory measurement, the secondary-edge samplers' equal-time comparison, the
+# secondary term's roulette by class at equal time and, when the mitsuba package is installed
 # (pip install -e '.[bench]'), the comparison with Mitsuba 3 (bench/mitsuba_compare.py).
 #   bench/run.sh [path/to/edgepath_bench] [benchmark options...]
 # Without a path, looks for the binary in the usual build folders. Options go to the binary
@@ -46,6 +46,9 @@ fi
 "$bin" --backward-memory --size 1024 --spp 16
 # Secondary edges: the edge hierarchy against uniform sampling at equal time (a minute or two).
 "$bin" --secondary-only --size 32 --spp 8 --seeds 48
+# The secondary term's roulette by class (RenderOptions::secondary_survival) against none, at
+# equal time: variance of every gradient over seeds times the pass's CPU time (a minute or two).
+"$bin" --survival-compare --secondary-survival 0.1 --size 64 --spp 4 --seeds 64 --bounces 1,3
 # Side by side with Mitsuba 3, in the project's Python (make bench puts its venv first on PATH);
 # without mitsuba it says so in one line.
 python="$(command -v python || command -v python3)"

@@ -100,13 +100,17 @@ class RenderOptions:
     edge_samples: int = 0  # 0: one per output pixel per spp
     edge_sampling: int = 0
     hide_emitters: bool = False
+    secondary_survival: Optional[float] = None  # None: the core's default
 
     def core(self) -> dict:
-        return {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
-                "num_threads": self.num_threads, "sampling": self.sampling,
-                "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
-                "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling,
-                "hide_emitters": self.hide_emitters}
+        out = {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
+               "num_threads": self.num_threads, "sampling": self.sampling,
+               "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
+               "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling,
+               "hide_emitters": self.hide_emitters}
+        if self.secondary_survival is not None:
+            out["secondary_survival"] = self.secondary_survival
+        return out
 
 
 def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
@@ -115,7 +119,8 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
            backward_seed: Optional[int] = None, primary_edges: bool = True,
            secondary_edges: bool = True, edge_samples: Optional[int] = None,
            edge_sampling: str = "importance", hide_emitters: bool = False,
-           cameras: Optional[Sequence[Camera]] = None) -> torch.Tensor:
+           cameras: Optional[Sequence[Camera]] = None,
+           secondary_survival: Optional[float] = None) -> torch.Tensor:
     """Renders ``scene`` and returns a float32 (H, W, 3) tensor of linear radiance, row 0 at
     the top (H, W: the crop window's size if the camera has one).
 
@@ -138,6 +143,10 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     edge by world length: the baseline, for comparison). ``hide_emitters``: as Mitsuba's
     integrators' ``hide_emitters``, area lights are transparent to camera rays and the
     environment seen directly is black; seen after a bounce both stay (the gradient follows).
+    ``secondary_survival`` (in (0, 1]; None: the default, 1): below 1, the gradient pass
+    samples the secondary edges' term at a path vertex with a probability set per mesh and depth
+    by a small pilot pass, no lower than this, and divides it by that probability (unbiased);
+    1 samples it at every vertex (see docs/gradients.md, "Roulette by class").
 
     Many views: with ``cameras`` (a list of ``Camera`` of one film size), renders the scene once
     per camera (``scene.camera`` is not used) and returns (V, H, W, 3), view k exactly the image
@@ -151,7 +160,8 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     environment or the camera change, the BVH is refitted when only vertices move, and rebuilt
     when the topology does (``Scene.build_counts`` counts them)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters,
+                             secondary_survival)
     if cameras is not None:
         flat, views, view_params = _flatten_views(scene, cameras)
     else:
@@ -166,7 +176,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                   num_threads, sampling, primary_edges, secondary_edges,
-                                  edge_samples, edge_sampling, hide_emitters)
+                                  edge_samples, edge_sampling, hide_emitters, secondary_survival)
     slots = [slot for slot, _ in attached]
     if cameras is not None:
         return _RenderViewsFunction.apply(flat, views, options, grad_options, slots,
@@ -317,7 +327,8 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
                      num_threads: Optional[int] = None, sampling: str = "mis",
                      primary_edges: bool = True, secondary_edges: bool = True,
                      edge_samples: Optional[int] = None,
-                     edge_sampling: str = "importance", hide_emitters: bool = False) -> torch.Tensor:
+                     edge_sampling: str = "importance", hide_emitters: bool = False,
+                     secondary_survival: Optional[float] = None) -> torch.Tensor:
     """The derivative of the image along ``direction`` in the space of ``param`` (forward mode):
     (H, W, 3) float32, dI/dt of the image of the scene with ``param + t * direction``.
 
@@ -327,7 +338,8 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     code, per camera sample, with the same random numbers as ``render`` for the same seed, plus
     the edges' boundary terms (options as for ``render``)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters,
+                             secondary_survival)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
@@ -365,7 +377,8 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
                     backward_spp: Optional[int] = None, backward_seed: Optional[int] = None,
                     primary_edges: bool = True, secondary_edges: bool = True,
                     edge_samples: Optional[int] = None,
-                    edge_sampling: str = "importance", hide_emitters: bool = False) -> Dict[str, torch.Tensor]:
+                    edge_sampling: str = "importance", hide_emitters: bool = False,
+                    secondary_survival: Optional[float] = None) -> Dict[str, torch.Tensor]:
     """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
     (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
     the same options, bit for bit; "alpha", "depth", "position", "geometry_normal",
@@ -379,7 +392,8 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
     ...) and of the geometric normal's jumps between faces; ids have no gradient."""
     names = _channel_names(channels)
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters,
+                             secondary_survival)
     flat = flatten_scene(scene)
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     continuous = [n for n in names if n not in ID_CHANNELS]
@@ -389,7 +403,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
         grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                       _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                       num_threads, sampling, primary_edges, secondary_edges,
-                                      edge_samples, edge_sampling, hide_emitters)
+                                      edge_samples, edge_sampling, hide_emitters, secondary_survival)
         slots = [slot for slot, _ in attached]
         values, ids = _ChannelsFunction.apply(flat, names, options, grad_options, slots,
                                               *[t for _, t in attached])
@@ -455,13 +469,15 @@ def derivative_channels(scene: Scene, param: torch.Tensor, direction: torch.Tens
                         num_threads: Optional[int] = None, sampling: str = "mis",
                         primary_edges: bool = True, secondary_edges: bool = True,
                         edge_samples: Optional[int] = None,
-                        edge_sampling: str = "importance", hide_emitters: bool = False) -> Dict[str, torch.Tensor]:
+                        edge_sampling: str = "importance", hide_emitters: bool = False,
+                        secondary_survival: Optional[float] = None) -> Dict[str, torch.Tensor]:
     """``derivative_image`` for output channels: {name: (H, W, C) float32} derivatives along
     ``direction`` of the continuous channels in ``channels`` (default: all of them; ids have
     no derivative and are refused), with the same random numbers as ``render_channels``."""
     names = _channel_names(channels, continuous_only=True)
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling, hide_emitters)
+                             secondary_edges, edge_samples, edge_sampling, hide_emitters,
+                             secondary_survival)
     directions = _slot_directions(scene, param, direction)
     flat = flatten_scene(scene)
     values = torch.empty((flat.height, flat.width, sum(CHANNELS[n] for n in names)), dtype=torch.float32)
@@ -530,8 +546,14 @@ def _split_channels(names: List[str], values: torch.Tensor,
 
 def render_options(spp=16, max_bounces=1, seed=0, num_threads=None, sampling="mis",
                    primary_edges=True, secondary_edges=True, edge_samples=None,
-                   edge_sampling="importance", hide_emitters=False) -> RenderOptions:
+                   edge_sampling="importance", hide_emitters=False,
+                   secondary_survival=None) -> RenderOptions:
+    if secondary_survival is not None:
+        secondary_survival = v.number(secondary_survival, "secondary_survival")
+        if not 0.0 < secondary_survival <= 1.0:
+            v.fail("secondary_survival", f"must be in (0, 1], got {secondary_survival}")
     return RenderOptions(
+        secondary_survival=secondary_survival,
         hide_emitters=v.boolean(hide_emitters, "hide_emitters"),
         edge_sampling=v.choice(edge_sampling, "edge_sampling", EDGE_SAMPLING),
         primary_edges=v.boolean(primary_edges, "primary_edges"),

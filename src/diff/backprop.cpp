@@ -427,7 +427,10 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint,
         // so the sweeps that replay the terms (one per colour) keep the first sweep's draw.
         // A smooth vertex sees edges along one direction only: no boundary term of its own.
-        const float q = std::min(1.f, std::max(r.beta.x, std::max(r.beta.y, r.beta.z)));
+        // And by the vertex's class (its mesh and depth): the probability set from a pilot pass
+        // (SecondaryEdges::survival; 1 without one), independent of this term's own samples.
+        float q = std::min(1.f, std::max(r.beta.x, std::max(r.beta.y, r.beta.z)));
+        if (secondary) q *= secondary->survival(r.hit.mesh, k);
         if (secondary && k < secondary->max_bounces() && !delta && q > 0.f) {
             const Vec3f ab_q = ab / q;
             if (log && log->replaying) {

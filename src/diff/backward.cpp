@@ -13,6 +13,8 @@
 #include "render/channels.h"
 #include "render/path.h"
 #include "render/tiles.h"
+#include <algorithm>
+#include <cmath>
 #include <tbb/enumerable_thread_specific.h>
 
 namespace edgepath {
@@ -22,6 +24,86 @@ namespace {
 void check_layout(const ChannelLayout& layout) {
     if (layout.num_values == 0)
         throw std::invalid_argument("channels: no continuous channel to differentiate (ids have no derivative)");
+}
+
+// The pilot pass of the secondary term's roulette (RenderOptions::secondary_survival): about
+// kPilotPixels camera samples on a regular grid of pixels, with random numbers of their own (so
+// that the probabilities do not depend on the samples they weigh: the roulette stays unbiased),
+// traced and swept one after another (the same probabilities for any thread count). For each
+// class of vertices (SecondaryEdges::survival_class: its mesh, its depth) it measures the mean
+// square of the term's gradient there, M = mean (|s| (|d e0| + |d e1| + |d p|))^2 over the
+// vertices (zero where nothing was sampled); a class gets sqrt(M / M_max), the allocation of
+// samples that minimises the variance for the time when vertices cost alike, no lower than the
+// floor. Classes with fewer than kPilotMin pilot vertices keep 1. `adjoint`: the pixels'
+// adjoints (reverse mode; values `stride` apart, radiance at `offset`), or null (forward mode:
+// every colour alike).
+constexpr int kPilotPixels = 1024, kPilotMin = 16;
+
+void calibrate_survival(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
+                        SecondaryEdges& secondary, const float* adjoint, int stride, int offset) {
+    secondary.set_survival({});
+    const float floor = opt.secondary_survival;
+    if (!(floor < 1.f) || !secondary.active()) return;
+    const int W = scene.out_width, H = scene.out_height;
+    // About kPilotPixels pixels, and no more than an eighth of the pass's own samples.
+    const double pilot = std::min(double(kPilotPixels), double(W) * double(H) * double(opt.spp) / 8.0);
+    const int step = std::max(1, int(std::ceil(std::sqrt(double(W) * double(H) / std::max(pilot, 1.0)))));
+    const uint64_t seed = mix64(opt.seed ^ 0x70696c6f74ull);  // the pilot's own streams
+    const size_t classes = SecondaryEdges::survival_class(int(scene.meshes.size()), 0);
+    std::vector<double> sum(classes, 0.0);
+    std::vector<int64_t> count(classes, 0);
+    PathRecord rec;
+    EdgeTermLog log;
+    GradSink discard(true);  // projections only, never written anywhere
+    RayCounters counters;
+    for (int y = step / 2; y < H; y += step)
+        for (int x = step / 2; x < W; x += step) {
+            Vec3f a(1.f);
+            if (adjoint) {
+                const float* ap = adjoint + (int64_t(y) * W + x) * stride + offset;
+                a = Vec3f(ap[0], ap[1], ap[2]);
+                if (is_black(a)) continue;
+            }
+            const uint64_t pixel = film_pixel_index(scene, x, y);
+            Rng rng = Rng::for_sample(seed, pixel, 0);
+            rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
+            rec.lens = sample_lens_point(scene, rng);
+            if (!scene.camera.sees(rec.film.x, rec.film.y)) continue;
+            rec.stream = mix64(seed ^ pixel);
+            const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
+            trace_path(scene, opt, ray, rng, counters, &rec, nullptr);
+            if (rec.camera_missed) continue;
+            log.replaying = false;
+            backprop_path(scene, slots, rec, a, discard, &secondary, &log);
+            discard.take_projection();
+            const int K = std::min(int(rec.vertices.size()), opt.max_bounces);
+            for (int k = 0; k < K; ++k) {
+                const PathVertexRecord& r = rec.vertices[size_t(k)];
+                const float q = std::min(1.f, std::max(r.beta.x, std::max(r.beta.y, r.beta.z)));
+                double X = 0.0;
+                if (size_t(k) < log.begin.size() && q > 0.f) {
+                    const Vec3f w = a * r.beta / q;
+                    for (uint32_t i = log.begin[size_t(k)]; i < log.end[size_t(k)]; ++i) {
+                        const EdgeTerm& t = log.terms[i];
+                        const double sv = std::abs(double(dot(w, t.u)));
+                        X += sv * (length(t.g.d_e0) + length(t.g.d_e1) + length(t.g.d_o));
+                    }
+                }
+                const size_t c = SecondaryEdges::survival_class(r.hit.mesh, k);
+                if (!std::isfinite(X)) X = 0.0;
+                sum[c] += X * X;
+                ++count[c];
+            }
+        }
+    double top = 0.0;
+    for (size_t c = 0; c < classes; ++c)
+        if (count[c] >= kPilotMin) top = std::max(top, sum[c] / double(count[c]));
+    if (!(top > 0.0)) return;
+    std::vector<float> p(classes, 1.f);
+    for (size_t c = 0; c < classes; ++c)
+        if (count[c] >= kPilotMin)
+            p[c] = std::clamp(float(std::sqrt(sum[c] / double(count[c]) / top)), floor, 1.f);
+    secondary.set_survival(std::move(p));
 }
 
 }  // namespace
@@ -35,7 +117,8 @@ void channel_gradients(const Scene& scene, const RenderOptions& opt, const Chann
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
     const SceneGradients none;  // the other channels see no secondary edges
-    const SecondaryEdges secondary(scene, opt, radiance ? grads : none);
+    SecondaryEdges secondary(scene, opt, radiance ? grads : none);
+    if (radiance) calibrate_survival(scene, opt, grads, secondary, adjoint, nv, ro);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
     tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(false); });
     for_each_sample(
@@ -75,7 +158,8 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
     const int64_t n = int64_t(scene.out_width) * scene.out_height * nv;
     std::fill(out, out + n, 0.f);
     const SceneGradients none;  // the other channels see no secondary edges
-    const SecondaryEdges secondary(scene, opt, radiance ? dirs : none);
+    SecondaryEdges secondary(scene, opt, radiance ? dirs : none);
+    if (radiance) calibrate_survival(scene, opt, dirs, secondary, nullptr, nv, ro);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
     tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(true); });
     tbb::enumerable_thread_specific<EdgeTermLog> logs;

@@ -671,9 +671,9 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
 
 const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t index, Coarse& scratch) const {
     if (q.memo) {
-        if (const Coarse* c = q.memo->find(index)) return *c;
-        if (Coarse* c = q.memo->insert(index)) {
-            coarse(q, nodes_[size_t(index)], *c);
+        bool found;
+        if (Coarse* c = q.memo->lookup(index, found)) {
+            if (!found) coarse(q, nodes_[size_t(index)], *c);
             return *c;
         }
     }
@@ -686,22 +686,23 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).
-        if (q.memo)
-            if (const Coarse* kept = q.memo->find(index)) {
-                out[0] = kept->value[0];
-                out[1] = kept->value[1];
-                return;
-            }
+        // (The entry is claimed before the leaves fill other entries: it is written below.)
+        bool found = false;
+        Coarse* kept = q.memo ? q.memo->lookup(index, found) : nullptr;
+        if (found) {
+            out[0] = kept->value[0];
+            out[1] = kept->value[1];
+            return;
+        }
         float a[2], b[2];
         importance(q, n.left, a, 0, 0);
         importance(q, n.right, b, 0, 0);
         out[0] = a[0] + b[0];
         out[1] = a[1] + b[1];
-        if (q.memo)
-            if (Coarse* kept = q.memo->insert(index)) {
-                kept->value[0] = out[0];
-                kept->value[1] = out[1];
-            }
+        if (kept) {
+            kept->value[0] = out[0];
+            kept->value[1] = out[1];
+        }
         return;
     }
     Coarse scratch;
@@ -724,6 +725,27 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         importance(q, n.left, a, 0, light_refine - 1);
         importance(q, n.right, b, 0, light_refine - 1);
         out[1] = a[1] + b[1];
+    }
+}
+
+EdgeHierarchy::Coarse* EdgeHierarchy::Memo::lookup(int32_t node, bool& found) {
+    // One probe sequence for find() and then insert(): insert() takes the first entry find()
+    // stops at.
+    for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
+        Entry& e = entries_[h];
+        if (e.stamp == stamp_) {
+            if (e.node == node) {
+                found = true;
+                return &e.value;
+            }
+            continue;
+        }
+        found = false;
+        if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
+        e.stamp = stamp_;
+        e.node = node;
+        ++used_;
+        return &e.value;
     }
 }
 

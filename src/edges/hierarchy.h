@@ -176,6 +176,8 @@ public:
         void reset();
         const Coarse* find(int32_t node) const;
         Coarse* insert(int32_t node);  // nullptr when full
+        // find(), or else insert() (found false; nullptr when full), in one probe sequence.
+        Coarse* lookup(int32_t node, bool& found);
 
     private:
         static constexpr uint32_t kSize = 1024;  // a power of two

@@ -110,6 +110,10 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         co = -co;
     }
     if (!(co > 0.f)) return d_p;
+    // At a vertex's last bounce, what either side of an edge sees counts only by its emission:
+    // with neither an environment nor an area light (point lights have no boundary term), both
+    // sides are black and no edge sample can add anything.
+    if (bounces_left == 0 && !scene_.has_envmap && !has_lights_) return d_p;
     auto mean = [](const Vec3f& c) { return (c.x + c.y + c.z) / 3.f; };
     EdgeHierarchy::Query q;
     thread_local EdgeHierarchy::Memo memo;

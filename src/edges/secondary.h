@@ -18,6 +18,7 @@
 // opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
 // instead (the baseline).
 #pragma once
+#include <algorithm>
 #include <memory>
 #include <vector>
 #include "edges/hierarchy.h"
@@ -73,6 +74,21 @@ public:
     Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
               const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink,
               std::vector<EdgeTerm>* record = nullptr) const;
+    // The probability with which the term is sampled at a vertex on mesh `mesh` at depth
+    // `depth` (0: the camera's vertex), from set_survival(); 1 when none was set.
+    float survival(int mesh, int depth) const {
+        if (survival_.empty()) return 1.f;
+        const size_t c = survival_class(mesh, depth);
+        return c < survival_.size() ? survival_[c] : 1.f;
+    }
+    // The classes of vertices survival() tells apart: a mesh and a depth (the last one holds
+    // every deeper vertex).
+    static constexpr int kSurvivalDepths = 4;
+    static size_t survival_class(int mesh, int depth) {
+        return size_t(mesh) * kSurvivalDepths + size_t(std::min(depth, kSurvivalDepths - 1));
+    }
+    void set_survival(std::vector<float> p) { survival_ = std::move(p); }
+
     // Adds recorded terms again, with the adjoint weight `weight`; returns the adjoint of p.
     Vec3f replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
 
@@ -109,6 +125,7 @@ private:
     bool has_lights_ = false;
     Vec3f lights_center_;  // a bounding sphere of the area lights
     float lights_radius_ = 0.f;
+    std::vector<float> survival_;  // per survival_class(); empty: 1 everywhere
 };
 
 }  // namespace edgepath

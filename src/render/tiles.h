@@ -26,6 +26,8 @@ inline void check_options(const RenderOptions& opt) {
     if (opt.spp < 1) throw std::invalid_argument("spp: must be at least 1, got " + std::to_string(opt.spp));
     if (opt.edge_samples < 0 || opt.edge_samples > kMaxEdgeSamples)
         throw std::invalid_argument("edge_samples: must be in [0, 2**62], got " + std::to_string(opt.edge_samples));
+    if (!(opt.secondary_survival > 0.f && opt.secondary_survival <= 1.f))
+        throw std::invalid_argument("secondary_survival: must be in (0, 1], got " + std::to_string(opt.secondary_survival));
     if (opt.max_bounces < 0)
         throw std::invalid_argument("max_bounces: must be non-negative, got " + std::to_string(opt.max_bounces));
 }

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <functional>
+#include <string>
 #include <vector>
 
 #include "edgepath.h"
@@ -296,6 +297,27 @@ TEST(Gradients, ReverseModeEqualsForwardMode) {
         double g_dot_dir = 0;
         for (size_t i = 0; i < dir.size(); ++i) g_dot_dir += double(buf[i]) * dir[i];
         EXPECT_NEAR(a_dot_d, g_dot_dir, 1e-3 * (std::abs(a_dot_d) + 1e-3)) << p.name;
+    }
+}
+
+// The secondary term's roulette floor must lie in (0, 1]: anything else is refused by name.
+TEST(Gradients, SecondarySurvivalOutsideZeroOneIsRefused) {
+    FloorScene base(true, true);
+    auto scene = build_scene(base.desc);
+    const size_t n = 24 * 20 * 3;
+    std::vector<float> adj(n, 1.f), D(n);
+    SceneGradients none;
+    for (float bad : {0.f, -0.5f, 1.5f, std::nanf("")}) {
+        RenderOptions opt;
+        opt.spp = 1;
+        opt.secondary_survival = bad;
+        try {
+            render_gradients(*scene, opt, adj.data(), none);
+            ADD_FAILURE() << "accepted secondary_survival " << bad;
+        } catch (const std::invalid_argument& e) {
+            EXPECT_NE(std::string(e.what()).find("secondary_survival"), std::string::npos) << e.what();
+        }
+        EXPECT_THROW(derivative_image(*scene, opt, none, D.data()), std::invalid_argument);
     }
 }
 
