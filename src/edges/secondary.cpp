@@ -44,14 +44,11 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
-    // (Nearly flat edges are left out: with them, translate_occluder_area_light's image sum moved
-    // from -2.8% to -3.7% of Mitsuba's and a sun's elevation recovered from its shadow from 60.5 to
-    // 62.9 for a truth of 60; why is not known yet.)
-    build_set(all_, [](const SecondaryEdges&, const Edge& e) { return !e.nearly_flat; });
+    build_set(all_, [](const SecondaryEdges&, const Edge&) { return true; });
     total_ = all_.total;
     // Where nothing wanted moves the shading point, only the wanted meshes' edges matter.
     if (!every) {
-        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return !e.nearly_flat && self.mesh_wanted(e.mesh); });
+        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
         has_wanted_set_ = true;
     }
     if (!uniform_ && !all_.edges.empty()) {
