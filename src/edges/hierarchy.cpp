@@ -149,7 +149,7 @@ struct EdgeHierarchy::Input {
     std::vector<uint8_t> always;
     std::vector<uint8_t> crease;       // a crease (with two faces of nonzero area)
     std::vector<uint8_t> seam;         // a crease along which more than the face normal jumps
-    std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
+    std::vector<uint8_t> dark_behind;  // two faces that are black from behind
     std::vector<uint8_t> emissive;     // an edge of an emitter
     const std::vector<int32_t>* ids;
 
@@ -172,13 +172,13 @@ struct EdgeHierarchy::Input {
             p0[i] = m.vertex(e.v0);
             p1[i] = m.vertex(e.v1);
             always[i] = e.kind != EdgeKind::Smooth;
-            // A crease between faces that are black seen from behind (a one-sided material, no
+            // An edge between faces that are black seen from behind (a one-sided material, no
             // emission from the back): from a point behind both, either side of it looks black
             // (or both sides see what hides it), so it adds nothing there.
             const Material& mat = scene.materials[size_t(m.material)];
             crease[i] = e.kind == EdgeKind::Crease;
             seam[i] = crease[i] && e.seam;
-            dark_behind[i] = crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+            dark_behind[i] = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
             emissive[i] = m.is_emitter();
             if (!always[i] || crease[i]) {
                 const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
@@ -547,17 +547,21 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
 void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
     const bool leaf = n.left < 0;
-    // A smooth edge is a silhouette only where p is in front of exactly one of its faces. A
-    // crease is one there too; elsewhere its faces meet at a shading jump only, about as large
-    // as the angle between them (nothing where both are dark from behind).
+    // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
+    // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
+    // them, and a smooth edge's at the steps where the mesh shadows itself along it (the light
+    // between the faces' planes reaches one face and not the other, while the smooth normals
+    // give both a weight): in proportion to that angle, over pi as in the camera's pass.
+    // Nothing there where both faces are dark from behind, or at a last bounce, which sees
+    // only emission (that jumps along an emitter's seams only).
     float weight = 1.f;
     if (leaf && (n.crease || (!n.always && n.cone_cos > -1.f))) {
         const Vec3f d = q.p - n.a;
         const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
         if (front0 == front1) {
-            // At a last bounce only emission is seen, which jumps along a seam of an emitter only.
-            if (!n.always || (!front0 && n.dark_behind) || (q.direct_only && !(n.emissive && n.seam))) return;
-            weight = crease_weight(n.dihedral, n.seam);
+            if ((!front0 && n.dark_behind) || (q.direct_only && !(n.emissive && n.seam))) return;
+            weight = n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi;
+            if (!(weight > 0.f)) return;
         }
     }
     const Vec3f v = n.center - q.p;
@@ -603,17 +607,17 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
         if (n.dark_behind && !(hi > 0.f)) return;  // creases, p behind every face
-        // Creases count where the range straddles 0 (silhouettes) and elsewhere too (shading
-        // jumps), except at a last bounce unless there are seams of an emitter: then, like
-        // smooth edges, only as silhouettes.
-        silhouettes_only = !n.always || (q.direct_only && !(n.emissive && n.seam));
+        // Edges count where the range straddles 0 (silhouettes) and elsewhere too (shading jumps,
+        // self-shadowing steps), except at a last bounce unless there are seams of an emitter:
+        // then only as silhouettes.
+        silhouettes_only = q.direct_only && !(n.emissive && n.seam);
         const bool straddles = lo < 0.f && hi > 0.f;
         if (silhouettes_only) {
             if (!straddles) return;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
         } else {
             const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
-            fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral, n.seam);
+            fraction = silhouettes + (1.f - silhouettes) * (n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi);
         }
     }
     // The lobe over the node's directions: for a leaf, along its edge's own arc (closed form);

@@ -189,8 +189,10 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     EdgeEye eye;
     eye.origin = p;
     eye.step = kTouchStep;
-    // A smooth edge is a discontinuity only where it folds as seen from p.
-    if (e.kind == EdgeKind::Smooth && !is_fold(eye, m, e)) return d_p;
+    // A smooth edge is a discontinuity where it folds as seen from p, and elsewhere only where
+    // the light reaching its faces can differ: the steps where the mesh shadows itself along it,
+    // seen after a bounce (not at a last one, which sees emission only).
+    if (e.kind == EdgeKind::Smooth && bounces_left == 0 && !is_fold(eye, m, e)) return d_p;
     // The plane through p and the edge; degenerate when p lies on the edge's line.
     const Vec3f N = cross(v0 - p, v1 - p);
     const float n_len = length(N);

@@ -2,6 +2,7 @@
 // empirical frequencies, densities integrate to one, awkward geometry gives finite results.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <map>
@@ -337,7 +338,9 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
 // A glossy lobe concentrates the probability on the edges near the mirror direction: from a
 // point on a (virtual) floor, the mirror direction grazes the top of the sphere's outline (its
 // silhouette), with the box 30 degrees off. The share of the sphere's edges follows the
-// leaves' own values (the lobe's integral along each silhouette, over the distance to it).
+// leaves' own values (the lobe's integral along each silhouette, over the distance to it; the
+// smooth edges that are not silhouettes by the angle between their faces over pi, for the
+// steps where the sphere shadows itself, where p sees their faces' fronts).
 TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
@@ -368,11 +371,14 @@ TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
             // A leaf's value: a silhouette's (or a crease's: its faces meet at right angles)
             // lobe integral over the distance to its line.
             const Vec3f v0 = m.vertex(edge.v0), v1 = m.vertex(edge.v1);
-            const bool counts = edge.kind == EdgeKind::Crease ||
-                                is_silhouette(p, v0, normalize(m.face_normal(edge.f0)), normalize(m.face_normal(edge.f1)),
-                                              EdgeKind::Smooth);
+            const Vec3f n0 = normalize(m.face_normal(edge.f0)), n1 = normalize(m.face_normal(edge.f1));
+            double weight = 1.0;
+            if (edge.kind == EdgeKind::Smooth && !is_silhouette(p, v0, n0, n1, EdgeKind::Smooth))
+                weight = dot(p - v0, n0) > 0.f || scene.materials[size_t(m.material)].two_sided
+                             ? std::acos(std::clamp(double(dot(n0, n1)), -1.0, 1.0)) / kPi
+                             : 0.0;
             double dist = 0.0;
-            const double leaf = counts ? q.lobe.integral(p, v0, v1, &dist) / dist : 0.0;
+            const double leaf = weight > 0.0 ? weight * q.lobe.integral(p, v0, v1, &dist) / dist : 0.0;
             leaf_total += leaf;
             if (edge.mesh == 0) {
                 on_sphere += pe;
