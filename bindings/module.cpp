@@ -139,6 +139,7 @@ edgepath::MaterialDesc material_desc(Views& views, const nb::dict& d, const std:
     m.two_sided = scalar<bool>(d, "two_sided", f);
     if (has(d, "kind")) m.kind = static_cast<edgepath::MaterialKind>(scalar<int>(d, "kind", f));
     if (has(d, "ior")) m.ior = texture(views, item(d, "ior", f), f + ".ior");
+    if (has(d, "nonlinear")) m.nonlinear = scalar<bool>(d, "nonlinear", f);
     if (has(d, "normal_map")) m.normal_map = texture(views, d["normal_map"], f + ".normal_map");
     return m;
 }

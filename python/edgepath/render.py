@@ -30,7 +30,7 @@ SAMPLING = {"mis": 0, "light": 1, "bsdf": 2}
 EDGE_SAMPLING = {"importance": 0, "uniform": 1}
 CAMERA_TYPES = {"perspective": 0, "orthographic": 1, "thinlens": 2, "fisheye": 3, "panorama": 4}
 PIXEL_FILTERS = {"box": 0, "gaussian": 1, "tent": 2}
-MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2}
+MATERIAL_KINDS = {"standard": 0, "conductor": 1, "dielectric": 2, "plastic": 3}
 LIGHT_SAMPLING = {"area": 0, "solid_angle": 1, "spherical_triangle": 2}
 MAX_EDGE_SAMPLES = 2**62  # the core's bound (chunked int64 sample indices)
 MAX_PIXELS = 2**31 - 1  # the core's bound on the film's pixel count
@@ -724,10 +724,16 @@ def _flatten_material(material, i: int, emissive: bool, flat: FlatScene) -> dict
     out = {"two_sided": v.boolean(material.two_sided, f + ".two_sided"),
            "kind": v.choice(getattr(material, "kind", "standard"), f + ".kind", MATERIAL_KINDS)}
     fields = (("diffuse", 3), ("specular", 3), ("roughness", 1))
-    if out["kind"] == MATERIAL_KINDS["dielectric"]:
+    plastic = out["kind"] == MATERIAL_KINDS["plastic"]
+    if out["kind"] in (MATERIAL_KINDS["dielectric"], MATERIAL_KINDS["plastic"]):
         fields += (("ior", 1),)
+    if plastic:
+        out["nonlinear"] = v.boolean(getattr(material, "nonlinear", False), f + ".nonlinear")
     for name, channels in fields:
         value = v.texture(getattr(material, name), f"{f}.{name}", channels)
+        if plastic and name in ("roughness", "ior") and value.numel() != 1:
+            v.fail(f"{f}.{name}", f"a plastic's {name} must be one value (its coating is tabulated for "
+                                  f"it), got shape {tuple(value.shape)}")
         out[name] = _param(flat, ("materials", i, name), value)
     normal_map = getattr(material, "normal_map", None)
     if normal_map is not None:

@@ -102,6 +102,15 @@ class Material:
     it as GGX alpha (Walter et al. 2007, as Mitsuba's ``roughdielectric``); ``diffuse`` and
     ``specular`` are unused.
 
+    "plastic": a diffuse base under a dielectric coating of relative index ``ior`` (a float or
+    shape (1,)), as Mitsuba 3's ``roughplastic`` (GGX alpha ``roughness``, a float or shape
+    (1,); 0.1 by default) or, where ``roughness`` is 0, its ``plastic`` (a smooth coating: a
+    mirror reflection). The coating reflects ``specular`` (default 1.0) times its Fresnel
+    reflectance; the base ``diffuse`` seen through it, divided by 1 - R for the light the
+    coating reflects back into it (R its internal reflectance), or by 1 - ``diffuse`` R with
+    ``nonlinear=True`` (Mitsuba's ``nonlinear``: saturated colours). ``roughness`` and ``ior``
+    stay differentiable (the coating's transmittance tables carry their derivatives).
+
     ``two_sided``: False makes the back of a surface black (as Mitsuba's BSDFs). Every tensor
     is differentiable, ``ior`` included.
 
@@ -110,20 +119,24 @@ class Material:
     whose first axis is the triangle's dp/du (from its uvs, or its barycentrics without uvs);
     differentiable in its texels, and in the vertices, normals and uvs through the frame."""
 
-    def __init__(self, diffuse: Constant = 0.5, specular: Constant = 0.0,
+    def __init__(self, diffuse: Constant = 0.5, specular: Optional[Constant] = None,
                  roughness: Optional[Constant] = None, two_sided: bool = False,
                  kind: str = "standard", ior: Constant = 1.5,
-                 normal_map: Optional[torch.Tensor] = None):
+                 normal_map: Optional[torch.Tensor] = None, nonlinear: bool = False):
         self.diffuse = diffuse
+        # None: 0.0 (a plastic: 1.0, Mitsuba's default)
+        if specular is None:
+            specular = 1.0 if kind == "plastic" else 0.0
         self.specular = specular
-        # None: 0.5 (a dielectric: 0, smooth)
+        # None: 0.5 (a dielectric: 0, smooth; a plastic: 0.1, Mitsuba's default)
         if roughness is None:
-            roughness = 0.0 if kind == "dielectric" else 0.5
+            roughness = {"dielectric": 0.0, "plastic": 0.1}.get(kind, 0.5)
         self.roughness = roughness
         self.two_sided = two_sided
         self.kind = kind
         self.ior = ior
         self.normal_map = normal_map
+        self.nonlinear = nonlinear
 
     def __repr__(self):
         return f"Material(kind={self.kind!r}, two_sided={self.two_sided})"

@@ -221,12 +221,12 @@ const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
 namespace {
 
 TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp) {
-    BsdfParams p = scene.bsdf_params(sp);
-    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta, p.rough};
+    return world_params(scene.bsdf_params(sp));
 }
 
 DeltaParams<float> delta_params(const TBsdfParams<float>& p) {
-    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided};
+    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided,
+                              p.kind == MaterialKind::Plastic};
 }
 
 // The throughput factor T of vertex r's continuation (beta after = beta T), at the shading
@@ -414,7 +414,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             d_diffuse(scene, g, slots, db.diffuse, sink, ha);
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
-            if (mat.kind == MaterialKind::Dielectric) {
+            if (mat.kind == MaterialKind::Dielectric || mat.kind == MaterialKind::Plastic) {
                 float de[1] = {d_eta + db.eta};
                 d_texture(mat.ior, mats ? mats->ior : kNoSlot, sp.uv, de, sink, &ha.duv);
             }

@@ -29,7 +29,8 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
                 break;
             case Channel::Albedo:
                 // albedo = diffuse(uv) colour(b) (zero for a mirror or glass)
-                if (mat.kind == MaterialKind::Standard) d_diffuse(scene, g, slots, Vec3f(a[0], a[1], a[2]), sink, ha);
+                if (mat.kind == MaterialKind::Standard || mat.kind == MaterialKind::Plastic)
+                    d_diffuse(scene, g, slots, Vec3f(a[0], a[1], a[2]), sink, ha);
                 break;
             case Channel::Barycentrics:
                 ha.db.x += a[0];

@@ -114,7 +114,9 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     q.memo = &memo;
     q.p = sp.p;
     q.direct_only = bounces_left == 0;
-    q.lobe = LobeBound::make(n, wo, mean(bsdf.diffuse), mean(bsdf.specular), bsdf.alpha);
+    // The smooth plastic's coating reflects into one direction: no lobe for edges to meet.
+    const bool glossy = bsdf.kind != MaterialKind::Plastic || bsdf.rough;
+    q.lobe = LobeBound::make(n, wo, mean(bsdf.diffuse), glossy ? mean(bsdf.specular) : 0.f, bsdf.alpha);
     // Strategy All: over all edges; strategy Lights: the edges and the parts of them inside the
     // cone towards the lights. Balance heuristic on the joint density of (edge, t).
     BoundsCone cone;

@@ -87,8 +87,12 @@ void eval_hit_channels(const Scene& scene, const ChannelLayout& layout, const Ra
                 values[o + 1] = sp.uv.y;
                 break;
             case Channel::Albedo:
-                // The Lambertian reflectance (as the BSDF sees it): none for a mirror or glass.
-                store(values, o, m.kind == MaterialKind::Standard ? scene.bsdf_params(sp).diffuse : Vec3f(0.f));
+                // The Lambertian reflectance (as the BSDF sees it; a plastic's base under its
+                // coating): none for a mirror or glass.
+                if (m.kind == MaterialKind::Standard || m.kind == MaterialKind::Plastic)
+                    store(values, o, scene.bsdf_params(sp).diffuse);
+                else
+                    store(values, o, Vec3f(0.f));
                 break;
             case Channel::Barycentrics:
                 values[o] = sp.b1;

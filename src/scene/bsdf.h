@@ -3,7 +3,9 @@
 // local shading frame (z = shading normal), `wo` towards the viewer, `wi` towards the light.
 // One-sided unless `two_sided`: black when either direction is below the shading surface.
 // The rough dielectric (Walter et al. 2007; scene/bsdf_diff.h holds its value) reflects and
-// transmits, from either side. The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
+// transmits, from either side. The plastic (scene/plastic.h) is a diffuse base under a
+// dielectric coating, rough or smooth; the smooth coating's reflection is a delta lobe, sampled
+// beside the base's density. The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
 // are zero, and bsdf_sample returns their one direction with its weight.
 #pragma once
 #include <cmath>
@@ -25,14 +27,22 @@ struct BsdfParams {
     bool two_sided = false;
     MaterialKind kind = MaterialKind::Standard;
     float eta = 1.5f;  // Dielectric: relative index of refraction
-    bool rough = false;  // Dielectric: rough (GGX with `alpha`) rather than smooth
+    bool rough = false;  // Dielectric, Plastic: rough (GGX with `alpha`) rather than smooth
+    const CoatTable* coat = nullptr;  // Plastic: its coating
+    bool nonlinear = false;           // Plastic
 };
 
 inline bool is_delta(const BsdfParams& p) { return is_delta_kind(p.kind, p.rough); }
 inline bool is_rough_dielectric(const BsdfParams& p) { return p.kind == MaterialKind::Dielectric && p.rough; }
 
 inline DeltaParams<float> delta_params(const BsdfParams& p) {
-    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided};
+    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided,
+                              p.kind == MaterialKind::Plastic};
+}
+
+inline TBsdfParams<float> world_params(const BsdfParams& p) {
+    return TBsdfParams<float>{p.diffuse, p.specular, p.alpha, p.two_sided, p.kind, p.eta, p.rough, p.coat,
+                              p.nonlinear};
 }
 
 struct BsdfSample {
@@ -66,6 +76,18 @@ inline Vec3f fresnel_schlick(const Vec3f& f0, float cos_theta) {
     return f0 + (Vec3f(1.f) - f0) * m5;
 }
 
+// Probability of choosing the plastic's coating (its reflection) when sampling, for wo at cosine
+// co > 0: the coating's reflectance 1 - T(co) weighted by the mean specular reflectance, against
+// the light it transmits weighted by the mean diffuse one (Mitsuba's choice).
+inline float plastic_coat_probability(const BsdfParams& p, float co) {
+    const float ks = (p.specular.x + p.specular.y + p.specular.z) / 3.f;
+    const float kd = (p.diffuse.x + p.diffuse.y + p.diffuse.z) / 3.f;
+    if (!(ks + kd > 0.f)) return 0.f;
+    const float t = detail::coat_transmittance(*p.coat, co, p.eta);
+    const float s = (1.f - t) * ks, d = t * kd;
+    return s + d > 0.f ? s / (s + d) : 0.f;
+}
+
 // Probability of choosing the specular lobe when sampling.
 inline float specular_lobe_probability(const BsdfParams& p) {
     float d = luminance(p.diffuse), s = luminance(p.specular);
@@ -91,6 +113,10 @@ inline Vec3f bsdf_eval(const BsdfParams& p, Vec3f wo, Vec3f wi) {
     }
     if (is_delta(p)) return Vec3f(0.f);
     if (!orient(p, wo, wi)) return Vec3f(0.f);
+    if (p.kind == MaterialKind::Plastic) {
+        detail::PlasticTerms<float> t;
+        return detail::plastic_terms(world_params(p), Vec3f(0.f, 0.f, 1.f), wo, wi, wo.z, wi.z, t);
+    }
     Vec3f result = p.diffuse * (wi.z * kInvPi);
     if (!is_black(p.specular)) {
         Vec3f h = normalize(wo + wi);
@@ -138,6 +164,12 @@ inline float bsdf_pdf(const BsdfParams& p, Vec3f wo, Vec3f wi) {
     if (is_rough_dielectric(p)) return rough_dielectric_pdf(p, wo, wi);
     if (is_delta(p)) return 0.f;
     if (!orient(p, wo, wi)) return 0.f;
+    if (p.kind == MaterialKind::Plastic) {
+        const float ps = plastic_coat_probability(p, wo.z);
+        float pdf = (1.f - ps) * wi.z * kInvPi;
+        if (p.rough && ps > 0.f) pdf += ps * ggx_pdf(wo, wi, p.alpha);
+        return pdf;
+    }
     float ps = specular_lobe_probability(p);
     float pdf = (1.f - ps) * wi.z * kInvPi;
     if (ps > 0.f) pdf += ps * ggx_pdf(wo, wi, p.alpha);
@@ -202,8 +234,19 @@ inline bool bsdf_sample(const BsdfParams& p, Vec3f wo, float u_lobe, float u1, f
     bool flipped = p.two_sided && wo.z < 0.f;
     if (flipped) wo.z = -wo.z;
     if (wo.z <= 0.f) return false;
-    float ps = specular_lobe_probability(p);
+    const bool plastic = p.kind == MaterialKind::Plastic;
+    float ps = plastic ? plastic_coat_probability(p, wo.z) : specular_lobe_probability(p);
     if (luminance(p.diffuse) + luminance(p.specular) <= 0.f) return false;
+    if (plastic && !p.rough && u_lobe < ps) {
+        // The smooth coating's mirror reflection, weight ks F(co) / ps.
+        DeltaParams<float> d = delta_params(p);
+        d.two_sided = false;  // wo is on the front already
+        if (!delta_scatter(d, Vec3f(0.f, 0.f, 1.f), wo, false, 1.f / ps, out.wi, out.weight)) return false;
+        if (flipped) out.wi.z = -out.wi.z;
+        out.delta = true;
+        out.pdf = ps;
+        return true;
+    }
     Vec3f wi;
     if (u_lobe < ps) {
         Vec3f h = ggx_sample_visible_normal(wo, p.alpha, u1, u2);
@@ -213,7 +256,7 @@ inline bool bsdf_sample(const BsdfParams& p, Vec3f wo, float u_lobe, float u1, f
     }
     if (wi.z <= 0.f) return false;
     float pdf = (1.f - ps) * wi.z * kInvPi;
-    if (ps > 0.f) pdf += ps * ggx_pdf(wo, wi, p.alpha);
+    if (ps > 0.f && (!plastic || p.rough)) pdf += ps * ggx_pdf(wo, wi, p.alpha);
     if (!(pdf > 0.f)) return false;
     if (flipped) wi.z = -wi.z;
     out.wi = wi;

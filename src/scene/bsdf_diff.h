@@ -9,6 +9,7 @@
 #include <cmath>
 #include "math/vec.h"
 #include "scene/desc.h"
+#include "scene/plastic.h"
 
 namespace edgepath {
 
@@ -19,7 +20,9 @@ struct TBsdfParams {
     bool two_sided = false;
     MaterialKind kind = MaterialKind::Standard;  // smooth kinds: zero here (scene/specular.h)
     T eta = T(1.5);
-    bool rough = false;  // Dielectric: the rough (GGX) one, evaluated here; otherwise smooth
+    bool rough = false;  // Dielectric, Plastic: the rough (GGX) one; otherwise smooth
+    const CoatTable* coat = nullptr;  // Plastic: its coating (scene/plastic.h)
+    bool nonlinear = false;           // Plastic
 };
 
 // Whether the material scatters into isolated directions (scene/specular.h): the conductor,
@@ -32,7 +35,7 @@ template <class T>
 struct DBsdf {
     TVec3<T> diffuse, specular, n, wo, wi;
     T alpha = 0;
-    T eta = 0;  // rough dielectric only
+    T eta = 0;  // rough dielectric and plastic only
 };
 
 namespace detail {
@@ -247,6 +250,113 @@ void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, c
     // e = eta (wo outside) or 1 / eta
     deta += r.s > 0 ? de : -de * r.e * r.e;
 }
+
+// The plastic coating's transmittance T(c) at cosine c > 0 (scene/plastic.h), and its adjoint.
+template <class T> T coat_transmittance(const CoatTable& tab, T c, T eta) {
+    if (tab.smooth) return 1 - fresnel_dielectric(c, eta);
+    const CoatLookup l = coat_lookup(float(c));
+    return T(tab.t[l.i]) * (1 - T(l.w)) + T(tab.t[l.i + 1]) * T(l.w);
+}
+template <class T> void d_coat_transmittance(const CoatTable& tab, T c, T eta, T dt, T& dc, T& dalpha, T& deta) {
+    if (tab.smooth) {
+        d_fresnel_dielectric(c, eta, -dt, dc, deta);
+        return;
+    }
+    const CoatLookup l = coat_lookup(float(c));
+    const T w = T(l.w);
+    if (c > 0 && c < 1) dc += dt * T(tab.t[l.i + 1] - tab.t[l.i]) * T(kCoatResolution - 1);
+    dalpha += dt * (T(tab.dt_dalpha[l.i]) * (1 - w) + T(tab.dt_dalpha[l.i + 1]) * w);
+    deta += dt * (T(tab.dt_deta[l.i]) * (1 - w) + T(tab.dt_deta[l.i + 1]) * w);
+}
+
+// The plastic's f cos(theta_i) at (wo, wi) with co = n . wo > 0, ci = n . wi > 0 (scene/plastic.h).
+template <class T>
+struct PlasticTerms {
+    T to, ti, k;
+    TVec3<T> den, diff;
+    bool spec = false;  // the rough coating's lobe
+    TVec3<T> h;
+    T hl, ch, oh, D, Go, Gi, F, S;
+};
+template <class T>
+TVec3<T> plastic_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co,
+                       T ci, PlasticTerms<T>& t) {
+    const CoatTable& tab = *p.coat;
+    const T R = T(tab.r);
+    // diffuse: kd / den T(co) T(ci) ci / (pi eta^2), den = 1 - R or 1 - kd R
+    t.to = coat_transmittance(tab, co, p.eta);
+    t.ti = coat_transmittance(tab, ci, p.eta);
+    t.k = t.to * t.ti * ci / (pi<T>() * p.eta * p.eta);
+    t.den = p.nonlinear ? TVec3<T>(T(1)) - p.diffuse * R : TVec3<T>(1 - R);
+    t.diff = TVec3<T>(p.diffuse.x / t.den.x, p.diffuse.y / t.den.y, p.diffuse.z / t.den.z);
+    TVec3<T> result = t.diff * t.k;
+    t.spec = false;
+    if (tab.smooth || is_black(p.specular)) return result;
+    // specular: ks F(oh) D Go Gi / (4 co)
+    const TVec3<T> H = wo + wi;
+    t.hl = length(H);
+    if (!(t.hl > 0)) return result;
+    t.spec = true;
+    t.h = H / t.hl;
+    t.ch = dot(n, t.h);
+    t.oh = dot(wo, t.h);
+    t.D = ggx_d(t.ch, p.alpha);
+    t.Go = smith_g1(co, t.oh, p.alpha);
+    t.Gi = smith_g1(ci, t.oh, p.alpha);
+    t.F = t.oh > 0 ? fresnel_dielectric(t.oh, p.eta) : T(0);
+    t.S = t.F * t.D * t.Go * t.Gi / (4 * co);
+    return result + p.specular * t.S;
+}
+
+// Adds the adjoint of plastic_terms (output adjoint dr) to d, and to dn / dco / dci.
+template <class T>
+void d_plastic(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci,
+               const TVec3<T>& dr, DBsdf<T>& d, TVec3<T>& dn, T& dco, T& dci) {
+    PlasticTerms<T> t;
+    plastic_terms(p, n, wo, wi, co, ci, t);
+    const CoatTable& tab = *p.coat;
+    // result = diff k
+    const T dk = dot(dr, t.diff);
+    T dR = 0;
+    for (int c = 0; c < 3; ++c) {
+        // diff = kd / den, den = 1 - R (linear) or 1 - kd R (nonlinear)
+        const T ddiff = dr[c] * t.k, den = t.den[c];
+        if (p.nonlinear) {
+            d.diffuse[c] += ddiff / (den * den);
+            dR += ddiff * p.diffuse[c] * p.diffuse[c] / (den * den);
+        } else {
+            d.diffuse[c] += ddiff / den;
+            dR += ddiff * p.diffuse[c] / (den * den);
+        }
+    }
+    d.alpha += dR * T(tab.dr_dalpha);
+    d.eta += dR * T(tab.dr_deta);
+    // k = to ti ci / (pi eta^2)
+    const T g = 1 / (pi<T>() * p.eta * p.eta);
+    d_coat_transmittance(tab, co, p.eta, dk * t.ti * ci * g, dco, d.alpha, d.eta);
+    d_coat_transmittance(tab, ci, p.eta, dk * t.to * ci * g, dci, d.alpha, d.eta);
+    dci += dk * t.to * t.ti * g;
+    d.eta += dk * t.k * T(-2) / p.eta;
+    if (!t.spec) return;
+    // result += ks S, S = F D Go Gi / (4 co)
+    d.specular += dr * t.S;
+    const T dS = dot(dr, p.specular), q = dS / (4 * co);
+    const T dF = q * t.D * t.Go * t.Gi, dD = q * t.F * t.Go * t.Gi;
+    const T dGo = q * t.F * t.D * t.Gi, dGi = q * t.F * t.D * t.Go;
+    dco += -dS * t.S / co;
+    T doh = 0, dch = 0;
+    if (t.oh > 0) d_fresnel_dielectric(t.oh, p.eta, dF, doh, d.eta);
+    d_ggx_d(t.ch, p.alpha, dD, dch, d.alpha);
+    d_smith_g1(co, t.oh, p.alpha, dGo, dco, d.alpha);
+    d_smith_g1(ci, t.oh, p.alpha, dGi, dci, d.alpha);
+    // ch = n . h, oh = wo . h, h = H / |H|, H = wo + wi
+    const TVec3<T> dh = n * dch + wo * doh;
+    dn += t.h * dch;
+    d.wo += t.h * doh;
+    const TVec3<T> dH = (dh - t.h * dot(t.h, dh)) / t.hl;
+    d.wo += dH;
+    d.wi += dH;
+}
 }  // namespace detail
 
 // The shading normal the BSDF uses, bent towards the viewer where the interpolated normal
@@ -288,7 +398,7 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
         detail::RoughDielectricTerms<T> r;
         return TVec3<T>(detail::rough_dielectric_terms(p.alpha, p.eta, n, wo, wi, r) ? r.v : T(0));
     }
-    if (p.kind != MaterialKind::Standard) return TVec3<T>(T(0));
+    if (p.kind != MaterialKind::Standard && p.kind != MaterialKind::Plastic) return TVec3<T>(T(0));
     T co = dot(n, wo);
     if (p.two_sided && co < 0) {
         n = -n;
@@ -296,6 +406,10 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
     }
     T ci = dot(n, wi);
     if (co <= 0 || ci <= 0) return TVec3<T>(T(0));
+    if (p.kind == MaterialKind::Plastic) {
+        detail::PlasticTerms<T> t;
+        return detail::plastic_terms(p, n, wo, wi, co, ci, t);
+    }
     TVec3<T> result = p.diffuse * (ci / detail::pi<T>());
     detail::GgxTerms<T> g;
     if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) result += g.F * g.S;
@@ -311,7 +425,7 @@ void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, 
         detail::d_rough_dielectric(p.alpha, p.eta, n, wo, wi, dr.x + dr.y + dr.z, d.n, d.wo, d.wi, d.alpha, d.eta);
         return;
     }
-    if (p.kind != MaterialKind::Standard) return;
+    if (p.kind != MaterialKind::Standard && p.kind != MaterialKind::Plastic) return;
     T co = dot(n, wo);
     bool flipped = p.two_sided && co < 0;
     if (flipped) {
@@ -322,36 +436,40 @@ void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, 
     if (co <= 0 || ci <= 0) return;
     TVec3<T> dn(T(0));
     T dco = 0, dci = 0;
-    // result = diffuse * ci / pi
-    d.diffuse += dr * (ci / detail::pi<T>());
-    dci += dot(dr, p.diffuse) / detail::pi<T>();
-    detail::GgxTerms<T> g;
-    if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) {
-        // result += F * S
-        TVec3<T> dF = dr * g.S;
-        T dS = dot(dr, g.F);
-        // F = ks + (1 - ks) m^5, m = clamp(1 - oh)
-        d.specular += dF * (1 - g.m5);
-        T m4 = g.m * g.m * g.m * g.m;
-        T dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : T(0);
-        T doh = -dm;
-        // S = D Go Gi / (4 co)
-        T dD = dS * g.Go * g.Gi / (4 * co);
-        T dGo = dS * g.D * g.Gi / (4 * co);
-        T dGi = dS * g.D * g.Go / (4 * co);
-        dco += -dS * g.S / co;
-        T dch = 0;
-        detail::d_ggx_d(g.ch, p.alpha, dD, dch, d.alpha);
-        detail::d_smith_g1(co, g.oh, p.alpha, dGo, dco, d.alpha);
-        detail::d_smith_g1(ci, g.oh, p.alpha, dGi, dci, d.alpha);
-        // ch = n.h, oh = wo.h
-        TVec3<T> dh = n * dch + wo * doh;
-        dn += g.h * dch;
-        d.wo += g.h * doh;
-        // h = H / |H|, H = wo + wi
-        TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
-        d.wo += dH;
-        d.wi += dH;
+    if (p.kind == MaterialKind::Plastic) {
+        detail::d_plastic(p, n, wo, wi, co, ci, dr, d, dn, dco, dci);
+    } else {
+        // result = diffuse * ci / pi
+        d.diffuse += dr * (ci / detail::pi<T>());
+        dci += dot(dr, p.diffuse) / detail::pi<T>();
+        detail::GgxTerms<T> g;
+        if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) {
+            // result += F * S
+            TVec3<T> dF = dr * g.S;
+            T dS = dot(dr, g.F);
+            // F = ks + (1 - ks) m^5, m = clamp(1 - oh)
+            d.specular += dF * (1 - g.m5);
+            T m4 = g.m * g.m * g.m * g.m;
+            T dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : T(0);
+            T doh = -dm;
+            // S = D Go Gi / (4 co)
+            T dD = dS * g.Go * g.Gi / (4 * co);
+            T dGo = dS * g.D * g.Gi / (4 * co);
+            T dGi = dS * g.D * g.Go / (4 * co);
+            dco += -dS * g.S / co;
+            T dch = 0;
+            detail::d_ggx_d(g.ch, p.alpha, dD, dch, d.alpha);
+            detail::d_smith_g1(co, g.oh, p.alpha, dGo, dco, d.alpha);
+            detail::d_smith_g1(ci, g.oh, p.alpha, dGi, dci, d.alpha);
+            // ch = n.h, oh = wo.h
+            TVec3<T> dh = n * dch + wo * doh;
+            dn += g.h * dch;
+            d.wo += g.h * doh;
+            // h = H / |H|, H = wo + wi
+            TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
+            d.wo += dH;
+            d.wi += dH;
+        }
     }
     // co = n.wo, ci = n.wi
     dn += wo * dco + wi * dci;

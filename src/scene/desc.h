@@ -24,19 +24,26 @@ struct TextureDesc {
 // normal incidence (Schlick); `diffuse` and `roughness` unused. Dielectric: glass with
 // relative index of refraction `ior` (inside over outside), reflecting and refracting by the
 // Fresnel equations; smooth where `roughness` is 0, elsewhere rough with it as GGX alpha
-// (Walter et al. 2007); `diffuse` and `specular` unused, always two-sided.
-enum class MaterialKind { Standard = 0, Conductor = 1, Dielectric = 2 };
+// (Walter et al. 2007); `diffuse` and `specular` unused, always two-sided. Plastic: a diffuse
+// base under a dielectric coating of relative index `ior` (Mitsuba 3's `plastic` where
+// `roughness` is 0, `roughplastic` with GGX alpha `roughness` elsewhere; scene/plastic.h):
+// the coating reflects `specular` times its Fresnel reflectance, the base `diffuse` seen
+// through it. Its `roughness` and `ior` are constants (one value each).
+enum class MaterialKind { Standard = 0, Conductor = 1, Dielectric = 2, Plastic = 3 };
 
 struct MaterialDesc {
     TextureDesc diffuse;    // 3 channels, Lambertian albedo
     TextureDesc specular;   // 3 channels, GGX lobe reflectance at normal incidence (Schlick)
     TextureDesc roughness;  // 1 channel, GGX alpha (Dielectric: 0 where smooth)
-    TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric only)
+    TextureDesc ior;        // 1 channel, relative index of refraction (Dielectric, Plastic)
     // 3 channels, tangent-space normal map (scene/normal_map.h); empty: none. Needs no uvs (the
     // barycentrics stand in) but follows them where given.
     TextureDesc normal_map;
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false; // false: black seen from the back (as Mitsuba's BSDFs)
+    // Plastic: the base's multiple internal reflections divide its albedo kd by 1 - kd R
+    // (Mitsuba's `nonlinear`, colours saturate) rather than by 1 - R.
+    bool nonlinear = false;
 };
 
 struct MeshDesc {

@@ -249,17 +249,43 @@ void validate(const SceneDesc& desc) {
         check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
         const MaterialDesc& md = desc.materials[i];
         if (!md.normal_map.empty()) check_texture(md.normal_map, 3, f + ".normal_map", false);
-        if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Dielectric))
+        if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Plastic))
             fail(f + ".kind", "unknown material kind " + str(int(md.kind)));
-        if (md.kind == MaterialKind::Dielectric) {
+        if (md.kind == MaterialKind::Dielectric || md.kind == MaterialKind::Plastic) {
             check_texture(md.ior, 1, f + ".ior", true);
             for (int64_t k = 0; k < md.ior.num_values(); ++k)
                 if (!(md.ior.data[k] >= kMinIor && md.ior.data[k] <= kMaxIor))
                     fail(f + ".ior", "value " + str(md.ior.data[k]) + " at flat index " + str(k) + " is outside [" +
                                          str(kMinIor) + ", " + str(kMaxIor) + "]");
         }
+        if (md.kind == MaterialKind::Plastic) {
+            // The coating's tables are built for one roughness and one index.
+            if (md.roughness.num_values() != 1)
+                fail(f + ".roughness", "a plastic's roughness must be one value, got " +
+                                           str(md.roughness.num_values()));
+            if (md.ior.num_values() != 1)
+                fail(f + ".ior", "a plastic's ior must be one value, got " + str(md.ior.num_values()));
+            if (std::abs(md.ior.data[0] - 1.f) < kMinCoatIndexContrast)
+                fail(f + ".ior", "a plastic's coating needs an index other than 1, got " + str(md.ior.data[0]));
+            // Nonlinear: kd / (1 - kd R) stays finite and positive for albedos up to 1 (R < 1).
+            if (md.nonlinear)
+                for (int64_t k = 0; k < md.diffuse.num_values(); ++k)
+                    if (md.diffuse.data[k] > 1.f)
+                        fail(f + ".diffuse", "a nonlinear plastic's diffuse must be at most 1, got " +
+                                                 str(md.diffuse.data[k]) + " at flat index " + str(k));
+        }
     }
-    for (size_t i = 0; i < desc.meshes.size(); ++i) validate_mesh(desc.meshes[i], int(i), int(desc.materials.size()));
+    for (size_t i = 0; i < desc.meshes.size(); ++i) {
+        const MeshDesc& m = desc.meshes[i];
+        validate_mesh(m, int(i), int(desc.materials.size()));
+        // Vertex colours multiply a nonlinear plastic's diffuse: at most 1 too.
+        if (m.colors && desc.materials[size_t(m.material)].kind == MaterialKind::Plastic &&
+            desc.materials[size_t(m.material)].nonlinear)
+            for (int64_t k = 0; k < m.num_vertices * 3; ++k)
+                if (m.colors[k] > 1.f)
+                    fail("meshes[" + str(i) + "].colors", "on a nonlinear plastic, colours must be at most 1, got " +
+                                                              str(m.colors[k]) + " at flat index " + str(k));
+    }
     if (desc.has_envmap) {
         check_texture(desc.envmap.values, 3, "envmap.values", true);
         check_finite(desc.envmap.to_world, 9, "envmap.to_world");
@@ -375,7 +401,12 @@ void Scene::set_views(const SceneDesc& desc) {
         m.specular = Texture(md.specular);
         m.roughness = Texture(md.roughness);
         m.kind = md.kind;
-        if (md.kind == MaterialKind::Dielectric) m.ior = Texture(md.ior);
+        if (md.kind == MaterialKind::Dielectric || md.kind == MaterialKind::Plastic) m.ior = Texture(md.ior);
+        if (md.kind == MaterialKind::Plastic) {
+            const float roughness = md.roughness.data[0];
+            m.coat = coat_table(std::max(roughness, kMinRoughness), md.ior.data[0], !(roughness > 0.f));
+            m.nonlinear = md.nonlinear;
+        }
         m.normal_map = Texture(md.normal_map);
         m.two_sided = md.two_sided || md.kind == MaterialKind::Dielectric;
         materials.push_back(m);
@@ -653,9 +684,13 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     p.alpha = std::max(roughness, kMinRoughness);
     p.two_sided = m.two_sided;
     p.kind = m.kind;
-    if (m.kind == MaterialKind::Dielectric) {
+    if (m.kind == MaterialKind::Dielectric || m.kind == MaterialKind::Plastic) {
         p.eta = eval_texture1(m.ior, sp.uv);
         p.rough = roughness > 0.f;
+    }
+    if (m.kind == MaterialKind::Plastic) {
+        p.coat = m.coat.get();
+        p.nonlinear = m.nonlinear;
     }
     return p;
 }

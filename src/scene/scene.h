@@ -108,10 +108,12 @@ struct Mesh {
 
 struct Material {
     Texture diffuse, specular, roughness;
-    Texture ior;  // Dielectric only
+    Texture ior;  // Dielectric and Plastic only
     Texture normal_map;  // empty: none
     MaterialKind kind = MaterialKind::Standard;
     bool two_sided = false;
+    bool nonlinear = false;  // Plastic
+    std::shared_ptr<const CoatTable> coat;  // Plastic: the coating's transmittance
 };
 
 struct Hit {

@@ -1,6 +1,8 @@
 // Smooth (delta) BSDFs and their adjoint: the mirror (a smooth conductor, Schlick reflectance
-// with `specular` at normal incidence) and the smooth dielectric (glass: Fresnel reflection
-// and refraction with a relative index of refraction eta, inside over outside). Each scatters
+// with `specular` at normal incidence), the smooth dielectric (glass: Fresnel reflection
+// and refraction with a relative index of refraction eta, inside over outside) and the smooth
+// plastic's coating (its reflection only: `specular` times the dielectric's Fresnel
+// reflectance, one-sided unless two_sided; its diffuse base has a density, scene/bsdf.h). Each scatters
 // a direction wo into one direction; the path tracer picks the dielectric's lobe with the
 // Fresnel reflectance as probability and divides by that probability (a constant: the
 // gradient differentiates the lobe's value, not the choice). Directions and normal are world
@@ -24,7 +26,8 @@ struct DeltaParams {
     TVec3<T> specular;        // mirror: reflectance at normal incidence
     T eta = T(1.5);           // dielectric: inside over outside
     bool dielectric = false;  // false: mirror
-    bool two_sided = false;   // mirror: reflects on the back too
+    bool two_sided = false;   // mirror, coating: reflects on the back too
+    bool coat = false;        // the plastic's coating (dielectric false)
 };
 
 template <class T>
@@ -65,6 +68,28 @@ Interface<T> dielectric_interface(T eta, const TVec3<T>& n, const TVec3<T>& wo) 
     return f;
 }
 
+// Adds the adjoint of the interface's F for its adjoint dF to (dci, de, dct): F = (rs^2 + rp^2) / 2.
+template <class T>
+void d_interface_fresnel(const Interface<T>& f, T dF, T& dci, T& de, T& dct) {
+    const T drs = dF * f.rs, drp = dF * f.rp;
+    // rs = (ci - a) / (ci + a), rp = (b - ct) / (b + ct)
+    const T ua = (f.ci + f.a) * (f.ci + f.a), ub = (f.b + f.ct) * (f.b + f.ct);
+    dci += drs * 2 * f.a / ua;
+    const T da = -drs * 2 * f.ci / ua;
+    const T db = drp * 2 * f.ct / ub;
+    dct += -drp * 2 * f.b / ub;
+    // a = e ct, b = e ci
+    de += da * f.ct + db * f.ci;
+    dct += da * f.e;
+    dci += db * f.e;
+    // ct = sqrt(1 - q), q = (1 - ci^2) / e^2
+    if (f.ct > 0) {
+        const T dq = -dct / (2 * f.ct);
+        dci += dq * (-2 * f.ci / (f.e * f.e));
+        de += dq * (-2 * (1 - f.ci * f.ci) / (f.e * f.e * f.e));
+    }
+}
+
 }  // namespace detail
 
 // Fresnel reflectance of the dielectric seen from wo: the probability of reflection.
@@ -79,6 +104,15 @@ T dielectric_reflectance(T eta, const TVec3<T>& n, const TVec3<T>& wo) {
 template <class T>
 bool delta_scatter(const DeltaParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, bool refract, T inv_prob,
                    TVec3<T>& dir, TVec3<T>& weight) {
+    if (p.coat) {
+        // The coating from outside (its front, or its back when two-sided): relative index eta.
+        const T s = p.two_sided && dot(n, wo) < 0 ? T(-1) : T(1);
+        const detail::Interface<T> f = detail::dielectric_interface(p.eta, n * s, wo);
+        if (refract || !(f.s > 0 && f.ci > 0)) return false;
+        dir = n * (2 * s * f.ci) - wo;
+        weight = p.specular * (f.F * inv_prob);
+        return true;
+    }
     if (!p.dielectric) {
         T c = dot(n, wo);
         const T s = p.two_sided && c < 0 ? T(-1) : T(1);
@@ -108,6 +142,24 @@ bool delta_scatter(const DeltaParams<T>& p, const TVec3<T>& n, const TVec3<T>& w
 template <class T>
 void d_delta_scatter(const DeltaParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, bool refract, T inv_prob,
                      const TVec3<T>& ddir, const TVec3<T>& dweight, DDelta<T>& d) {
+    if (p.coat) {
+        const T s = p.two_sided && dot(n, wo) < 0 ? T(-1) : T(1);
+        const detail::Interface<T> f = detail::dielectric_interface(p.eta, n * s, wo);
+        if (refract || !(f.s > 0 && f.ci > 0)) return;
+        T dci = 0, de = 0, dct = 0;
+        // dir = n (2 s ci) - wo
+        d.n += ddir * (2 * s * f.ci);
+        dci += 2 * s * dot(ddir, n);
+        d.wo -= ddir;
+        // weight = ks F inv_prob
+        d.specular += dweight * (f.F * inv_prob);
+        if (!f.tir) detail::d_interface_fresnel(f, dot(dweight, p.specular) * inv_prob, dci, de, dct);
+        // e = eta; ci = (s n) . wo
+        d.eta += de;
+        d.n += wo * (s * dci);
+        d.wo += n * (s * dci);
+        return;
+    }
     if (!p.dielectric) {
         T c0 = dot(n, wo);
         const T s = p.two_sided && c0 < 0 ? T(-1) : T(1);
@@ -152,26 +204,7 @@ void d_delta_scatter(const DeltaParams<T>& p, const TVec3<T>& n, const TVec3<T>&
         dF -= dw * inv_prob / (f.e * f.e);
         de += dw * (1 - f.F) * inv_prob * T(-2) / (f.e * f.e * f.e);
     }
-    if (!f.tir) {
-        // F = (rs^2 + rp^2) / 2
-        const T drs = dF * f.rs, drp = dF * f.rp;
-        // rs = (ci - a) / (ci + a), rp = (b - ct) / (b + ct)
-        const T ua = (f.ci + f.a) * (f.ci + f.a), ub = (f.b + f.ct) * (f.b + f.ct);
-        dci += drs * 2 * f.a / ua;
-        const T da = -drs * 2 * f.ci / ua;
-        const T db = drp * 2 * f.ct / ub;
-        dct += -drp * 2 * f.b / ub;
-        // a = e ct, b = e ci
-        de += da * f.ct + db * f.ci;
-        dct += da * f.e;
-        dci += db * f.e;
-        // ct = sqrt(1 - q), q = (1 - ci^2) / e^2
-        if (f.ct > 0) {
-            const T dq = -dct / (2 * f.ct);
-            dci += dq * (-2 * f.ci / (f.e * f.e));
-            de += dq * (-2 * (1 - f.ci * f.ci) / (f.e * f.e * f.e));
-        }
-    }
+    if (!f.tir) detail::d_interface_fresnel(f, dF, dci, de, dct);
     // e = eta (outside) or 1 / eta (inside)
     d.eta += f.s > 0 ? de : -de * f.e * f.e;
     // ci = s (n . wo)

@@ -145,6 +145,73 @@ TEST(Adjoint, RoughDielectricEvalWorld) {
 }
 
 // The world-space rough dielectric equals the sampler's local model.
+// The plastic. Inputs: diffuse[3], specular[3], alpha, eta, n[3], wo[3], wi[3] (normalised
+// inside). Its coating's tables are rebuilt for each alpha and eta, so the differences in those
+// two see the tabulated function itself (float tables: a coarser step and tolerance).
+void plastic_case(bool smooth, bool nonlinear, bool two_sided, Vec3d n, Vec3d wo, Vec3d wi, double alpha,
+                  double eta, const char* name) {
+    auto unpack = [&](const std::vector<double>& x, TBsdfParams<double>& p, Vec3d& N, Vec3d& O, Vec3d& I,
+                      std::shared_ptr<const CoatTable>& coat) {
+        p.kind = MaterialKind::Plastic;
+        p.diffuse = v3(x, 0);
+        p.specular = v3(x, 3);
+        p.alpha = x[6];
+        p.eta = x[7];
+        p.rough = !smooth;
+        p.nonlinear = nonlinear;
+        p.two_sided = two_sided;
+        coat = coat_table(float(x[6]), float(x[7]), smooth);
+        p.coat = coat.get();
+        N = v3(x, 8);
+        O = v3(x, 11);
+        I = v3(x, 14);
+    };
+    std::vector<double> x = {0.5, 0.3, 0.2, 0.4, 0.2, 0.6, alpha, eta};
+    for (const Vec3d& v : {normalize(n), normalize(wo), normalize(wi)}) x.insert(x.end(), {v.x, v.y, v.z});
+    Fn f = [&](const std::vector<double>& x) {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        std::shared_ptr<const CoatTable> coat;
+        unpack(x, p, N, O, I, coat);
+        Vec3d r = bsdf_eval_world(p, N, O, I);
+        return std::vector<double>{r.x, r.y, r.z};
+    };
+    auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        std::shared_ptr<const CoatTable> coat;
+        unpack(x, p, N, O, I, coat);
+        DBsdf<double> d;
+        d_bsdf_eval_world(p, N, O, I, Vec3d(yb[0], yb[1], yb[2]), d);
+        std::vector<double> g(17);
+        put(g, 0, d.diffuse);
+        put(g, 3, d.specular);
+        g[6] = d.alpha;
+        g[7] = d.eta;
+        put(g, 8, d.n);
+        put(g, 11, d.wo);
+        put(g, 14, d.wi);
+        return g;
+    };
+    {
+        TBsdfParams<double> p;
+        Vec3d N, O, I;
+        std::shared_ptr<const CoatTable> coat;
+        unpack(x, p, N, O, I, coat);
+        EXPECT_GT(bsdf_eval_world(p, N, O, I).x, 1e-3) << name << ": the case must not be zero";
+    }
+    check_adjoint(f, adj, x, name, 1e-4, 1e-3);
+}
+
+TEST(Adjoint, PlasticEvalWorld) {
+    const Vec3d n(0.1, 0.2, 1);
+    plastic_case(false, false, false, n, Vec3d(0.3, -0.2, 0.8), Vec3d(-0.4, 0.3, 0.7), 0.2, 1.5, "rough");
+    plastic_case(false, true, false, n, Vec3d(0.6, 0.1, 0.3), Vec3d(0.2, -0.5, 0.4), 0.35, 1.33, "rough, nonlinear");
+    plastic_case(true, false, false, n, Vec3d(0.3, -0.2, 0.8), Vec3d(-0.4, 0.3, 0.7), 0.2, 1.5, "smooth");
+    plastic_case(false, false, true, Vec3d(0.1, 0.2, -1), Vec3d(0.3, -0.2, 0.8), Vec3d(-0.4, 0.3, 0.7), 0.3, 1.6,
+                 "two-sided from below");
+}
+
 TEST(Adjoint, RoughDielectricWorldMatchesLocalModel) {
     BsdfParams p;
     p.kind = MaterialKind::Dielectric;

@@ -145,6 +145,107 @@ TEST(Bsdf, RoughDielectricSamplerMatchesIntegralAndSmoothLimit) {
     }
 }
 
+// The plastic against Mitsuba 3's `roughplastic` (ggx, alpha 0.2) and `plastic`, both with
+// int_ior 1.5, diffuse_reflectance 0.5 and specular_reflectance 1: bsdf.eval of Mitsuba 3.9.1's
+// scalar_rgb variant (f times the light's cosine) with the viewer at theta_v, phi 0 and the
+// light at theta_l, phi 250 degrees; the whole BSDF and its diffuse component alone.
+TEST(Bsdf, PlasticMatchesMitsuba) {
+    struct Case { float theta_v, theta_l; double rough_total, rough_diffuse, smooth; };
+    const Case cases[] = {{10, 60, 0.061086, 0.0592165, 0.0766995},
+                          {45, 20, 0.121871, 0.116048, 0.150272},
+                          {70, 30, 0.0982163, 0.0954684, 0.120718},
+                          {30, 80, 0.0177393, 0.0170726, 0.017879}};
+    auto dir = [](float theta, float phi) {
+        const float t = theta * kPi / 180.f, p = phi * kPi / 180.f;
+        return Vec3f(std::sin(t) * std::cos(p), std::sin(t) * std::sin(p), std::cos(t));
+    };
+    for (bool smooth : {false, true}) {
+        const auto coat = coat_table(0.2f, 1.5f, smooth);
+        BsdfParams p;
+        p.kind = MaterialKind::Plastic;
+        p.diffuse = Vec3f(0.5f);
+        p.specular = Vec3f(1.f);
+        p.alpha = 0.2f;
+        p.eta = 1.5f;
+        p.rough = !smooth;
+        p.coat = coat.get();
+        BsdfParams base = p;
+        base.specular = Vec3f(0.f);
+        for (const Case& c : cases) {
+            const Vec3f wo = dir(c.theta_v, 0.f), wi = dir(c.theta_l, 250.f);
+            const float total = bsdf_eval(p, wo, wi).x, diffuse = bsdf_eval(base, wo, wi).x;
+            if (smooth) {
+                EXPECT_NEAR(total, c.smooth, 2e-4 * c.smooth) << c.theta_v << " " << c.theta_l;
+            } else {
+                // The tables: Gauss-Legendre quadrature as Mitsuba's, over our visible normals.
+                EXPECT_NEAR(total, c.rough_total, 2e-3 * c.rough_total) << c.theta_v << " " << c.theta_l;
+                EXPECT_NEAR(diffuse, c.rough_diffuse, 2e-3 * c.rough_diffuse) << c.theta_v << " " << c.theta_l;
+            }
+        }
+    }
+    // The internal reflectance of the rough coating (alpha 0.2, eta 1.5): about 0.49.
+    EXPECT_NEAR(coat_table(0.2f, 1.5f, false)->r, 0.486, 0.002);
+}
+
+// The plastic's density integrates to the probability that sampling succeeds; its sampler's
+// estimate agrees with uniform sampling of the sphere (with the smooth coating, plus the
+// expected weight of its mirror lobe, ks F(cos theta_o)); it does not gain energy.
+TEST(Bsdf, PlasticSamplerMatchesIntegral) {
+    Rng rng(13, 5);
+    struct Case { bool smooth, two_sided; float alpha, eta, wz; Vec3f kd, ks; };
+    for (const Case& c : {Case{false, false, 0.2f, 1.5f, 0.8f, Vec3f(0.8f, 0.5f, 0.2f), Vec3f(1.f)},
+                          Case{false, true, 0.5f, 1.33f, -0.3f, Vec3f(0.3f), Vec3f(0.6f, 0.8f, 1.f)},
+                          Case{true, false, 0.f, 1.5f, 0.7f, Vec3f(0.8f, 0.5f, 0.2f), Vec3f(1.f)},
+                          Case{true, true, 0.f, 1.6f, -0.25f, Vec3f(0.9f), Vec3f(0.5f)}}) {
+        const auto coat = coat_table(std::max(c.alpha, kMinRoughness), c.eta, c.smooth);
+        BsdfParams p;
+        p.kind = MaterialKind::Plastic;
+        p.diffuse = c.kd;
+        p.specular = c.ks;
+        p.alpha = std::max(c.alpha, kMinRoughness);
+        p.eta = c.eta;
+        p.rough = !c.smooth;
+        p.two_sided = c.two_sided;
+        p.coat = coat.get();
+        const Vec3f wo = normalize(Vec3f(0.4f, -0.2f, c.wz));
+        Acc pdf_int, success, f_uniform[3], f_sampled[3], delta;
+        const int N = 400000;
+        for (int i = 0; i < N; ++i) {
+            const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
+            pdf_int.add(bsdf_pdf(p, wo, w) * 4.f * kPi);
+            const Vec3f f = bsdf_eval(p, wo, w) * (4.f * kPi);
+            for (int k = 0; k < 3; ++k) f_uniform[k].add(f[k]);
+            BsdfSample bs;
+            Vec3f g(0.f);
+            const bool ok = bsdf_sample(p, wo, rng.next_float(), rng.next_float(), rng.next_float(), bs);
+            success.add(ok && !bs.delta ? 1.0 : 0.0);
+            delta.add(ok && bs.delta ? 1.0 : 0.0);
+            if (ok && bs.delta) {
+                EXPECT_TRUE(c.smooth);
+                EXPECT_NEAR(bs.wi.z, wo.z, 1e-6f);
+                EXPECT_NEAR(bs.wi.x, -wo.x, 1e-6f);
+                g = bs.weight;
+            } else if (ok) {
+                const float pdf = bsdf_pdf(p, wo, bs.wi);
+                EXPECT_NEAR(pdf, bs.pdf, 1e-3f * pdf + 1e-6f);
+                g = bsdf_eval(p, wo, bs.wi) / bs.pdf;
+            }
+            for (int k = 0; k < 3; ++k) f_sampled[k].add(g[k]);
+        }
+        const float F = dielectric_reflectance(c.eta, Vec3f(0.f, 0.f, 1.f), Vec3f(wo.x, wo.y, std::abs(wo.z)));
+        EXPECT_NEAR(pdf_int.mean(), success.mean(), 5 * std::hypot(pdf_int.se(), success.se())) << c.wz;
+        if (c.smooth) {
+            EXPECT_GT(delta.mean(), 0.01);
+        }
+        for (int k = 0; k < 3; ++k) {
+            const double mirror = c.smooth ? double(c.ks[k] * F) : 0.0;
+            const double se = std::hypot(f_uniform[k].se(), f_sampled[k].se());
+            EXPECT_NEAR(f_uniform[k].mean() + mirror, f_sampled[k].mean(), 5 * se + 1e-6) << c.wz << " channel " << k;
+            EXPECT_LE(f_sampled[k].mean(), 1.0 + 5 * se) << "energy gain " << c.wz;
+        }
+    }
+}
+
 TEST(Bsdf, OneSidedIsBlackFromBelowAndReciprocal) {
     BsdfParams p = test_materials()[2];
     Vec3f a = normalize(Vec3f(0.3f, 0.1f, 0.9f)), b = normalize(Vec3f(-0.5f, 0.2f, 0.6f));

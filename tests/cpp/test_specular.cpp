@@ -90,10 +90,11 @@ TEST(Specular, SamplerMatchesWorldFunction) {
 }
 
 // Inputs: specular[3], eta, n[3], wo[3] (n and wo normalised inside); outputs: dir[3], weight[3].
-void delta_case(bool dielectric, bool two_sided, bool refract, Vec3d n, Vec3d wo, double eta, const char* what) {
+void delta_case(bool dielectric, bool two_sided, bool refract, Vec3d n, Vec3d wo, double eta, const char* what,
+                bool coat = false) {
     const double inv_prob = 1.7;
     auto unpack = [&](const std::vector<double>& x, DeltaParams<double>& p, Vec3d& N, Vec3d& O) {
-        p = DeltaParams<double>{Vec3d(x[0], x[1], x[2]), x[3], dielectric, two_sided};
+        p = DeltaParams<double>{Vec3d(x[0], x[1], x[2]), x[3], dielectric, two_sided, coat};
         N = Vec3d(x[4], x[5], x[6]);
         O = Vec3d(x[7], x[8], x[9]);
     };
@@ -141,6 +142,24 @@ TEST(Specular, Adjoint) {
     delta_case(true, false, false, n, Vec3d(0.1, -0.1, -1.0), 1.5, "glass, reflection from inside");
     delta_case(true, false, true, n, Vec3d(0.1, -0.1, -1.0), 1.5, "glass, refraction from inside");
     delta_case(true, false, true, n, Vec3d(-0.5, 0.3, 0.6), 0.8, "eta below one");
+    delta_case(false, false, false, n, wo, 1.5, "plastic coating", true);
+    delta_case(false, true, false, n, -wo, 1.4, "two-sided plastic coating from behind", true);
+}
+
+// The plastic's coating reflects about the normal with ks times the dielectric's Fresnel
+// reflectance, and not at all from behind unless two-sided.
+TEST(Specular, PlasticCoatingReflectsWithFresnel) {
+    const Vec3d n(0, 0, 1), wo = normalize(Vec3d(0.5, 0.2, 0.6));
+    DeltaParams<double> p{Vec3d(1.0, 0.5, 0.25), 1.5, false, false, true};
+    Vec3d dir, w;
+    ASSERT_TRUE(delta_scatter(p, n, wo, false, 1.0, dir, w));
+    const double F = dielectric_reflectance(1.5, n, wo);
+    EXPECT_NEAR(dir.x, -wo.x, 1e-12);
+    EXPECT_NEAR(dir.z, wo.z, 1e-12);
+    EXPECT_NEAR(w.x, F, 1e-12);
+    EXPECT_NEAR(w.z, 0.25 * F, 1e-12);
+    EXPECT_FALSE(delta_scatter(p, n, -wo, false, 1.0, dir, w));
+    EXPECT_FALSE(delta_scatter(p, n, wo, true, 1.0, dir, w));
 }
 
 }  // namespace

@@ -137,8 +137,10 @@ UNSUPPORTED = [
      '<float name="alpha_v" value="0.2"/></bsdf></shape>', "anisotropic roughness"),
     ('<shape type="rectangle"><bsdf type="roughconductor"><string name="material" value="Hg"/>'
      '</bsdf></shape>', "conductor material 'Hg' is not supported"),
-    ('<shape type="rectangle"><bsdf type="roughplastic"><boolean name="nonlinear" value="true"/>'
-     '</bsdf></shape>', "nonlinear=true is not supported"),
+    ('<shape type="rectangle"><bsdf type="roughplastic"><float name="alpha" value="0"/>'
+     '</bsdf></shape>', "a roughplastic needs alpha > 0"),
+    ('<shape type="rectangle"><bsdf type="plastic"><float name="int_ior" value="1.0"/>'
+     '</bsdf></shape>', "must be in [0.1, 10] and differ from 1"),
     ('<shape type="rectangle"><bsdf type="twosided"><bsdf type="diffuse"/><bsdf type="diffuse"/>'
      '</bsdf></shape>', "twosided takes exactly one BSDF"),
     ('<shape type="rectangle"><bsdf type="normalmap"><bsdf type="diffuse"/></bsdf></shape>',
@@ -493,14 +495,16 @@ def test_bsdfs(tmp_path):
     f0 = ((eta - 1) ** 2 + k ** 2) / ((eta + 1) ** 2 + k ** 2)
     assert torch.allclose(s.bsdfs["ek"].specular, f0) and s.bsdfs["ek"].roughness == 0.1
     pl = s.bsdfs["pl"]
-    r = ((1.5046 - 1.000277) / (1.5046 + 1.000277)) ** 2
-    assert torch.allclose(pl.specular, torch.full((3,), r)) and pl.roughness == pytest.approx(0.3)
+    assert pl.kind == "plastic" and float(pl.ior) == pytest.approx(1.5046 / 1.000277)
+    assert torch.equal(pl.specular, torch.ones(3)) and pl.roughness == pytest.approx(0.3)
     assert torch.allclose(pl.diffuse, torch.tensor([0.1, 0.2, 0.3])) and not pl.two_sided
     names = s.parameters()
     assert names["shared.brdf_0.reflectance.data"] is shared.diffuse
     assert names["ek.specular"] is s.bsdfs["ek"].specular
     assert names["gold.bsdf.specular"] is gold.specular
     assert names["pl.diffuse_reflectance.value"] is pl.diffuse
+    assert names["pl.specular_reflectance.value"] is pl.specular and names["pl.eta"] is pl.ior
+    assert names["pl.alpha.value"] is pl.roughness
     assert "gold.bsdf.diffuse" in names  # a conductor's (black) diffuse: no Mitsuba name
     # Shapes a and b share one BSDF: its tensors are listed once, under its id.
     assert not any(name.startswith(("a.bsdf", "b.bsdf")) for name in names)
@@ -527,7 +531,7 @@ def test_normalmap(tmp_path):
     s = ep.load_mitsuba(_write(tmp_path, body))
     bumpy = s.bsdfs["bumpy"]
     assert torch.equal(bumpy.normal_map, ep.imread(tmp_path / "normals.exr"))
-    assert bumpy.roughness == pytest.approx(0.3) and bumpy.kind == "standard" and not bumpy.two_sided
+    assert bumpy.roughness == pytest.approx(0.3) and bumpy.kind == "plastic" and not bumpy.two_sided
     b = s.shapes["b"].material
     assert b.two_sided and torch.allclose(b.diffuse, torch.tensor([0.2, 0.4, 0.6]))
     # raw: the 8-bit values as stored (imwrite encoded the linear texels as sRGB)

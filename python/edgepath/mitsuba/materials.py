@@ -1,6 +1,7 @@
-"""BSDFs of Mitsuba scene files (diffuse, conductor, roughconductor, roughplastic, dielectric,
-roughdielectric, twosided, normalmap), mapped onto edgepath's ``Material`` kinds (diffuse + GGX, mirror, glass),
-approximately where Mitsuba's model differs (see docs/scene-files.md)."""
+"""BSDFs of Mitsuba scene files (diffuse, conductor, roughconductor, plastic, roughplastic,
+dielectric, roughdielectric, twosided, normalmap), mapped onto edgepath's ``Material`` kinds
+(diffuse + GGX, mirror, glass, plastic), approximately where Mitsuba's model differs (see
+docs/scene-files.md)."""
 
 from __future__ import annotations
 
@@ -44,7 +45,10 @@ NAMED_IOR = {
 # A material made without a <bsdf> (a shape's default) is a diffuse one.
 DIFFUSE_KEYS = {"diffuse": "reflectance"}
 BSDF_KEYS = {"diffuse": DIFFUSE_KEYS, "roughplastic": {"diffuse": "diffuse_reflectance",
-                                                       "roughness": "alpha"},
+                                                       "specular": "specular_reflectance",
+                                                       "roughness": "alpha", "ior": "eta"},
+             "plastic": {"diffuse": "diffuse_reflectance", "specular": "specular_reflectance",
+                         "ior": "eta"},
              "roughconductor": {"roughness": "alpha"}, "conductor": {},
              "dielectric": {"ior": "eta"}, "roughdielectric": {"ior": "eta", "roughness": "alpha"}}
 
@@ -67,7 +71,8 @@ def load_bsdf(ctx: Reader, node: Node) -> Material:
         ctx.leftovers(node, props, "bsdf")
         material = Material(diffuse=base.diffuse, specular=base.specular,
                             roughness=base.roughness, two_sided=True, kind=base.kind,
-                            normal_map=base.normal_map)
+                            ior=base.ior, normal_map=base.normal_map,
+                            nonlinear=base.nonlinear)
         ctx.result.bsdf_keys[id(material)] = {
             k: "brdf_0." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
     elif kind == "normalmap":
@@ -114,7 +119,7 @@ def normal_mapped(ctx: Reader, node: Node, props: Dict[str, Node], nested) -> Ma
     ctx.leftovers(node, props, "bsdf")
     material = Material(diffuse=base.diffuse, specular=base.specular, roughness=base.roughness,
                         two_sided=base.two_sided, kind=base.kind, ior=base.ior,
-                        normal_map=normal_map)
+                        normal_map=normal_map, nonlinear=base.nonlinear)
     keys = {k: "nested_bsdf." + v for k, v in ctx.result.bsdf_keys[id(base)].items()}
     keys["normal_map"] = "normalmap"
     ctx.result.bsdf_keys[id(material)] = keys
@@ -224,23 +229,31 @@ def simple_bsdf(ctx: Reader, node: Node, kind: str, props: Dict[str, Node]) -> M
                 props.pop(name)
         ctx.leftovers(node, props, "bsdf")
         return Material(kind="dielectric", ior=torch.tensor(eta, dtype=torch.float32), roughness=alpha)
-    if kind == "roughplastic":
-        alpha = roughness_alpha(ctx, node, props)
+    if kind in ("plastic", "roughplastic"):
+        # Mitsuba's plastic and roughplastic: kind "plastic", smooth (roughness 0) or GGX.
+        alpha = 0.0
+        if kind == "roughplastic":
+            alpha = roughness_alpha(ctx, node, props)
+            if not isinstance(alpha, float):
+                ctx.fail(node, "a roughplastic's alpha must be a constant (a texture is not supported)")
+            if not alpha > 0:
+                ctx.fail(node, f"alpha = {alpha:g}: a roughplastic needs alpha > 0 (use plastic)")
         int_ior = ior_value(ctx, node, props, "int_ior", NAMED_IOR["polypropylene"])
         ext_ior = ior_value(ctx, node, props, "ext_ior", NAMED_IOR["air"])
         if not int_ior > 0 or not ext_ior > 0:
             ctx.fail(node, "indices of refraction must be > 0")
-        if "nonlinear" in props:
-            if ctx.bool_value(props["nonlinear"]):
-                ctx.fail(props["nonlinear"], "nonlinear=true is not supported")
-            props.pop("nonlinear")
+        eta = int_ior / ext_ior
+        if not 0.1 <= eta <= 10 or abs(eta - 1) < 1e-3:
+            ctx.fail(node, f"int_ior / ext_ior = {eta:g}: must be in [0.1, 10] and differ from 1")
+        nonlinear = ctx.bool_value(props.pop("nonlinear")) if "nonlinear" in props else False
         diffuse = colour(ctx, props.pop("diffuse_reflectance")) \
             if "diffuse_reflectance" in props else torch.full((3,), 0.5)
-        f0 = ((int_ior - ext_ior) / (int_ior + ext_ior)) ** 2
-        specular = torch.full((3,), f0)
-        if "specular_reflectance" in props:
-            specular = specular * colour(ctx, props.pop("specular_reflectance"))
+        specular = colour(ctx, props.pop("specular_reflectance")) \
+            if "specular_reflectance" in props else torch.ones(3)
         ctx.leftovers(node, props, "bsdf")
-        return Material(diffuse=diffuse, specular=specular.contiguous(), roughness=alpha)
+        return Material(kind="plastic", diffuse=diffuse, specular=specular,
+                        roughness=torch.tensor(alpha, dtype=torch.float32),
+                        ior=torch.tensor(eta, dtype=torch.float32), nonlinear=nonlinear)
     ctx.fail(node, f"unsupported bsdf type '{kind}' (supported: diffuse, conductor, "
-                   "roughconductor, roughplastic, dielectric, roughdielectric, twosided, normalmap)")
+                   "roughconductor, plastic, roughplastic, dielectric, roughdielectric, twosided, "
+                   "normalmap)")

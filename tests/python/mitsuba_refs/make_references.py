@@ -20,7 +20,8 @@ mi.set_variant("scalar_rgb")
 HERE = Path(__file__).resolve().parent
 # name: $name parameters of the file (the tutorial's Cornell box at 32 x 32 pixels).
 SCENES = {"cornell_glass_mirror": {}, "direct_hidden_emitters": {}, "tutorial_cbox": {"res": 32},
-          "normalmap_rectangle": {}, "point_spot": {}, "rough_glass": {}}
+          "normalmap_rectangle": {}, "point_spot": {}, "rough_glass": {}, "rough_plastic": {},
+          "smooth_plastic": {}}
 
 
 def load(path: Path, **params):
