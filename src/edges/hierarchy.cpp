@@ -20,10 +20,17 @@ float cos_minus(float cos_a, float cos_b, float sin_b) {
     return cos_a >= cos_b ? 1.f : cos_a * cos_b + sine(cos_a) * sin_b;
 }
 // A crease seen with both faces on the same side of p: its share of a silhouette's importance,
-// the angle between the faces' normals (radians), no less than kMinCreaseWeight (texture seams
-// and nearly flat creases still get sampled).
-constexpr float kMinCreaseWeight = 0.05f;
-float crease_weight(float dihedral) { return std::clamp(dihedral, kMinCreaseWeight, 1.f); }
+// the angle between the faces' normals (radians). A seam (Edge::seam: uvs, colours or split
+// normals differ) no less than kMinSeamWeight, whatever the angle: textures may jump along it.
+// A crease of flat shading jumps by the angle alone: no less than kMinCreaseWeight, which only
+// keeps the density positive (the angle of nearly flat faces is lost to rounding). (With the
+// seams' floor for every crease, the float rounding of flat-shaded emitters, a sun's disk or a
+// tessellated sphere light, made thousands of nearly flat creases that drew samples where
+// nothing jumps.)
+constexpr float kMinSeamWeight = 0.05f, kMinCreaseWeight = 1e-3f;
+float crease_weight(float dihedral, bool seam) {
+    return std::clamp(dihedral, seam ? kMinSeamWeight : kMinCreaseWeight, 1.f);
+}
 // Ranges larger than this are split in parallel.
 constexpr int kParallelRange = 8192;
 // When a descent splits (EdgeHierarchy::splits): the light cone's cos(half angle) above which it
@@ -141,7 +148,8 @@ struct EdgeHierarchy::Input {
     std::vector<Vec3f> p0, p1, n0, n1;
     std::vector<uint8_t> always;
     std::vector<uint8_t> crease;       // a crease (with two faces of nonzero area)
-    std::vector<uint8_t> dark_behind;  // a crease whose faces are black from behind
+    std::vector<uint8_t> seam;         // a crease along which more than the face normal jumps
+    std::vector<uint8_t> dark_behind;  // two faces that are black from behind
     std::vector<uint8_t> emissive;     // an edge of an emitter
     const std::vector<int32_t>* ids;
 
@@ -157,18 +165,20 @@ struct EdgeHierarchy::Input {
         dark_behind.assign(n, 0);
         emissive.assign(n, 0);
         crease.assign(n, 0);
+        seam.assign(n, 0);
         auto one = [&](size_t i) {
             const Edge& e = all[size_t(edges[i])];
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             p0[i] = m.vertex(e.v0);
             p1[i] = m.vertex(e.v1);
             always[i] = e.kind != EdgeKind::Smooth;
-            // A crease between faces that are black seen from behind (a one-sided material, no
+            // An edge between faces that are black seen from behind (a one-sided material, no
             // emission from the back): from a point behind both, either side of it looks black
             // (or both sides see what hides it), so it adds nothing there.
             const Material& mat = scene.materials[size_t(m.material)];
             crease[i] = e.kind == EdgeKind::Crease;
-            dark_behind[i] = crease[i] && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+            seam[i] = crease[i] && e.seam;
+            dark_behind[i] = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
             emissive[i] = m.is_emitter();
             if (!always[i] || crease[i]) {
                 const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
@@ -180,6 +190,7 @@ struct EdgeHierarchy::Input {
                     always[i] = 1;
                     dark_behind[i] = 0;
                     crease[i] = 0;
+                    seam[i] = 0;
                 }
             }
         };
@@ -208,6 +219,7 @@ void EdgeHierarchy::set_leaf(const Input& in, size_t i, Node& node) {
     node.dark_behind = in.dark_behind[i] != 0;
     node.emissive = in.emissive[i] != 0;
     node.crease = in.crease[i] != 0;
+    node.seam = in.seam[i] != 0;
     node.cone_axis = Vec3f();
     node.cone_cos = -1.f;
     node.cone_sin = 0.f;
@@ -313,6 +325,7 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.dark_behind = a.dark_behind && b.dark_behind;
     n.emissive = a.emissive || b.emissive;
     n.crease = a.crease && b.crease;
+    n.seam = a.seam || b.seam;
     n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
     n.cone_cos = -1.f;
     n.cone_sin = 0.f;
@@ -430,7 +443,7 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
     bool moved = false, flags = false;
     for (size_t i = 0; i < n && same; ++i) {
         const Node& leaf = nodes_[size_t(leaf_of_[size_t(edges[i])])];
-        same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0);
+        same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0) && leaf.seam == (in.seam[i] != 0);
         moved = moved || !(bitwise_equal(leaf.a, in.p0[i]) && bitwise_equal(leaf.b, in.p1[i]) &&
                            bitwise_equal(leaf.n0, in.n0[i]) && bitwise_equal(leaf.n1, in.n1[i]));
         flags = flags || leaf.dark_behind != (in.dark_behind[i] != 0) || leaf.emissive != (in.emissive[i] != 0);
@@ -534,16 +547,21 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
 void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
     const bool leaf = n.left < 0;
-    // A smooth edge is a silhouette only where p is in front of exactly one of its faces. A
-    // crease is one there too; elsewhere its faces meet at a shading jump only, about as large
-    // as the angle between them (nothing where both are dark from behind).
+    // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
+    // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
+    // them, and a smooth edge's at the steps where the mesh shadows itself along it (the light
+    // between the faces' planes reaches one face and not the other, while the smooth normals
+    // give both a weight): in proportion to that angle, over pi as in the camera's pass.
+    // Nothing there where both faces are dark from behind, or at a last bounce, which sees
+    // only emission (that jumps along an emitter's seams only).
     float weight = 1.f;
     if (leaf && (n.crease || (!n.always && n.cone_cos > -1.f))) {
         const Vec3f d = q.p - n.a;
         const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
         if (front0 == front1) {
-            if (!n.always || (!front0 && n.dark_behind) || (q.direct_only && !n.emissive)) return;
-            weight = crease_weight(n.dihedral);
+            if ((!front0 && n.dark_behind) || (q.direct_only && !(n.emissive && n.seam))) return;
+            weight = n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi;
+            if (!(weight > 0.f)) return;
         }
     }
     const Vec3f v = n.center - q.p;
@@ -589,17 +607,17 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
         const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
         if (n.dark_behind && !(hi > 0.f)) return;  // creases, p behind every face
-        // Creases count where the range straddles 0 (silhouettes) and elsewhere too (shading
-        // jumps), except at a last bounce of a mesh that does not emit: then, like smooth
-        // edges, only as silhouettes.
-        silhouettes_only = !n.always || (q.direct_only && !n.emissive);
+        // Edges count where the range straddles 0 (silhouettes) and elsewhere too (shading jumps,
+        // self-shadowing steps), except at a last bounce unless there are seams of an emitter:
+        // then only as silhouettes.
+        silhouettes_only = q.direct_only && !(n.emissive && n.seam);
         const bool straddles = lo < 0.f && hi > 0.f;
         if (silhouettes_only) {
             if (!straddles) return;
             fraction = std::clamp(d * n.dihedral / (hi - lo), 0.1f, 1.f);
         } else {
             const float silhouettes = straddles ? std::clamp(d * n.dihedral / (hi - lo), 0.f, 1.f) : 0.f;
-            fraction = silhouettes + (1.f - silhouettes) * crease_weight(n.dihedral);
+            fraction = silhouettes + (1.f - silhouettes) * (n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi);
         }
     }
     // The lobe over the node's directions: for a leaf, along its edge's own arc (closed form);

@@ -158,7 +158,8 @@ private:
         Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
         bool always = false;        // holds a boundary edge or a crease
         bool crease = false;        // holds only creases
-        bool dark_behind = false;   // holds only creases whose faces are black seen from behind
+        bool seam = false;          // holds a seam (Edge::seam)
+        bool dark_behind = false;   // holds only edges whose two faces are black seen from behind
         bool emissive = false;      // holds an edge of an emitter
         bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
         int32_t first = 0;          // its edges: order_[first, first + count)

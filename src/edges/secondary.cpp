@@ -44,14 +44,11 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
-    // (Nearly flat edges are left out: with them, translate_occluder_area_light's image sum moved
-    // from -2.8% to -3.7% of Mitsuba's and a sun's elevation recovered from its shadow from 60.5 to
-    // 62.9 for a truth of 60; why is not known yet.)
-    build_set(all_, [](const SecondaryEdges&, const Edge& e) { return !e.nearly_flat; });
+    build_set(all_, [](const SecondaryEdges&, const Edge&) { return true; });
     total_ = all_.total;
     // Where nothing wanted moves the shading point, only the wanted meshes' edges matter.
     if (!every) {
-        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return !e.nearly_flat && self.mesh_wanted(e.mesh); });
+        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
         has_wanted_set_ = true;
     }
     if (!uniform_ && !all_.edges.empty()) {
@@ -198,8 +195,10 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     EdgeEye eye;
     eye.origin = p;
     eye.step = kTouchStep;
-    // A smooth edge is a discontinuity only where it folds as seen from p.
-    if (e.kind == EdgeKind::Smooth && !is_fold(eye, m, e)) return d_p;
+    // A smooth edge is a discontinuity where it folds as seen from p, and elsewhere only where
+    // the light reaching its faces can differ: the steps where the mesh shadows itself along it,
+    // seen after a bounce (not at a last one, which sees emission only).
+    if (e.kind == EdgeKind::Smooth && bounces_left == 0 && !is_fold(eye, m, e)) return d_p;
     // The plane through p and the edge; degenerate when p lies on the edge's line.
     const Vec3f N = cross(v0 - p, v1 - p);
     const float n_len = length(N);

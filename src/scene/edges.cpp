@@ -119,7 +119,6 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
         const size_t count = j - i;
         if (count == 2) {
             const HalfEdge &h0 = half[i], &h1 = half[i + 1];
-            const Vec3f n0 = face_normal(m, h0.face), n1 = face_normal(m, h1.face);
             bool shading_jump = m.normals == nullptr;
             if (!shading_jump) {
                 // Split normals along the edge: a shading discontinuity.
@@ -160,7 +159,7 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 e.f0 = h0.face;
                 e.f1 = h1.face;
                 e.kind = shading_jump ? EdgeKind::Crease : EdgeKind::Smooth;
-                e.nearly_flat = dot(n0, n1) > 1.f - 1e-6f;
+                e.seam = value_jump || (shading_jump && m.normals != nullptr);
                 out.push_back(e);
             }
         } else {

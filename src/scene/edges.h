@@ -34,9 +34,10 @@ struct Edge {
     int32_t v0 = -1, v1 = -1;  // vertex indices in the mesh (of the first face that has the edge)
     int64_t f0 = -1, f1 = -1;  // adjacent triangles; f1 = -1 on a boundary
     EdgeKind kind = EdgeKind::Boundary;
-    // Two faces less than 1.4e-3 rad from one plane (1 - cos below 1e-6): sampled by the camera's
-    // pass, left out of the surfaces' (edges/secondary.cpp; docs/gradients.md, known limitations).
-    bool nearly_flat = false;
+    // A crease whose sides differ in more than their faces' normals: uvs, vertex colours or split
+    // vertex normals (a texture seam, a modelled crease). A crease that is not a seam (flat
+    // shading) jumps only by the angle between its faces, however small.
+    bool seam = false;
 };
 
 // All the edges of one mesh (mesh index `mesh` is stored in each edge).

@@ -96,6 +96,7 @@ TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
         d.uv_indices = uv_indices.data();
         std::vector<Edge> out;
         build_mesh_edges(d, 0, out);
+        for (const Edge& e : out) EXPECT_EQ(e.seam, e.kind == EdgeKind::Crease);  // the uvs jump
         return count_kinds(out);
     };
     // One uv per vertex (continuous) against the second face's corners shifted in u (a seam).
@@ -124,6 +125,8 @@ TEST(Edges, WeldedAndUnweldedMeshesGiveTheSameEdges) {
     EXPECT_EQ(a, b);
     EXPECT_EQ(a[EdgeKind::Boundary], 5);
     EXPECT_EQ(a[EdgeKind::Crease], 2);  // both inner edges fold (flat shading)
+    // Flat shading jumps by the faces' angle only: no seam.
+    for (const Edge& e : edges_of(split)) EXPECT_FALSE(e.seam);
 }
 
 TEST(Edges, SplitNormalsMakeACreaseEvenWhenCoplanar) {
@@ -144,6 +147,7 @@ TEST(Edges, SplitNormalsMakeACreaseEvenWhenCoplanar) {
     auto c = count_kinds(edges_of(split));
     EXPECT_EQ(c[EdgeKind::Boundary], 4);
     EXPECT_EQ(c[EdgeKind::Crease], 1);
+    for (const Edge& e : edges_of(split)) EXPECT_EQ(e.seam, e.kind == EdgeKind::Crease);  // a modelled crease
 }
 
 TEST(Edges, EdgeSharedByThreeFacesIsKeptForEachFace) {

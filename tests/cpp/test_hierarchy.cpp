@@ -2,9 +2,11 @@
 // empirical frequencies, densities integrate to one, awkward geometry gives finite results.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <map>
+#include <tuple>
 #include <vector>
 
 #include "edgepath.h"
@@ -122,63 +124,77 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     EXPECT_GT(split_seen, 0);  // the splitting descents were exercised
 }
 
-// A vertex's last bounce sees only emission, so a crease of a mesh that does not emit adds
-// nothing where the point is in front of both its faces: such creases are never picked then
-// (and still are otherwise), while silhouettes, and creases of an emitter, still are. (The
-// boxes' face diagonals are creases of no angle.)
+// A vertex's last bounce sees only emission, so a crease adds nothing where the point is in
+// front of both its faces, unless it is a seam of an emitter (a textured emission may jump
+// there): such creases are never picked then (and still are otherwise), while silhouettes, and
+// an emitter's seams, still are. The emitting box once without uvs (flat shading: its creases
+// jump by their angle only) and once with each face's own uvs (every crease a seam).
 TEST(EdgeHierarchy, LastBounceSkipsCreasesThatCannotChangeEmission) {
-    MeshData dark = make_box(Vec3f(-1.f, 1.f, -0.5f), Vec3f(-0.2f, 1.8f, 0.5f)),
-             bright = make_box(Vec3f(0.4f, 1.f, -0.5f), Vec3f(1.2f, 1.8f, 0.5f));
-    std::vector<float> glow = {1.f, 1.f, 1.f};
-    MatteScene matte;
-    SceneDesc d = matte.desc();
-    d.meshes = {dark.desc(0), bright.desc(0)};
-    d.meshes[1].emission = {glow.data(), 1, 1, 3};
-    const std::shared_ptr<const Scene> scene = build_scene(d);
-    const EdgeHierarchy h = hierarchy_of_all(*scene);
-    EdgeHierarchy::Query q;
-    q.p = Vec3f(0.1f, 0.2f, -1.2f);  // below both boxes and in front of them
-    q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(0, 1, -1)), 0.5f, 0.f, 0.5f);
-    int culled = 0, kept_dark = 0, kept_bright = 0;
-    for (size_t i = 0; i < scene->edges().size(); ++i) {
-        const Edge& e = scene->edges()[i];
-        ASSERT_EQ(e.kind, EdgeKind::Crease);
-        const Mesh& mesh = scene->meshes[size_t(e.mesh)];
-        const Vec3f x = mesh.vertex(e.v0);
-        const bool front0 = dot(q.p - x, mesh.face_normal(e.f0)) > 0.f, front1 = dot(q.p - x, mesh.face_normal(e.f1)) > 0.f;
-        q.direct_only = false;
-        const float every = h.pdf(q, int32_t(i)).prob[0];
-        q.direct_only = true;
-        const float last = h.pdf(q, int32_t(i)).prob[0];
-        // Behind both faces (one-sided, no emission from the back): never, in either mode.
-        if (!front0 && !front1) {
-            EXPECT_EQ(every, 0.f) << "edge " << i;
-            EXPECT_EQ(last, 0.f) << "edge " << i;
-            continue;
-        }
-        EXPECT_GT(every, 0.f) << "edge " << i;
-        if (front0 && front1 && e.mesh == 0) {
-            EXPECT_EQ(last, 0.f) << "edge " << i;
-            ++culled;
+    for (const bool seams : {false, true}) {
+        MeshData dark = make_box(Vec3f(-1.f, 1.f, -0.5f), Vec3f(-0.2f, 1.8f, 0.5f)), bright;
+        if (seams) {
+            const Vec3f lo(0.4f, 1.f, -0.5f), s = Vec3f(1.2f, 1.8f, 0.5f) - lo;
+            const Vec3f ex(s.x, 0, 0), ey(0, s.y, 0), ez(0, 0, s.z);
+            for (const auto& [corner, e1, e2] : {std::tuple{lo, ey, ex}, std::tuple{lo + ez, ex, ey}, std::tuple{lo, ez, ey},
+                                                std::tuple{lo + ex, ey, ez}, std::tuple{lo, ex, ez}, std::tuple{lo + ey, ez, ex}})
+                bright.append(make_quad(corner, e1, e2));
         } else {
-            EXPECT_GT(last, 0.f) << "edge " << i;
-            (e.mesh == 0 ? kept_dark : kept_bright)++;
+            bright = make_box(Vec3f(0.4f, 1.f, -0.5f), Vec3f(1.2f, 1.8f, 0.5f));
         }
-    }
-    EXPECT_GT(culled, 0);
-    EXPECT_GT(kept_dark, 0);  // the dark box's silhouette
-    EXPECT_GT(kept_bright, 0);
-    // sample() agrees: it never picks a culled crease, and its counts are pdf()'s.
-    q.direct_only = true;
-    Rng rng(5, 2);
-    for (int i = 0; i < 2000; ++i) {
-        EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
-        const int n = h.sample(q, EdgeHierarchy::All, rng.next_float(), c);
-        ASSERT_GT(n, 0);
-        for (int j = 0; j < n; ++j) {
-            const float want = h.pdf(q, c[j].edge).prob[0];
-            EXPECT_GT(want, 0.f);
-            EXPECT_NEAR(c[j].prob[0], want, 1e-5f * want);
+        std::vector<float> glow = {1.f, 1.f, 1.f};
+        MatteScene matte;
+        SceneDesc d = matte.desc();
+        d.meshes = {dark.desc(0), bright.desc(0)};
+        d.meshes[1].emission = {glow.data(), 1, 1, 3};
+        const std::shared_ptr<const Scene> scene = build_scene(d);
+        const EdgeHierarchy h = hierarchy_of_all(*scene);
+        EdgeHierarchy::Query q;
+        q.p = Vec3f(0.1f, 0.2f, -1.2f);  // below both boxes and in front of them
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(0, 1, -1)), 0.5f, 0.f, 0.5f);
+        int culled = 0, kept_dark = 0, kept_bright = 0, kept_seams = 0;
+        for (size_t i = 0; i < scene->edges().size(); ++i) {
+            const Edge& e = scene->edges()[i];
+            ASSERT_EQ(e.kind, EdgeKind::Crease);
+            ASSERT_EQ(e.seam, seams && e.mesh == 1) << "edge " << i;
+            const Mesh& mesh = scene->meshes[size_t(e.mesh)];
+            const Vec3f x = mesh.vertex(e.v0);
+            const bool front0 = dot(q.p - x, mesh.face_normal(e.f0)) > 0.f, front1 = dot(q.p - x, mesh.face_normal(e.f1)) > 0.f;
+            q.direct_only = false;
+            const float every = h.pdf(q, int32_t(i)).prob[0];
+            q.direct_only = true;
+            const float last = h.pdf(q, int32_t(i)).prob[0];
+            // Behind both faces (one-sided, no emission from the back): never, in either mode.
+            if (!front0 && !front1) {
+                EXPECT_EQ(every, 0.f) << "edge " << i;
+                EXPECT_EQ(last, 0.f) << "edge " << i;
+                continue;
+            }
+            EXPECT_GT(every, 0.f) << "edge " << i;
+            if (front0 && front1 && !e.seam) {
+                EXPECT_EQ(last, 0.f) << "edge " << i;
+                ++culled;
+            } else {
+                EXPECT_GT(last, 0.f) << "edge " << i;
+                (e.mesh == 0 ? kept_dark : kept_bright)++;
+                kept_seams += front0 && front1;
+            }
+        }
+        EXPECT_GT(culled, 0);
+        EXPECT_GT(kept_dark, 0);  // the dark box's silhouette
+        EXPECT_GT(kept_bright, 0);
+        EXPECT_EQ(kept_seams > 0, seams);  // the emitter's seams where no silhouette
+        // sample() agrees: it never picks a culled crease, and its counts are pdf()'s.
+        q.direct_only = true;
+        Rng rng(5, 2);
+        for (int i = 0; i < 2000; ++i) {
+            EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+            const int n = h.sample(q, EdgeHierarchy::All, rng.next_float(), c);
+            ASSERT_GT(n, 0);
+            for (int j = 0; j < n; ++j) {
+                const float want = h.pdf(q, c[j].edge).prob[0];
+                EXPECT_GT(want, 0.f);
+                EXPECT_NEAR(c[j].prob[0], want, 1e-5f * want);
+            }
         }
     }
 }
@@ -322,7 +338,9 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
 // A glossy lobe concentrates the probability on the edges near the mirror direction: from a
 // point on a (virtual) floor, the mirror direction grazes the top of the sphere's outline (its
 // silhouette), with the box 30 degrees off. The share of the sphere's edges follows the
-// leaves' own values (the lobe's integral along each silhouette, over the distance to it).
+// leaves' own values (the lobe's integral along each silhouette, over the distance to it; the
+// smooth edges that are not silhouettes by the angle between their faces over pi, for the
+// steps where the sphere shadows itself, where p sees their faces' fronts).
 TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
@@ -353,11 +371,14 @@ TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
             // A leaf's value: a silhouette's (or a crease's: its faces meet at right angles)
             // lobe integral over the distance to its line.
             const Vec3f v0 = m.vertex(edge.v0), v1 = m.vertex(edge.v1);
-            const bool counts = edge.kind == EdgeKind::Crease ||
-                                is_silhouette(p, v0, normalize(m.face_normal(edge.f0)), normalize(m.face_normal(edge.f1)),
-                                              EdgeKind::Smooth);
+            const Vec3f n0 = normalize(m.face_normal(edge.f0)), n1 = normalize(m.face_normal(edge.f1));
+            double weight = 1.0;
+            if (edge.kind == EdgeKind::Smooth && !is_silhouette(p, v0, n0, n1, EdgeKind::Smooth))
+                weight = dot(p - v0, n0) > 0.f || scene.materials[size_t(m.material)].two_sided
+                             ? std::acos(std::clamp(double(dot(n0, n1)), -1.0, 1.0)) / kPi
+                             : 0.0;
             double dist = 0.0;
-            const double leaf = counts ? q.lobe.integral(p, v0, v1, &dist) / dist : 0.0;
+            const double leaf = weight > 0.0 ? weight * q.lobe.integral(p, v0, v1, &dist) / dist : 0.0;
             leaf_total += leaf;
             if (edge.mesh == 0) {
                 on_sphere += pe;

@@ -291,7 +291,9 @@ def test_ctrl_c_exits_130_with_one_line(quad_obj, tmp_path):
     process = subprocess.Popen(
         [sys.executable, "-m", "edgepath", "render", str(quad_obj), "-o", str(tmp_path / "out.png"),
          "--resolution", "16", "16", "--spp", "10000000", "--chunk-spp", "1", "--threads", "1"],
-        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env,
+        # SIGINT at its default: a shell's background job inherits it ignored (no KeyboardInterrupt)
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     lines, said = [], {}
 
     def read_stderr():  # keeps the pipe drained; notes when the message comes

@@ -173,11 +173,13 @@ def test_geometry_derivative_image_matches_mitsuba(name):
 # 256 spp) passes with the hierarchy. translate_occluder_area_light: a 32k-triangle sphere
 # occluding a 32k-triangle light of radius 0.05 (a light cone of half angle 0.009 rad): rare
 # large samples dominate its error (with uniform sampling at 128 spp mean err 0.145, max err 132).
+# At 256 spp its image sum is off by 2.0-2.3% (standard deviation over seeds 0-5, mean +0.1%),
+# too near the 3% bound on the sum for one seed: 1024 spp (seed 0: -1.25%).
 SHADOWS = {"translate_plane_and_area_emitter": 256,
            "translate_textured_area_emitter_illuminating_plane": 256,
            "translate_shadow_receiver_area_light": 256,
            "translate_self_shadowing_right_angle": 256,
-           "translate_occluder_area_light": 256}
+           "translate_occluder_area_light": 1024}
 SHADOWS_SLOW = {"translate_shadow_receiver_area_light", "translate_self_shadowing_right_angle",
                 "translate_occluder_area_light"}
 # Configs where the interior and primary terms alone fail (by the metric named): the check sees

@@ -182,8 +182,11 @@ except KeyboardInterrupt:
 def test_ctrl_c_stops_long_core_calls(call):
     """SIGINT during a call that would take minutes raises KeyboardInterrupt within half a
     second, and the interpreter renders again afterwards."""
+    # SIGINT at its default in the child: a shell's background job inherits it ignored, and Python
+    # then installs no KeyboardInterrupt handler (the signal would be lost, the test hang).
     child = subprocess.Popen([sys.executable, "-c", INTERRUPT_CHILD, call], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True)
+                             stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
         assert child.stdout.readline().strip() == "ready"
         time.sleep(0.5)  # inside the core call
