@@ -103,7 +103,9 @@ def test_bunny_pose(tmp_path):
     bunny = EXAMPLES.parents[1] / "shared" / "data" / "bunny.ply"
     if not bunny.exists():
         pytest.skip(f"test data not found: {bunny}")
-    r = run("bunny_pose", tmp_path, "--iterations", "12", "--size", "24", "--spp", "2", "--mesh", str(bunny))
+    # 16 steps: the shift error falls from 10.1% to 4.4%. At 12 it reached 6.1% or 7.3% depending
+    # on which random samples the edge passes drew, too near the 30% fall asserted.
+    r = run("bunny_pose", tmp_path, "--iterations", "16", "--size", "24", "--spp", "2", "--mesh", str(bunny))
     assert fell(r["loss"], 0.8)
     assert r["shift_error"][-1] < 0.7 * r["shift_error"][0]
     assert (tmp_path / "comparison.png").is_file()
