@@ -104,6 +104,17 @@ def image_error(image: torch.Tensor, ref: torch.Tensor, floor: float) -> Tuple[f
     return float(err.mean()), float(err.max())
 
 
+def block_means(image: torch.Tensor, k: int) -> torch.Tensor:
+    """The means of an (H, W, 3) image's k x k blocks, (H / k, W / k, 3): Mitsuba's scene tests
+    compare images so."""
+    return torch.nn.functional.avg_pool2d(image.permute(2, 0, 1)[None], k)[0].permute(1, 2, 0)
+
+
+def relative_l1(image: torch.Tensor, reference: torch.Tensor) -> float:
+    """sum |image - reference| / sum |reference|."""
+    return float((image - reference).abs().sum() / reference.abs().sum())
+
+
 def error_map(image: torch.Tensor, ref: torch.Tensor, floor: float) -> torch.Tensor:
     """Per-value err = |image - ref| / max(|ref|, floor), shape (H, W, 3)."""
     r = ref.detach().to(torch.float64)

@@ -8,24 +8,11 @@ from pathlib import Path
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
 
 SCENE_DIR = Path(__file__).resolve().parent / "mitsuba_refs"
-
-
-def _block_means(image, k):
-    return torch.nn.functional.avg_pool2d(image.permute(2, 0, 1)[None], k)[0].permute(1, 2, 0)
-
-
-def _image_error(image, ref, floor=0.02):
-    """Mitsuba's image metric: err = |x - ref| / max(|ref|, floor); (mean, max)."""
-    err = (image.double() - ref.double()).abs() / ref.double().abs().clamp_min(floor)
-    return float(err.mean()), float(err.max())
-
-
-def relative_l1(a, b):
-    return float((a - b).abs().sum() / b.abs().sum())
 
 
 @pytest.mark.parametrize("name", ["rough_plastic", "smooth_plastic"])
@@ -41,7 +28,7 @@ def test_plastic_matches_mitsuba(name):
     ref = ep.imread(SCENE_DIR / f"{name}.exr")[..., :3].float()
     image = loaded.render(spp=256)
     relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
-    blocks = _image_error(_block_means(image, 4), _block_means(ref, 4))
+    blocks = C.image_error(C.block_means(image, 4), C.block_means(ref, 4), 0.02)
     print("channel means", relative.tolist(), "blocks", blocks)
     assert float(relative.abs().max()) < 0.02
     assert blocks[0] < 0.04 and blocks[1] < 0.4
@@ -102,7 +89,7 @@ def test_plastic_derivatives_match_finite_differences(name, value, eps, extra, s
         plus, minus = (ep.render(plastic_scene(**{name: value + s * eps * direction}, **extra), spp=spp, seed=2,
                                  max_bounces=2) for s in (0.5, -0.5))
     fd_image = (plus - minus) / eps
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     ratio = float(d_image.sum() / fd_image.sum())
     print(f"{name} {extra}: relative L1 {error:.4f}, sum ratio {ratio:.4f}")
     assert float(fd_image.abs().mean()) > 0.05  # the image does change with the parameter
@@ -215,7 +202,7 @@ def test_shadow_on_plastic_matches_finite_differences(roughness):
         plus, minus = (ep.render(shadow_scene(s * eps * direction, roughness), spp=spp, seed=seed)
                        for s in (0.5, -0.5))
     fd_image = (plus - minus) / eps
-    error, interior_error = relative_l1(d_image, fd_image), relative_l1(interior, fd_image)
+    error, interior_error = C.relative_l1(d_image, fd_image), C.relative_l1(interior, fd_image)
     print(f"relative L1 {error:.4f}, without secondary edges {interior_error:.4f}")
     assert float(fd_image.abs().mean()) > 0.05
     assert error < 0.3

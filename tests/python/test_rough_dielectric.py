@@ -9,24 +9,11 @@ from pathlib import Path
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
 
 SCENE_DIR = Path(__file__).resolve().parent / "mitsuba_refs"
-
-
-def _block_means(image, k):
-    return torch.nn.functional.avg_pool2d(image.permute(2, 0, 1)[None], k)[0].permute(1, 2, 0)
-
-
-def _image_error(image, ref, floor=0.02):
-    """Mitsuba's image metric: err = |x - ref| / max(|ref|, floor); (mean, max)."""
-    err = (image.double() - ref.double()).abs() / ref.double().abs().clamp_min(floor)
-    return float(err.mean()), float(err.max())
-
-
-def relative_l1(a, b):
-    return float((a - b).abs().sum() / b.abs().sum())
 
 
 def test_rough_glass_matches_mitsuba():
@@ -39,7 +26,7 @@ def test_rough_glass_matches_mitsuba():
     ref = ep.imread(SCENE_DIR / "rough_glass.exr")[..., :3].float()
     image = loaded.render(spp=256)
     relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
-    blocks = _image_error(_block_means(image, 4), _block_means(ref, 4))
+    blocks = C.image_error(C.block_means(image, 4), C.block_means(ref, 4), 0.02)
     print("channel means", relative.tolist(), "blocks", blocks)
     assert float(relative.abs().max()) < 0.02
     assert blocks[0] < 0.04 and blocks[1] < 0.4
@@ -99,7 +86,7 @@ def test_rough_glass_derivatives_match_finite_differences(name, value, eps):
         plus, minus = (ep.render(glass_slab_scene(**{name: torch.tensor(value + s * eps)}, size=(5, 5)),
                                  spp=spp, seed=seed, max_bounces=4) for s in (0.5, -0.5))
     fd_image = (plus - minus) / eps
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     ratio = float(d_image.sum() / fd_image.sum())
     print(f"{name}: relative L1 {error:.4f}, sum ratio {ratio:.4f}")
     assert float(fd_image.abs().mean()) > 0.5  # the image does change with the parameter
@@ -124,11 +111,11 @@ def test_occluder_seen_through_rough_glass_matches_finite_differences():
         plus, minus = (ep.render(glass_slab_scene(occluder=s * eps * direction, size=(5, 5)), spp=spp, seed=2,
                                  max_bounces=4) for s in (0.5, -0.5))
     fd_image = (plus - minus) / eps
-    error = relative_l1(d_image, fd_image)
-    print(f"relative L1 {error:.4f}, interior alone {relative_l1(interior, fd_image):.4f}")
+    error = C.relative_l1(d_image, fd_image)
+    print(f"relative L1 {error:.4f}, interior alone {C.relative_l1(interior, fd_image):.4f}")
     assert float(fd_image.abs().mean()) > 0.5
     assert error < 0.3
-    assert relative_l1(interior, fd_image) > 0.9
+    assert C.relative_l1(interior, fd_image) > 0.9
 
 
 def test_inverse_rendering_recovers_a_roughness():

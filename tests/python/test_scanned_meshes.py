@@ -180,16 +180,22 @@ def test_bumpy_smooth_sphere_outline_derivative_matches_finite_differences():
     assert_agrees(*outline_check(scene, vertices, along_x, seeds=6, spp=128, fd_spp=512, eps=2e-3))
 
 
+def side_lit_sphere(albedo):
+    """A smooth sphere of 224 triangles (radius 1, at the origin) and a quad light at x = 3."""
+    v, i, _, n = shapes.sphere(radius=1.0, rings=8, segments=16)
+    sphere = ep.Mesh(vertices=v, indices=i, normals=n,
+                     material=ep.Material(diffuse=torch.full((3,), albedo), specular=0.0))
+    lv, li = shapes.quad([[3, -0.5, -0.5], [3, -0.5, 0.5], [3, 0.5, 0.5], [3, 0.5, -0.5]])
+    light = ep.Mesh(vertices=lv, indices=li, material=ep.Material(diffuse=0.0, specular=0.0),
+                    emission=torch.full((3,), 60.0))
+    return v, sphere, light
+
+
 # A smooth sphere of 224 triangles lit from the side by a quad, the crop on its terminator:
 # 4 seeds x 128 spp against FD 4 x 512, step 2e-3: -209.3 +- 0.3 against -207.3 +- 2.8; without
 # the steps -118.8 +- 0.6.
 def test_terminator_of_a_low_poly_smooth_sphere_matches_finite_differences():
-    v, i, _, n = shapes.sphere(radius=1.0, rings=8, segments=16)
-    sphere = ep.Mesh(vertices=v, indices=i, normals=n,
-                     material=ep.Material(diffuse=torch.full((3,), 0.7), specular=0.0))
-    lv, li = shapes.quad([[3, -0.5, -0.5], [3, -0.5, 0.5], [3, 0.5, 0.5], [3, 0.5, -0.5]])
-    light = ep.Mesh(vertices=lv, indices=li, material=ep.Material(diffuse=0.0, specular=0.0),
-                    emission=torch.full((3,), 60.0))
+    v, sphere, light = side_lit_sphere(0.7)
     camera = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3), fov=40.0,
                        resolution=(48, 48), crop_window=(16, 12, 16, 24))
     scene = ep.Scene(camera=camera, meshes=[sphere, light])
@@ -205,12 +211,7 @@ def test_terminator_of_a_low_poly_smooth_sphere_matches_finite_differences():
 # -768.0 +- 6.1; without the steps (smooth edges sampled from surfaces only where they fold)
 # -696.4 +- 5.5, 9% off.
 def test_terminator_seen_in_a_glossy_floor_matches_finite_differences():
-    v, i, _, n = shapes.sphere(radius=1.0, rings=8, segments=16)
-    sphere = ep.Mesh(vertices=v, indices=i, normals=n,
-                     material=ep.Material(diffuse=torch.full((3,), 0.8), specular=0.0))
-    lv, li = shapes.quad([[3, -0.5, -0.5], [3, -0.5, 0.5], [3, 0.5, 0.5], [3, 0.5, -0.5]])
-    light = ep.Mesh(vertices=lv, indices=li, material=ep.Material(diffuse=0.0, specular=0.0),
-                    emission=torch.full((3,), 60.0))
+    v, sphere, light = side_lit_sphere(0.8)
     fv, fi = shapes.quad([[-6, -1.2, -6], [-6, -1.2, 6], [6, -1.2, 6], [6, -1.2, -6]])
     floor = ep.Mesh(vertices=fv, indices=fi, material=ep.Material(diffuse=0.0, specular=1.0, roughness=0.02))
     camera = ep.Camera(position=torch.tensor([0.0, -0.6, 5.0]), look_at=torch.tensor([0.0, -1.6, 0.0]), fov=40.0,

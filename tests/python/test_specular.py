@@ -14,6 +14,7 @@ from pathlib import Path
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
 
@@ -279,16 +280,6 @@ def test_inverse_rendering_recovers_an_index_of_refraction():
 SCENE_DIR = Path(__file__).resolve().parent / "mitsuba_refs"
 
 
-def _block_means(image, k):
-    return torch.nn.functional.avg_pool2d(image.permute(2, 0, 1)[None], k)[0].permute(1, 2, 0)
-
-
-def _image_error(image, ref, floor=0.02):
-    """Mitsuba's image metric: err = |x - ref| / max(|ref|, floor); (mean, max)."""
-    err = (image.double() - ref.double()).abs() / ref.double().abs().clamp_min(floor)
-    return float(err.mean()), float(err.max())
-
-
 # name: (spp, block size, (error_mean, error_max) of Mitsuba's conformance test with the same
 # kind of light transport: diffuse_albedo_g_i's for indirect light, directly_visible_area_
 # light_radiance's for direct light), applied to the means of k x k blocks of pixels.
@@ -309,9 +300,9 @@ def test_scene_file_matches_mitsuba(name):
     ref = ep.imread(SCENE_DIR / f"{name}.exr")[..., :3].float()
     image = loaded.render(spp=spp)
     relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
-    print(name, "channel means", relative.tolist(), "blocks", _image_error(_block_means(image, k), _block_means(ref, k)))
+    print(name, "channel means", relative.tolist(), "blocks", C.image_error(C.block_means(image, k), C.block_means(ref, k), 0.02))
     assert float(relative.abs().max()) < 0.02
-    mean_err, max_err = _image_error(_block_means(image, k), _block_means(ref, k))
+    mean_err, max_err = C.image_error(C.block_means(image, k), C.block_means(ref, k), 0.02)
     assert mean_err < mean_max and max_err < max_max
 
 

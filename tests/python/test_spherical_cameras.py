@@ -10,6 +10,7 @@ import math
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
 from edgepath.render import flatten_scene, render_flat, render_options
@@ -201,10 +202,6 @@ def surround_scene(camera_type, fov=200.0, resolution=(10, 20), pixel_filter="bo
     return ep.Scene(camera=camera, meshes=meshes, envmap=ep.EnvironmentMap(values=torch.ones(1, 1, 3)))
 
 
-def relative_l1(image, reference):
-    return float((image - reference).abs().sum() / reference.abs().sum())
-
-
 # Relative L1 distance between the derivative image and a central finite difference (both at
 # 1024 spp): the finite difference's own noise is most of it (see the printed figures).
 L1_TOLERANCE = 0.25
@@ -213,10 +210,10 @@ L1_TOLERANCE = 0.25
 def assert_derivative_matches(scene, param, direction, eps, spp=1024):
     d_image = ep.derivative_image(scene, param, direction, spp=spp, seed=1, max_bounces=1)
     fd_image = ep.finite_difference_image(scene, param, direction, eps=eps, spp=spp, seed=2, max_bounces=1)
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     interior = ep.derivative_image(scene, param, direction, spp=spp // 4, seed=1, max_bounces=1,
                                    primary_edges=False)
-    interior_error = relative_l1(interior, fd_image)
+    interior_error = C.relative_l1(interior, fd_image)
     print(f"relative L1 error {error:.3f} (<= {L1_TOLERANCE}); interior term alone {interior_error:.3f}")
     assert float(fd_image.abs().max()) > 0.05, "the finite difference vanishes, nothing is tested"
     assert error <= L1_TOLERANCE
@@ -261,7 +258,7 @@ def test_uniform_edge_sampling_agrees(camera_type):
     importance = ep.derivative_image(scene, vertices, direction, spp=512, seed=1)
     uniform = ep.derivative_image(scene, vertices, direction, spp=512, seed=2, edge_sampling="uniform",
                                   edge_samples=height * width * 2048)
-    error = relative_l1(uniform, importance)
+    error = C.relative_l1(uniform, importance)
     print(f"relative L1 distance {error:.3f}")
     assert error < 0.05
 
@@ -293,12 +290,12 @@ def test_alpha_and_depth_derivatives_match_finite_differences(camera_type):
     fd = ep.finite_difference_channels(scene, vertices, direction, names, eps=0.04, spp=512, seed=2)
     interior = ep.derivative_channels(scene, vertices, direction, names, spp=64, seed=1, primary_edges=False)
     for name in names:
-        error = relative_l1(d[name], fd[name])
+        error = C.relative_l1(d[name], fd[name])
         print(f"{camera_type} {name}: relative L1 error {error:.3f}, interior alone "
-              f"{relative_l1(interior[name], fd[name]):.3f}")
+              f"{C.relative_l1(interior[name], fd[name]):.3f}")
         assert float(fd[name].abs().max()) > 0.05
         assert error <= L1_TOLERANCE
-        assert relative_l1(interior[name], fd[name]) > 2 * L1_TOLERANCE
+        assert C.relative_l1(interior[name], fd[name]) > 2 * L1_TOLERANCE
 
 
 @pytest.mark.parametrize("camera_type,name", [("fisheye", "occluder"), ("fisheye", "fov"),

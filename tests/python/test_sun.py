@@ -72,10 +72,6 @@ def test_shadow_is_where_the_sun_puts_it():
     assert float(row[11:].min()) > 0.95 * lit and float(row[0]) > 0.95 * lit
 
 
-def relative_l1(image, reference):
-    return float((image - reference).abs().sum() / reference.abs().sum())
-
-
 def finite_difference(make, value, eps, spp, seed):
     return (ep.render(make(value + eps / 2), spp=spp, seed=seed) -
             ep.render(make(value - eps / 2), spp=spp, seed=seed)) / eps
@@ -86,7 +82,7 @@ def test_irradiance_derivative_matches_finite_differences():
     scene = sun_scene(irradiance=irradiance)
     d_image = ep.derivative_image(scene, irradiance, torch.ones_like(irradiance), spp=64, seed=1)
     fd_image = finite_difference(lambda x: sun_scene(irradiance=x), 2.0, 0.5, 64, 2)
-    assert relative_l1(d_image, fd_image) < 0.01
+    assert C.relative_l1(d_image, fd_image) < 0.01
 
 
 def assert_occluder_derivative_matches(scene_fn, eps, spp, max_error, min_interior_error):
@@ -102,7 +98,7 @@ def assert_occluder_derivative_matches(scene_fn, eps, spp, max_error, min_interi
     interior = ep.derivative_image(scene, shift, torch.ones_like(shift), spp=spp // 4, seed=1,
                                    secondary_edges=False)
     fd_image = finite_difference(make, 0.0, eps, spp, 2)
-    error, interior_error = relative_l1(d_image, fd_image), relative_l1(interior, fd_image)
+    error, interior_error = C.relative_l1(d_image, fd_image), C.relative_l1(interior, fd_image)
     print(f"relative L1 {error:.3f}; interior term alone {interior_error:.3f}")
     assert error < max_error
     assert interior_error > min_interior_error

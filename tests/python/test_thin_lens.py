@@ -77,9 +77,6 @@ def test_bad_lens_parameters_name_the_field():
 
 # ---- derivative images against finite differences -----------------------------------------
 
-def relative_l1(image, reference):
-    return float((image - reference).abs().sum() / reference.abs().sum())
-
 
 # Derivative and finite-difference images at 2048 spp are compared by their relative L1
 # distance: most of the derivative lies in blurred outlines, where a finite difference with the
@@ -95,10 +92,10 @@ def assert_derivative_matches(scene, param, direction, eps, spp=2048):
     d_image = ep.derivative_image(scene, param, direction, spp=spp, seed=1, max_bounces=1)
     fd_image = ep.finite_difference_image(scene, param, direction, eps=eps, spp=spp, seed=2,
                                           max_bounces=1)
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     interior = ep.derivative_image(scene, param, direction, spp=spp // 4, seed=1, max_bounces=1,
                                    primary_edges=False)
-    interior_error = relative_l1(interior, fd_image)
+    interior_error = C.relative_l1(interior, fd_image)
     print(f"relative L1 error {error:.3f} (<= {L1_TOLERANCE}); interior term alone "
           f"{interior_error:.3f}")
     assert float(fd_image.abs().max()) > 0.05, "the finite difference vanishes, nothing is tested"
@@ -151,7 +148,7 @@ def test_uniform_edge_sampling_agrees():
     importance = ep.derivative_image(scene, vertices, direction, spp=512, seed=1)
     uniform = ep.derivative_image(scene, vertices, direction, spp=512, seed=2,
                                   edge_sampling="uniform", edge_samples=12 * 16 * 2048)
-    error = relative_l1(uniform, importance)
+    error = C.relative_l1(uniform, importance)
     print(f"relative L1 distance {error:.3f}")
     assert error < 0.15
 
