@@ -115,6 +115,19 @@ def relative_l1(image: torch.Tensor, reference: torch.Tensor) -> float:
     return float((image - reference).abs().sum() / reference.abs().sum())
 
 
+def assert_matches_finite_difference(d_image: torch.Tensor, fd_image: torch.Tensor, label: str,
+                                     least_change: float, l1: float = 0.3, sum_tol: float = 0.05) -> None:
+    """A derivative image against a finite difference image: the latter changes (mean |.| above
+    `least_change`), their relative L1 distance is below `l1` and their sums agree within
+    `sum_tol`."""
+    error = relative_l1(d_image, fd_image)
+    ratio = float(d_image.sum() / fd_image.sum())
+    print(f"{label}: relative L1 {error:.4f}, sum ratio {ratio:.4f}")
+    assert float(fd_image.abs().mean()) > least_change  # the image does change with the parameter
+    assert error < l1
+    assert abs(ratio - 1.0) <= sum_tol
+
+
 def error_map(image: torch.Tensor, ref: torch.Tensor, floor: float) -> torch.Tensor:
     """Per-value err = |image - ref| / max(|ref|, floor), shape (H, W, 3)."""
     r = ref.detach().to(torch.float64)
