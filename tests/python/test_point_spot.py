@@ -12,9 +12,10 @@ from pathlib import Path
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
-from test_sun import assert_occluder_derivative_matches, relative_l1
+from test_sun import assert_occluder_derivative_matches
 
 SCENE_DIR = Path(__file__).resolve().parent / "mitsuba_refs"
 ALBEDO = 0.5
@@ -150,7 +151,7 @@ def test_delta_light_derivatives_match_finite_differences(name, make, value, dir
     (beam), 0.000 (point light's position); with the steps 4 times as large, 0.7 to 2.3 times
     those, the finite differences' own error."""
     d_image, fd_image = derivative_and_fd(lambda x: make(x, 0.0), value, direction, eps, 64)
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     print(f"{name}: relative L1 {error:.4f}")
     assert error < 0.01
 
@@ -161,7 +162,7 @@ def test_spot_sphere_derivatives_match_finite_differences(name, make, value, dir
     """Radius 0.05: the intensity's and the profile's derivatives through the emission the
     light samples see (measured relative L1: 0.000, 0.005, 0.005, 0.004)."""
     d_image, fd_image = derivative_and_fd(lambda x: make(x, 0.05), value, direction, eps, 64)
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     print(f"{name}: relative L1 {error:.4f}")
     assert error < 0.015
 
@@ -311,7 +312,7 @@ def test_profile_seen_by_the_camera_follows_the_camera_rays():
                            fov=60.0)
         return ep.Scene(camera=camera, meshes=[wall])
     d_image, fd_image = derivative_and_fd(make, [0.0, 0.0, 0.0], [0.5, 0.2, 0.0], 0.01, 16)
-    error = relative_l1(d_image, fd_image)
+    error = C.relative_l1(d_image, fd_image)
     print(f"relative L1 {error:.4f}")
     assert float(fd_image.abs().sum()) > 100 and error < 0.01
 
@@ -346,4 +347,4 @@ def test_point_lights_only_where_the_path_scatters(max_bounces):
     d_image = ep.derivative_image(make(intensity), intensity, torch.ones_like(intensity), spp=16,
                                   seed=2, max_bounces=max_bounces)
     image = ep.render(make(4.0), spp=16, seed=2, max_bounces=max_bounces)
-    assert relative_l1(d_image, image / 4.0) < 1e-4
+    assert C.relative_l1(d_image, image / 4.0) < 1e-4

@@ -10,9 +10,10 @@ import math
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
-from test_sun import assert_occluder_derivative_matches, finite_difference, relative_l1
+from test_sun import assert_occluder_derivative_matches, finite_difference
 
 
 def light_scene(position=(0.3, 2.0, 0.0), intensity=4.0, radius=0.1, occluder=(0.0, 0.0, 0.0),
@@ -48,7 +49,7 @@ def test_intensity_derivative_matches_finite_differences():
     d_image = ep.derivative_image(light_scene(intensity=intensity), intensity,
                                   torch.ones_like(intensity), spp=16, seed=2)
     fd_image = finite_difference(lambda x: light_scene(intensity=x), 4.0, 1.0, 16, 2)
-    assert relative_l1(d_image, fd_image) < 1e-3
+    assert C.relative_l1(d_image, fd_image) < 1e-3
 
 
 def test_occluder_derivative_matches_finite_differences():

@@ -7,9 +7,10 @@ image against finite differences, and the option's check."""
 import pytest
 import torch
 
+import conformance as C
 import edgepath as ep
 from edgepath import shapes
-from test_sun import assert_occluder_derivative_matches, relative_l1
+from test_sun import assert_occluder_derivative_matches
 
 
 def lamp_scene(light_sampling="spherical_triangle", occluder=(0.0, 0.0, 0.0), emission=2.0,
@@ -69,7 +70,7 @@ def test_emission_derivative_matches_finite_differences():
                                   torch.ones_like(emission), spp=16, seed=2)
     fd_image = (ep.render(lamp_scene(emission=2.5), spp=16, seed=2) -
                 ep.render(lamp_scene(emission=1.5), spp=16, seed=2))
-    assert relative_l1(d_image, fd_image) < 1e-3
+    assert C.relative_l1(d_image, fd_image) < 1e-3
 
 
 def test_occluder_derivative_matches_finite_differences():
