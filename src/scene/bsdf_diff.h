@@ -77,29 +77,64 @@ template <class T> void d_smith_g1(T c, T ch, T a, T dG, T& dc, T& da) {
     dc += dt2 * (-2 / (c * c * c));
 }
 
-// The specular lobe's value F * S at (wo, wi) and its intermediates (the adjoint reuses them).
-// False where the half vector vanishes (the lobe is then zero).
+// The GGX microfacet reflection at (wo, wi) without its Fresnel factor, S = D Go Gi / (4 co),
+// and its intermediates (the adjoint reuses them). False where the half vector vanishes.
 template <class T>
-struct GgxTerms {
-    TVec3<T> h, F;
-    T hl, ch, oh, D, Go, Gi, m, m5, S;
+struct GgxGeometry {
+    TVec3<T> h;
+    T hl, ch, oh, D, Go, Gi, S;
 };
 template <class T>
-bool ggx_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci,
-               GgxTerms<T>& g) {
-    TVec3<T> H = wo + wi;
+bool ggx_geometry(T alpha, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci, GgxGeometry<T>& g) {
+    const TVec3<T> H = wo + wi;
     g.hl = length(H);
     if (!(g.hl > 0)) return false;
     g.h = H / g.hl;
     g.ch = dot(n, g.h);
     g.oh = dot(wo, g.h);
-    g.D = ggx_d(g.ch, p.alpha);
-    g.Go = smith_g1(co, g.oh, p.alpha);
-    g.Gi = smith_g1(ci, g.oh, p.alpha);
+    g.D = ggx_d(g.ch, alpha);
+    g.Go = smith_g1(co, g.oh, alpha);
+    g.Gi = smith_g1(ci, g.oh, alpha);
+    g.S = g.D * g.Go * g.Gi / (4 * co);
+    return true;
+}
+// Adds the adjoint of ggx_geometry, given the adjoints of S and of oh (through a Fresnel factor),
+// to dalpha, dn, dwo, dwi, dco, dci.
+template <class T>
+void d_ggx_geometry(T alpha, const TVec3<T>& n, const TVec3<T>& wo, T co, T ci, const GgxGeometry<T>& g, T dS, T doh,
+                    T& dalpha, TVec3<T>& dn, TVec3<T>& dwo, TVec3<T>& dwi, T& dco, T& dci) {
+    // S = D Go Gi / (4 co)
+    const T dD = dS * g.Go * g.Gi / (4 * co);
+    const T dGo = dS * g.D * g.Gi / (4 * co);
+    const T dGi = dS * g.D * g.Go / (4 * co);
+    dco += -dS * g.S / co;
+    T dch = 0;
+    d_ggx_d(g.ch, alpha, dD, dch, dalpha);
+    d_smith_g1(co, g.oh, alpha, dGo, dco, dalpha);
+    d_smith_g1(ci, g.oh, alpha, dGi, dci, dalpha);
+    // ch = n . h, oh = wo . h, h = H / |H|, H = wo + wi
+    const TVec3<T> dh = n * dch + wo * doh;
+    dn += g.h * dch;
+    dwo += g.h * doh;
+    const TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
+    dwo += dH;
+    dwi += dH;
+}
+
+// The specular lobe's value F * S at (wo, wi), F Schlick's (the adjoint reuses the terms).
+// False where the half vector vanishes (the lobe is then zero).
+template <class T>
+struct GgxTerms : GgxGeometry<T> {
+    TVec3<T> F;
+    T m, m5;
+};
+template <class T>
+bool ggx_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci,
+               GgxTerms<T>& g) {
+    if (!ggx_geometry(p.alpha, n, wo, wi, co, ci, g)) return false;
     g.m = std::clamp(1 - g.oh, T(0), T(1));
     g.m5 = g.m * g.m * g.m * g.m * g.m;
     g.F = p.specular + (TVec3<T>(T(1)) - p.specular) * g.m5;
-    g.S = g.D * g.Go * g.Gi / (4 * co);
     return true;
 }
 
@@ -274,9 +309,9 @@ template <class T>
 struct PlasticTerms {
     T to, ti, k;
     TVec3<T> den, diff;
-    bool spec = false;  // the rough coating's lobe
-    TVec3<T> h;
-    T hl, ch, oh, D, Go, Gi, F, S;
+    bool spec = false;  // the rough coating's lobe: F g.S
+    GgxGeometry<T> g;
+    T F;
 };
 template <class T>
 TVec3<T> plastic_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co,
@@ -293,19 +328,10 @@ TVec3<T> plastic_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T
     t.spec = false;
     if (tab.smooth || is_black(p.specular)) return result;
     // specular: ks F(oh) D Go Gi / (4 co)
-    const TVec3<T> H = wo + wi;
-    t.hl = length(H);
-    if (!(t.hl > 0)) return result;
+    if (!ggx_geometry(p.alpha, n, wo, wi, co, ci, t.g)) return result;
     t.spec = true;
-    t.h = H / t.hl;
-    t.ch = dot(n, t.h);
-    t.oh = dot(wo, t.h);
-    t.D = ggx_d(t.ch, p.alpha);
-    t.Go = smith_g1(co, t.oh, p.alpha);
-    t.Gi = smith_g1(ci, t.oh, p.alpha);
-    t.F = t.oh > 0 ? fresnel_dielectric(t.oh, p.eta) : T(0);
-    t.S = t.F * t.D * t.Go * t.Gi / (4 * co);
-    return result + p.specular * t.S;
+    t.F = t.g.oh > 0 ? fresnel_dielectric(t.g.oh, p.eta) : T(0);
+    return result + p.specular * (t.F * t.g.S);
 }
 
 // Adds the adjoint of plastic_terms (output adjoint dr) to d, and to dn / dco / dci.
@@ -338,24 +364,12 @@ void d_plastic(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, c
     dci += dk * t.to * t.ti * g;
     d.eta += dk * t.k * T(-2) / p.eta;
     if (!t.spec) return;
-    // result += ks S, S = F D Go Gi / (4 co)
-    d.specular += dr * t.S;
-    const T dS = dot(dr, p.specular), q = dS / (4 * co);
-    const T dF = q * t.D * t.Go * t.Gi, dD = q * t.F * t.Go * t.Gi;
-    const T dGo = q * t.F * t.D * t.Gi, dGi = q * t.F * t.D * t.Go;
-    dco += -dS * t.S / co;
-    T doh = 0, dch = 0;
-    if (t.oh > 0) d_fresnel_dielectric(t.oh, p.eta, dF, doh, d.eta);
-    d_ggx_d(t.ch, p.alpha, dD, dch, d.alpha);
-    d_smith_g1(co, t.oh, p.alpha, dGo, dco, d.alpha);
-    d_smith_g1(ci, t.oh, p.alpha, dGi, dci, d.alpha);
-    // ch = n . h, oh = wo . h, h = H / |H|, H = wo + wi
-    const TVec3<T> dh = n * dch + wo * doh;
-    dn += t.h * dch;
-    d.wo += t.h * doh;
-    const TVec3<T> dH = (dh - t.h * dot(t.h, dh)) / t.hl;
-    d.wo += dH;
-    d.wi += dH;
+    // result += ks F g.S
+    d.specular += dr * (t.F * t.g.S);
+    const T dFS = dot(dr, p.specular);
+    T doh = 0;
+    if (t.g.oh > 0) d_fresnel_dielectric(t.g.oh, p.eta, dFS * t.g.S, doh, d.eta);
+    d_ggx_geometry(p.alpha, n, wo, co, ci, t.g, dFS * t.F, doh, d.alpha, dn, d.wo, d.wi, dco, dci);
 }
 }  // namespace detail
 
@@ -451,24 +465,7 @@ void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, 
             d.specular += dF * (1 - g.m5);
             T m4 = g.m * g.m * g.m * g.m;
             T dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : T(0);
-            T doh = -dm;
-            // S = D Go Gi / (4 co)
-            T dD = dS * g.Go * g.Gi / (4 * co);
-            T dGo = dS * g.D * g.Gi / (4 * co);
-            T dGi = dS * g.D * g.Go / (4 * co);
-            dco += -dS * g.S / co;
-            T dch = 0;
-            detail::d_ggx_d(g.ch, p.alpha, dD, dch, d.alpha);
-            detail::d_smith_g1(co, g.oh, p.alpha, dGo, dco, d.alpha);
-            detail::d_smith_g1(ci, g.oh, p.alpha, dGi, dci, d.alpha);
-            // ch = n.h, oh = wo.h
-            TVec3<T> dh = n * dch + wo * doh;
-            dn += g.h * dch;
-            d.wo += g.h * doh;
-            // h = H / |H|, H = wo + wi
-            TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
-            d.wo += dH;
-            d.wi += dH;
+            detail::d_ggx_geometry(p.alpha, n, wo, co, ci, g, dS, -dm, d.alpha, dn, d.wo, d.wi, dco, dci);
         }
     }
     // co = n.wo, ci = n.wi
