@@ -224,11 +224,6 @@ TBsdfParams<float> bsdf_params_world(const Scene& scene, const SurfacePoint& sp)
     return world_params(scene.bsdf_params(sp));
 }
 
-DeltaParams<float> delta_params(const TBsdfParams<float>& p) {
-    return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided,
-                              p.kind == MaterialKind::Plastic};
-}
-
 // The throughput factor T of vertex r's continuation (beta after = beta T), at the shading
 // normal ns: f / pdf, or a smooth material's weight.
 Vec3f continuation_weight(const TBsdfParams<float>& bp, const Vec3f& ns, const PathVertexRecord& r) {

@@ -64,14 +64,12 @@ void calibrate_survival(const Scene& scene, const RenderOptions& opt, const Scen
                 a = Vec3f(ap[0], ap[1], ap[2]);
                 if (is_black(a)) continue;
             }
-            const uint64_t pixel = film_pixel_index(scene, x, y);
-            Rng rng = Rng::for_sample(seed, pixel, 0);
-            rec.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, rng);
-            rec.lens = sample_lens_point(scene, rng);
-            if (!scene.camera.sees(rec.film.x, rec.film.y)) continue;
-            rec.stream = mix64(seed ^ pixel);
-            const Ray ray = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
-            trace_path(scene, opt, ray, rng, counters, &rec, nullptr);
+            CameraSample c = camera_sample(scene, seed, x, y, 0);
+            if (c.outside) continue;
+            rec.film = c.film;
+            rec.lens = c.lens;
+            rec.stream = mix64(seed ^ c.pixel);
+            trace_path(scene, opt, c.ray, c.rng, counters, &rec, nullptr);
             if (rec.camera_missed) continue;
             log.replaying = false;
             backprop_path(scene, slots, rec, a, discard, &secondary, &log);

@@ -45,6 +45,22 @@ struct CameraSample {
     bool outside = false;  // the film point lies outside a fisheye's image circle: black, not traced
 };
 
+// Camera sample s of output pixel (x, y) with the random numbers of Rng::for_sample(seed,
+// pixel, s): its film and lens points and its ray (first not yet found).
+inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int y, int s) {
+    CameraSample c;
+    c.s = s;
+    c.x = x;
+    c.y = y;
+    c.pixel = film_pixel_index(scene, x, y);
+    c.rng = Rng::for_sample(seed, c.pixel, uint64_t(s));
+    c.film = sample_film_point(scene, x + scene.crop_x, y + scene.crop_y, c.rng);
+    c.lens = sample_lens_point(scene, c.rng);
+    c.ray = scene.camera.generate_ray(c.film.x, c.film.y, c.lens.x, c.lens.y);
+    c.outside = !scene.camera.sees(c.film.x, c.film.y);
+    return c;
+}
+
 // Calls fn(sample) for every camera sample of the output pixels [x0, x1) x [y0, y1), in order
 // (rows, pixels, samples), with the random numbers of Rng::for_sample(opt.seed, pixel, s) and the
 // first hits traced in packets (with opt.hide_emitters, past the emitters, as first_hit
@@ -63,17 +79,9 @@ bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0
         const int n = int(std::min<int64_t>(kPacketSize, count - begin));
         for (int i = 0; i < n; ++i) {
             const int64_t k = begin + i, p = k / spp;
-            CameraSample& c = batch[i];
-            c.s = int(k - p * spp);
-            c.x = x0 + int(p % width);
-            c.y = y0 + int(p / width);
-            c.pixel = film_pixel_index(scene, c.x, c.y);
-            c.rng = Rng::for_sample(opt.seed, c.pixel, uint64_t(c.s));
-            c.film = sample_film_point(scene, c.x + scene.crop_x, c.y + scene.crop_y, c.rng);
-            c.lens = sample_lens_point(scene, c.rng);
-            c.ray = rays[i] = scene.camera.generate_ray(c.film.x, c.film.y, c.lens.x, c.lens.y);
-            c.outside = !scene.camera.sees(c.film.x, c.film.y);
-            if (c.outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
+            batch[i] = camera_sample(scene, opt.seed, x0 + int(p % width), y0 + int(p / width), int(k - p * spp));
+            rays[i] = batch[i].ray;
+            if (batch[i].outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
         }
         intersect_packet(scene, rays, n, first);
         for (int i = 0; i < n; ++i) {

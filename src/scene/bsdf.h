@@ -35,7 +35,9 @@ struct BsdfParams {
 inline bool is_delta(const BsdfParams& p) { return is_delta_kind(p.kind, p.rough); }
 inline bool is_rough_dielectric(const BsdfParams& p) { return p.kind == MaterialKind::Dielectric && p.rough; }
 
-inline DeltaParams<float> delta_params(const BsdfParams& p) {
+// The smooth-scattering parameters of a material's values (BsdfParams or TBsdfParams<float>).
+template <class Params>
+DeltaParams<float> delta_params(const Params& p) {
     return DeltaParams<float>{p.specular, p.eta, p.kind == MaterialKind::Dielectric, p.two_sided,
                               p.kind == MaterialKind::Plastic};
 }
