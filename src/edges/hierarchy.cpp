@@ -687,26 +687,15 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     }
 }
 
-const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t index, Coarse& scratch) const {
-    if (q.memo) {
-        bool found;
-        if (Coarse* c = q.memo->lookup(index, found)) {
-            if (!found) coarse(q, nodes_[size_t(index)], *c);
-            return *c;
-        }
-    }
-    coarse(q, nodes_[size_t(index)], scratch);
-    return scratch;
-}
-
 void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
     const Node& n = nodes_[size_t(index)];
+    // The memo's entry for the node (claimed now when new: written below, before anything under
+    // the node claims entries of its own), or none.
+    bool found = false;
+    Coarse* const kept = q.memo ? q.memo->lookup(index, found) : nullptr;
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).
-        // (The entry is claimed before the leaves fill other entries: it is written below.)
-        bool found = false;
-        Coarse* kept = q.memo ? q.memo->lookup(index, found) : nullptr;
         if (found) {
             out[0] = kept->value[0];
             out[1] = kept->value[1];
@@ -724,8 +713,14 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         return;
     }
     Coarse scratch;
-    const Coarse& c = coarse_memo(q, index, scratch);
-    if (c.inside && refine > 0) {
+    const Coarse* c = kept;
+    if (!kept) {
+        coarse(q, n, scratch);
+        c = &scratch;
+    } else if (!found) {
+        coarse(q, n, *kept);
+    }
+    if (c->inside && refine > 0) {
         // p inside the bounding sphere: the children's bounds are tighter (a few levels down).
         float a[2], b[2];
         importance(q, n.left, a, refine - 1, light_refine);
@@ -734,36 +729,15 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         out[1] = a[1] + b[1];
         return;
     }
-    out[0] = c.value[0];
-    out[1] = c.value[1];
-    if (c.narrow && light_refine > 0) {
+    out[0] = c->value[0];
+    out[1] = c->value[1];
+    if (c->narrow && light_refine > 0) {
         // The node's share of a narrow light cone, by its children (summed, a few levels down):
         // descents then rarely end where nothing contributes.
         float a[2], b[2];
         importance(q, n.left, a, 0, light_refine - 1);
         importance(q, n.right, b, 0, light_refine - 1);
         out[1] = a[1] + b[1];
-    }
-}
-
-EdgeHierarchy::Coarse* EdgeHierarchy::Memo::lookup(int32_t node, bool& found) {
-    // One probe sequence for find() and then insert(): insert() takes the first entry find()
-    // stops at.
-    for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
-        Entry& e = entries_[h];
-        if (e.stamp == stamp_) {
-            if (e.node == node) {
-                found = true;
-                return &e.value;
-            }
-            continue;
-        }
-        found = false;
-        if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
-        e.stamp = stamp_;
-        e.node = node;
-        ++used_;
-        return &e.value;
     }
 }
 

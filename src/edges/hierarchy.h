@@ -177,8 +177,26 @@ public:
         void reset();
         const Coarse* find(int32_t node) const;
         Coarse* insert(int32_t node);  // nullptr when full
-        // find(), or else insert() (found false; nullptr when full), in one probe sequence.
-        Coarse* lookup(int32_t node, bool& found);
+        // find(), or else insert() (found false; nullptr when full), in one probe sequence:
+        // insert() takes the first entry find() stops at.
+        Coarse* lookup(int32_t node, bool& found) {
+            for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
+                Entry& e = entries_[h];
+                if (e.stamp == stamp_) {
+                    if (e.node == node) {
+                        found = true;
+                        return &e.value;
+                    }
+                    continue;
+                }
+                found = false;
+                if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
+                e.stamp = stamp_;
+                e.node = node;
+                ++used_;
+                return &e.value;
+            }
+        }
 
     private:
         static constexpr uint32_t kSize = 1024;  // a power of two
@@ -195,8 +213,6 @@ public:
 
 private:
     void coarse(const Query& q, const Node& n, Coarse& out) const;
-    // The memo's entry, or `scratch` filled in.
-    const Coarse& coarse_memo(const Query& q, int32_t index, Coarse& scratch) const;
     // Node `index`'s importance under both strategies: its own bounds, or its children's where
     // they are tighter, or for a subtree of at most kExactLeaves edges the sum of its leaves.
     // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
