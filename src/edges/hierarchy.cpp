@@ -687,12 +687,23 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     }
 }
 
-void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
-    const Node& n = nodes_[size_t(index)];
-    // The memo's entry for the node (claimed now when new: written below, before anything under
-    // the node claims entries of its own), or none.
+// The memo's entry of a node scored by its own bounds needs no more work where neither the
+// refinement of a node whose sphere holds p nor that of a narrow light cone applies; a small
+// subtree's entry (its leaves' sum) keeps both flags false. Then no node is read at all.
+inline void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
     bool found = false;
     Coarse* const kept = q.memo ? q.memo->lookup(index, found) : nullptr;
+    if (found && !(kept->inside && refine > 0) && !(kept->narrow && light_refine > 0)) {
+        out[0] = kept->value[0];
+        out[1] = kept->value[1];
+        return;
+    }
+    importance_of(q, index, kept, found, out, refine, light_refine);
+}
+
+void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
+                                  int light_refine) const {
+    const Node& n = nodes_[size_t(index)];
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).
@@ -709,6 +720,7 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         if (kept) {
             kept->value[0] = out[0];
             kept->value[1] = out[1];
+            kept->inside = kept->narrow = false;
         }
         return;
     }

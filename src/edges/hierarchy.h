@@ -218,6 +218,9 @@ private:
     // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
     // children scoring its share of a narrow light cone.
     void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
+    // The same, past the memo's entry (`kept`, or null; `found`: it held the node already).
+    void importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
+                       int light_refine) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).
