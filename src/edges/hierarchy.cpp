@@ -565,11 +565,6 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         }
     }
     const Vec3f v = n.center - q.p;
-    const float dc2 = length_squared(v), r2 = n.radius * n.radius;
-    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
-    // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
-    // would be infinite for boxes that hold p).
-    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
     // Nothing above the tangent plane (the BSDF's support, n on the side of wo): no light
     // through the node's edges reaches p (edges in the plane itself are seen at grazing angles,
     // where the cosine vanishes).
@@ -579,6 +574,11 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         const Vec3f ea = n.a - q.p, eb = n.b - q.p;
         if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
     }
+    const float dc2 = length_squared(v), r2 = n.radius * n.radius;
+    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
+    // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
+    // would be infinite for boxes that hold p).
+    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
     if (!(dc2 > r2)) {
         // p inside the bounding sphere: every direction; the lobe's peak. (importance() scores
         // such a node by its children instead, a few levels down: their bounds are tighter.)
