@@ -171,6 +171,7 @@ struct EdgeHierarchy::Input {
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             p0[i] = m.vertex(e.v0);
             p1[i] = m.vertex(e.v1);
+            if (e.flat) p0[i] = p1[i] = (p0[i] + p1[i]) * 0.5f;  // an empty leaf (Edge::flat): never sampled
             always[i] = e.kind != EdgeKind::Smooth;
             // An edge between faces that are black seen from behind (a one-sided material, no
             // emission from the back): from a point behind both, either side of it looks black
@@ -516,7 +517,8 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
             // The edge as the scene has it now (not as the leaf kept it).
             const Edge& e = all[size_t(id)];
             const Mesh& m = scene.meshes[size_t(e.mesh)];
-            const Vec3f a = m.vertex(e.v0), b = m.vertex(e.v1);
+            Vec3f a = m.vertex(e.v0), b = m.vertex(e.v1);
+            if (e.flat) a = b = (a + b) * 0.5f;  // an empty leaf
             total += length(b - a);
             for (const Vec3f& x : {a, b}) {
                 for (int c = 0; c < 3; ++c)
