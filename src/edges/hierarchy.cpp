@@ -548,6 +548,7 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
 // about a fifth of this function's time.
 void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
+    if (!(n.length > 0.f)) return;  // empty leaves only (Edge::flat): nothing to sample
     const bool leaf = n.left < 0;
     // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
     // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
@@ -703,6 +704,10 @@ const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t 
 
 void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
     const Node& n = nodes_[size_t(index)];
+    if (!(n.length > 0.f)) {  // empty leaves only (Edge::flat): never descended into
+        out[0] = out[1] = 0.f;
+        return;
+    }
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).

@@ -744,5 +744,50 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     expect_fresh(flags, d);
 }
 
+// A moving scene's flat edges (Edge::flat) are empty leaves: never sampled, zero probability
+// under both strategies, and every probability of the others finite.
+TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
+    HierarchyScene hs;
+    SceneDesc d = hs.matte.desc();
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    const std::shared_ptr<Scene> scene = build_moved(d);
+    std::vector<int32_t> ids;
+    int flat = 0;
+    for (size_t i = 0; i < scene->edges().size(); ++i) {
+        ids.push_back(int32_t(i));
+        flat += scene->edges()[i].flat;
+    }
+    ASSERT_GT(flat, 0);
+    EdgeHierarchy h;
+    h.build(*scene, ids);
+    EXPECT_EQ(h.check_bounds(*scene, 1e-5f), -1);
+    Rng rng(5, 2);
+    int sampled = 0;
+    for (int i = 0; i < 200; ++i) {
+        EdgeHierarchy::Query q;
+        q.p = Vec3f(4.f * rng.next_float() - 2.f, 0.05f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
+        BoundsCone cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
+        q.cone = &cone;
+        q.direct_only = i % 2 == 0;
+        for (EdgeHierarchy::Strategy s : {EdgeHierarchy::All, EdgeHierarchy::Lights}) {
+            EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+            const int n = h.sample(q, s, rng.next_float(), c);
+            for (int j = 0; j < n; ++j) {
+                EXPECT_FALSE(scene->edges()[size_t(c[j].edge)].flat) << "edge " << c[j].edge;
+                EXPECT_TRUE(std::isfinite(c[j].prob[0]) && std::isfinite(c[j].prob[1]));
+                ++sampled;
+            }
+        }
+        for (size_t e = 0; e < scene->edges().size(); ++e)
+            if (scene->edges()[e].flat) {
+                const EdgeHierarchy::Choice c = h.pdf(q, int32_t(e));
+                ASSERT_EQ(c.prob[0], 0.f);
+                ASSERT_EQ(c.prob[1], 0.f);
+            }
+    }
+    EXPECT_GT(sampled, 100);
+}
+
 }  // namespace
 }  // namespace edgepath
