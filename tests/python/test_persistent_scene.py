@@ -304,7 +304,10 @@ def test_moves_that_turn_an_edge_flat_and_back_refit_the_edge_hierarchy():
     diagonal), a box on it under a lamp. A scene kept across vertex steps keeps the diagonal
     (flat when the faces are one plane: an empty leaf of its edge hierarchy), so its edge list is
     the same at every step and each step refits the hierarchy, as it refits the BVH; before, a
-    step that turned the diagonal flat or back rebuilt the hierarchy. The refit hierarchy gives
+    step that turned the diagonal flat or back changed the edge list (here, back and forth
+    between two lists, it took the other of the two trees the scene keeps, not refit to the
+    new positions; test_a_finely_tessellated_sphere_scaled_by_rounding_refits: rebuilt). The
+    refit hierarchy gives
     what a scene built afresh in the same form at those positions gives, bit for bit (the lift
     is too small to change a split), and so does a twin with the same history."""
     box_v, box_i = ep.shapes.box(center=(0.3, 0.5, 0.2), half=(0.4, 0.5, 0.4))
@@ -342,6 +345,62 @@ def test_moves_that_turn_an_edge_flat_and_back_refit_the_edge_hierarchy():
     assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 0, "refits": 4, "reuses": 0}
     after = scene.build_counts()
     assert {k: after[k] - builds[k] for k in after} == {"builds": 0, "refits": 4, "reuses": 4}
+
+
+def flat_pairs(vertices, indices):
+    """Per pair of faces sharing an edge (welded by position, in a fixed order), whether the
+    core takes them for one plane: within 1e-5 rad, in double precision from the float corners
+    (scene/edges.cpp, nearly_coplanar)."""
+    v = vertices.detach()
+    _, weld = torch.unique(v, dim=0, return_inverse=True)
+    idx = indices.long()
+    t = v.double()[idx]
+    n = torch.linalg.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    a, b = weld[idx], weld[idx].roll(-1, dims=1)
+    lo, hi = torch.minimum(a, b).reshape(-1), torch.maximum(a, b).reshape(-1)
+    face = torch.arange(idx.shape[0]).repeat_interleave(3)
+    ok = (lo != hi) & (n.norm(dim=1) > 0).repeat_interleave(3)
+    key, face = (lo * (int(weld.max()) + 1) + hi)[ok], face[ok]
+    key, order = torch.sort(key, stable=True)
+    face = face[order]
+    pair = key[1:] == key[:-1]
+    f0, f1 = face[:-1][pair], face[1:][pair]
+    c = (n[f0] * n[f1]).sum(dim=1)
+    return (c > 0) & (torch.linalg.cross(n[f0], n[f1]).norm(dim=1) <= 1e-5 * c)
+
+
+def test_a_finely_tessellated_sphere_scaled_by_rounding_refits():
+    """bench/persist.py's vertex step on a smaller sphere (112 rings, 25k triangles): scaled in
+    place by 1 + 1e-4 and 1 - 1e-4 in turn, its planar quads' diagonals cross the coplanar bound
+    by rounding (checked: the faces' pairs taken for one plane change between steps), which
+    rebuilt the edge hierarchy at those steps; the kept scene's edge list now keeps them (flat),
+    so every step after the first move refits the hierarchy and the BVH."""
+    v, i = ep.shapes.sphere(radius=1.0, rings=112, segments=112)[:2]
+    floor_v, floor_i = ep.shapes.quad([[-4, -1, -4], [-4, -1, 4], [4, -1, 4], [4, -1, -4]])
+    lamp_v, lamp_i = ep.shapes.quad([[-1, 4, -1], [1, 4, -1], [1, 4, 1], [-1, 4, 1]])
+    sphere = ep.Mesh(v.clone().requires_grad_(), i, material=ep.Material(diffuse=0.5))
+    meshes = [sphere, ep.Mesh(floor_v, floor_i), ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([8.0, 8.0, 7.0]))]
+    pixel = ep.Camera(position=torch.tensor([0.0, 1.5, 3.5]), look_at=torch.zeros(3), fov=45.0,
+                      resolution=(64, 64), crop_window=(32, 32, 1, 1))
+    scene = ep.Scene(pixel, meshes)
+
+    def step(k):
+        with torch.no_grad():
+            sphere.vertices.mul_(1.0 + 1e-4 * (-1) ** k)
+        (g,) = torch.autograd.grad(ep.render(scene, spp=1).sum(), [sphere.vertices])
+        return flat_pairs(sphere.vertices, i)
+
+    step(0)  # built
+    flats = [step(1)]  # the first move: built in the moving form
+    builds, hierarchy = scene.build_counts(), scene.edge_hierarchy_counts()
+    for k in range(2, 8):
+        flats.append(step(k))
+    changed = sum(int((a != b).sum()) for a, b in zip(flats, flats[1:]))
+    assert changed > 0, "the steps should turn some diagonals flat or back"
+    after = scene.edge_hierarchy_counts()
+    assert {key: after[key] - hierarchy[key] for key in after} == {"builds": 0, "refits": 6, "reuses": 0}
+    after = scene.build_counts()
+    assert {key: after[key] - builds[key] for key in after} == {"builds": 0, "refits": 6, "reuses": 6}
 
 
 def test_never_stale():
