@@ -60,6 +60,8 @@ _twins = {}
 # The vertices each kept scene was first rendered with, and whether they have moved since.
 _first_vertices = {}
 _moved = {}
+# Whether the kept scene's edge hierarchy was refit since it was last built.
+_refit = {}
 
 
 def geometric(scene):
@@ -70,14 +72,16 @@ def geometric(scene):
 
 
 def assert_same_as_fresh(scene):
-    """The image and the gradients equal those of a fresh scene, bit for bit; except once the
-    kept scene's vertices have moved: its edge list then keeps the nearly flat edges (empty
-    leaves of its edge hierarchy, so that moves refit the tree), and a refit tree keeps the
-    splits of the positions it was built at, so it samples the edges seen from path vertices
-    with other (still valid) probabilities than a fresh build; the gradients of the camera and
-    the vertices, which those edge samples reach, equal those of the twin (the same history)
+    """The image and the gradients equal those of a fresh scene, bit for bit. Once the kept
+    scene's vertices have moved, its edge list keeps the nearly flat edges (empty leaves of its
+    edge hierarchy, so that moves refit the tree): the gradients of the camera and the vertices,
+    which the secondary edge samples reach, then equal those of a scene built afresh in that
+    form (moving_form: built elsewhere, then moved here), not of a plain fresh scene. And where
+    the kept hierarchy was refit since it was built (only vertices moved), a refit tree keeps
+    the splits of the positions it was built at, so it samples those edges with other (still
+    valid) probabilities than a fresh build: those gradients equal the twin's (the same history)
     instead. The other gradients do not see those samples (their random numbers are apart) and
-    still equal the fresh scene's. (The refit tree itself is checked against a fresh build in
+    always equal the fresh scene's. (The refit tree itself is checked against a fresh build in
     tests/cpp/test_hierarchy.cpp and test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike
     below.)"""
     twin = _twins.setdefault(id(scene), fresh(scene))
@@ -86,17 +90,30 @@ def assert_same_as_fresh(scene):
     first = _first_vertices.setdefault(id(scene), vertices)
     if len(first) != len(vertices) or any(not torch.equal(a, b) for a, b in zip(first, vertices)):
         _moved[id(scene)] = True
+    before = scene.edge_hierarchy_counts()
     image, grads = image_and_gradients(scene)
+    after = scene.edge_hierarchy_counts()
+    if after["builds"] > before["builds"]:
+        _refit[id(scene)] = False
+    elif after["refits"] > before["refits"]:
+        _refit[id(scene)] = True
     image_twin, grads_twin = image_and_gradients(twin)
     image_fresh, grads_fresh = image_and_gradients(fresh(scene))
+    moved, refit = _moved.get(id(scene), False), _refit.get(id(scene), False)
+    if moved:
+        image_form, grads_form = image_and_gradients(moving_form(scene, [v * 0.5 for v in vertices]))
+        assert torch.equal(image, image_form)
     assert torch.equal(image, image_fresh)
     assert torch.equal(image, image_twin)
     assert len(grads) == len(grads_fresh) == len(grads_twin)
-    moved = _moved.get(id(scene), False)
-    for g, h, t, moves in zip(grads, grads_fresh, grads_twin, geometric(scene)):
+    for k, (g, h, t, moves) in enumerate(zip(grads, grads_fresh, grads_twin, geometric(scene))):
         assert torch.equal(g, t)
-        if not (moved and moves):
+        if not moves:
             assert torch.equal(g, h)
+        elif not moved:
+            assert torch.equal(g, h)
+        elif not refit:
+            assert torch.equal(g, grads_form[k])
 
 
 def counts_after(scene, change):
