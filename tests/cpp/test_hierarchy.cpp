@@ -745,7 +745,7 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
 }
 
 // A moving scene's flat edges (Edge::flat) are empty leaves: never sampled, zero probability
-// under both strategies, and every probability of the others finite.
+// under both strategies; the others' probabilities finite, those sample() reports pdf()'s.
 TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
     HierarchyScene hs;
     SceneDesc d = hs.matte.desc();
@@ -776,6 +776,9 @@ TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
             for (int j = 0; j < n; ++j) {
                 EXPECT_FALSE(scene->edges()[size_t(c[j].edge)].flat) << "edge " << c[j].edge;
                 EXPECT_TRUE(std::isfinite(c[j].prob[0]) && std::isfinite(c[j].prob[1]));
+                // What the sample reports is what pdf() gives (the estimate divides by it).
+                const EdgeHierarchy::Choice p = h.pdf(q, c[j].edge);
+                for (int k = 0; k < 2; ++k) EXPECT_NEAR(c[j].prob[k], p.prob[k], 1e-5f * p.prob[k]);
                 ++sampled;
             }
         }
