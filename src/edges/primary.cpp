@@ -295,7 +295,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     std::vector<FilmEdge> film_edges;
     std::vector<double> lengths;
     for (const Edge& e : scene.edges()) {
-        if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
+        if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
         const Mesh& m = scene.meshes[size_t(e.mesh)];
         FilmEdge fe;
         double len;
