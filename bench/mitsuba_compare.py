@@ -18,10 +18,13 @@ line and exits 0.
 
 Scenes: a Cornell box (welded walls, boxes and a sphere, 32k triangles, one area light); a
 100k-triangle bumpy sphere standing in for a scan, on a floor under an area light and a
-constant sky; and, for gradients, a welded cube casting a shadow from a small area light, the
-derivative image of the cube's translation along x (Mitsuba: ``prb_projective``, forward mode;
-edgepath: ``derivative_image``) at about equal CPU time, against edgepath's image at many more
-samples (the two renderers' image sums are printed beside it: they agree within noise).
+constant sky. Forward: time at equal spp and at equal noise (each renderer's per-pixel variance
+from two images of other seeds, times its time). Gradients: a welded cube casting a shadow from
+a small area light, and the same cube over a glossy floor (a GGX roughplastic: the light's
+highlight cut by the cube's edge, the cube's reflection, the shadow); the derivative image of
+the cube's translation along x (Mitsuba: ``prb_projective``, forward mode; edgepath:
+``derivative_image``) at about equal CPU time, against edgepath's image at many more samples
+(the two renderers' image sums are printed beside it: they agree within noise).
 """
 
 import argparse
@@ -193,19 +196,31 @@ def make_scan(folder, size, spp, max_depth):
     return xml, triangles
 
 
-def make_shadow(folder, size, spp, max_depth):
+def make_shadow(folder, size, spp, max_depth, floor_bsdf=None):
     """A welded cube floating over a floor, a small area light above: seen from above, the
-    cube out of view, only its shadow in the image."""
+    cube out of view, only its shadow in the image (and, on a glossy floor, its reflection)."""
     shapes = []
     for name, (v, f), bsdf, radiance in [
             ("cube", box([-0.4, 0.8, -0.4], [0.4, 1.6, 0.4]), diffuse("0.5, 0.5, 0.5"), None),
-            ("floor", grid([-5, 0, -5], [0, 0, 10], [10, 0, 0], 1), diffuse("0.7, 0.7, 0.7"), None),
+            ("floor", grid([-5, 0, -5], [0, 0, 10], [10, 0, 0], 1), floor_bsdf or diffuse("0.7, 0.7, 0.7"), None),
             ("light", grid([-0.15, 3.5, -0.15], [0.3, 0, 0], [0, 0, 0.3], 1), diffuse("0, 0, 0"), "300, 300, 300")]:
         path = os.path.join(folder, f"shadow_{name}.ply")
         write_ply(path, v, f)
         shapes.append((path, bsdf, radiance))
     xml = scene_xml(shapes, ("1.7, 3, 0", "1.7, 0, 0", 50, "0, 0, 1"), size, spp, max_depth, integrator="prb_projective")
     return xml
+
+
+GLOSSY_FLOOR = ('<bsdf type="roughplastic"><string name="distribution" value="ggx"/>'
+                '<float name="alpha" value="0.08"/>'
+                '<rgb name="diffuse_reflectance" value="0.3, 0.3, 0.3"/></bsdf>')
+
+
+def make_glossy(folder, size, spp, max_depth):
+    """The shadow scene on a glossy floor (Mitsuba's roughplastic, GGX alpha 0.08): the camera
+    sees the light's highlight in the floor with the cube's top edge cutting into it, the
+    cube's lit top face reflected beside it, and the shadow."""
+    return make_shadow(folder, size, spp, max_depth, floor_bsdf=GLOSSY_FLOOR)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -219,16 +234,23 @@ def timed(fn):
 
 def interleaved(runs, fns):
     """Runs each fn once untimed, then `runs` rounds of all of them in turn; returns the median
-    (wall, cpu) seconds of each, and each one's last result."""
-    results = [fn() for fn in fns]
+    (wall, cpu) seconds of each, and each one's last two results (of its last two calls)."""
+    last = [[None, fn()] for fn in fns]
     wall = [[] for _ in fns]
     cpu = [[] for _ in fns]
     for _ in range(runs):
         for k, fn in enumerate(fns):
-            results[k], w, c = timed(fn)
+            out, w, c = timed(fn)
+            last[k] = [last[k][1], out]
             wall[k].append(w)
             cpu[k].append(c)
-    return [(statistics.median(w), statistics.median(c)) for w, c in zip(wall, cpu)], results
+    return [(statistics.median(w), statistics.median(c)) for w, c in zip(wall, cpu)], last
+
+
+def noise_variance(a, b):
+    """The per-pixel variance of a renderer's image at its spp, from two images of other seeds:
+    E[(a - b)^2] = 2 var, averaged over the pixels and colours."""
+    return float(np.mean((a - b) ** 2) / 2)
 
 
 def table(title, header, rows):
@@ -276,33 +298,40 @@ def forward(mi, dr, ep, args, folder):
             return ep.render(loaded.scene, spp=args.spp, max_bounces=args.bounces, seed=seed[0],
                              num_threads=args.threads)
 
-        (m, e), (m_img, e_img) = interleaved(args.runs, [run_mitsuba, run_edgepath])
-        m_img = np.asarray(m_img, dtype=np.float64)[..., :3]
-        e_img = e_img.double().numpy()
+        (m, e), (m_imgs, e_imgs) = interleaved(args.runs, [run_mitsuba, run_edgepath])
+        m_imgs = [np.asarray(img, dtype=np.float64)[..., :3] for img in m_imgs]
+        e_imgs = [img.double().numpy() for img in e_imgs]
+        m_img, e_img = m_imgs[1], e_imgs[1]
         diff = abs(m_img.mean() - e_img.mean()) / max(m_img.mean(), 1e-12)
+        # Equal noise: the time each needs for the same variance is its time x its variance
+        # (variance falls as 1 / spp); the ratio is Mitsuba's over edgepath's.
+        m_var, e_var = noise_variance(*m_imgs), noise_variance(*e_imgs)
         rays = rays_per_sample(loaded.scene, args.size, 1, args.bounces, args.threads)
         rows.append([f"{name} ({triangles:,} tri)", f"{e[0]:.3f}", f"{m[0]:.3f}", f"{m[0] / e[0]:.2f}",
                      f"{e[1]:.3f}", f"{m[1]:.3f}", f"{m[1] / e[1]:.2f}", f"{100 * diff:.1f}%",
+                     f"{e_var / m_var:.2f}", f"{(m_var * m[1]) / (e_var * e[1]):.2f}",
                      " / ".join(f"{r:.2f}" for r in rays)])
     table(f"Forward, {args.size}x{args.size}, {args.spp} spp, max_bounces {args.bounces} (Mitsuba max_depth "
-          f"{args.bounces + 1}), {args.threads} threads, median of {args.runs} interleaved runs",
+          f"{args.bounces + 1}), {args.threads} threads, median of {args.runs} interleaved runs; variance per "
+          f"pixel from two images of other seeds, equal-noise ratio = Mitsuba's cpu x variance over edgepath's",
           ["scene", "edgepath s", "Mitsuba s", "ratio", "edgepath cpu s", "Mitsuba cpu s", "cpu ratio",
-           "image means differ", "edgepath rays/sample (camera / shadow / bounce)"], rows)
+           "image means differ", "variance ratio (edgepath / Mitsuba)", "equal-noise cpu ratio",
+           "edgepath rays/sample (camera / shadow / bounce)"], rows)
     # Issue 18's target: the forward pass at least as fast as Mitsuba's at equal spp, in CPU time.
     ratios = [float(r[6]) for r in rows]
     verdict = "met" if min(ratios) >= 1 else f"not met (edgepath at {min(ratios):.2f}x Mitsuba's speed at worst)"
     print(f"target, forward at least as fast as Mitsuba at equal spp (cpu ratio >= 1 on both scenes): {verdict}")
 
 
-def shadow_gradient(mi, dr, ep, args, folder):
+def gradient_at_equal_time(mi, dr, ep, args, folder, title, make, bounces):
     """Derivative image of the cube's x translation, at about equal CPU time, against one
     reference: edgepath's at many samples (cheap; that the two renderers agree on it is checked
-    by the images' sums, printed with the table)."""
+    by the images' sums, printed with the table). Returns Mitsuba's MSE over edgepath's."""
     import torch
     size = args.grad_size
-    path = os.path.join(folder, "shadow.xml")
+    path = os.path.join(folder, "gradient.xml")
     with open(path, "w") as f:
-        f.write(make_shadow(folder, size, 4, 2))
+        f.write(make(folder, size, 4, bounces + 1))
     ms = mi.load_file(path)
     params = mi.traverse(ms)
     key = "shape0.vertex_positions"
@@ -328,8 +357,8 @@ def shadow_gradient(mi, dr, ep, args, folder):
         return np.asarray(g, dtype=np.float64)[..., :3]
 
     def edgepath_derivative(spp, seed):
-        return ep.derivative_image(loaded.scene, cube.vertices, direction, spp=spp, max_bounces=1, seed=seed,
-                                   num_threads=args.threads).double().numpy()
+        return ep.derivative_image(loaded.scene, cube.vertices, direction, spp=spp, max_bounces=bounces,
+                                   seed=seed, num_threads=args.threads).double().numpy()
 
     ref = edgepath_derivative(args.grad_ref_spp, 1000)
     # Mitsuba's time at its spp; edgepath's time as a + b spp from two sample counts, solved
@@ -351,11 +380,12 @@ def shadow_gradient(mi, dr, ep, args, folder):
             total += img.sum() / args.seeds
         rows.append([name, spp, f"{statistics.median(times):.3f}", f"{statistics.mean(errs):.3f}", f"{total:.2f}"])
     rows.append(["reference (edgepath)", args.grad_ref_spp, "", "", f"{ref.sum():.2f}"])
-    table(f"Shadow of a welded cube, d image / d x, {size}x{size}, 1 bounce, at about equal CPU time: RMSE "
-          f"relative to the mean |derivative| of the reference, mean of {args.seeds} seeds",
+    table(f"{title}, d image / d x, {size}x{size}, {bounces} bounce{'s' if bounces > 1 else ''}, at about equal "
+          f"CPU time: RMSE relative to the mean |derivative| of the reference, mean of {args.seeds} seeds",
           ["renderer", "spp", "cpu s", "relative RMSE", "image sum"], rows)
     ratio = float(rows[0][3]) ** 2 / max(float(rows[1][3]) ** 2, 1e-30)
     print(f"equal-time MSE ratio (Mitsuba / edgepath): {ratio:.1f}")
+    return ratio
 
 
 def main(argv=None):
@@ -388,7 +418,9 @@ def main(argv=None):
     with tempfile.TemporaryDirectory() as folder:
         forward(mi, dr, ep, args, folder)
         if not args.no_gradient:
-            shadow_gradient(mi, dr, ep, args, folder)
+            gradient_at_equal_time(mi, dr, ep, args, folder, "Shadow of a welded cube", make_shadow, 1)
+            gradient_at_equal_time(mi, dr, ep, args, folder, "The cube over a glossy floor (its shadow, its "
+                                   "reflection, the light's highlight cut by it)", make_glossy, 2)
     return 0
 
 

@@ -171,6 +171,7 @@ struct EdgeHierarchy::Input {
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             p0[i] = m.vertex(e.v0);
             p1[i] = m.vertex(e.v1);
+            if (e.flat) p0[i] = p1[i] = (p0[i] + p1[i]) * 0.5f;  // an empty leaf (Edge::flat): never sampled
             always[i] = e.kind != EdgeKind::Smooth;
             // An edge between faces that are black seen from behind (a one-sided material, no
             // emission from the back): from a point behind both, either side of it looks black
@@ -516,7 +517,8 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
             // The edge as the scene has it now (not as the leaf kept it).
             const Edge& e = all[size_t(id)];
             const Mesh& m = scene.meshes[size_t(e.mesh)];
-            const Vec3f a = m.vertex(e.v0), b = m.vertex(e.v1);
+            Vec3f a = m.vertex(e.v0), b = m.vertex(e.v1);
+            if (e.flat) a = b = (a + b) * 0.5f;  // an empty leaf
             total += length(b - a);
             for (const Vec3f& x : {a, b}) {
                 for (int c = 0; c < 3; ++c)
@@ -546,6 +548,7 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
 // about a fifth of this function's time.
 void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
+    if (!(n.length > 0.f)) return;  // empty leaves only (Edge::flat): nothing to sample
     const bool leaf = n.left < 0;
     // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
     // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
@@ -704,6 +707,14 @@ inline void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2
 void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
                                   int light_refine) const {
     const Node& n = nodes_[size_t(index)];
+    if (!(n.length > 0.f)) {  // empty leaves only (Edge::flat): never descended into
+        out[0] = out[1] = 0.f;
+        if (kept) {  // claimed by importance(): a later hit reads it
+            kept->value[0] = kept->value[1] = 0.f;
+            kept->inside = kept->narrow = false;
+        }
+        return;
+    }
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).

@@ -304,7 +304,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         std::vector<double>& lengths = chunk_lengths[size_t(begin / kSetupChunk)];
         for (int64_t index = begin; index < end; ++index) {
             const Edge& e = all_edges[size_t(index)];
-            if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
+            if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             FilmEdge fe;
             double len;

@@ -18,7 +18,7 @@ void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&,
     const std::vector<Edge>& all = scene_.edges();
     set.cumulative.assign(1, 0.0);
     for (size_t i = 0; i < all.size(); ++i) {
-        if (!keep(*this, all[i])) continue;
+        if (all[i].flat || !keep(*this, all[i])) continue;
         const Mesh& m = scene_.meshes[size_t(all[i].mesh)];
         const double len = length(m.vertex(all[i].v1) - m.vertex(all[i].v0));
         if (!(len > 0.0)) continue;
@@ -52,12 +52,24 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         has_wanted_set_ = true;
     }
     if (!uniform_ && !all_.edges.empty()) {
-        // The wanted meshes' edges first, under a subtree of their own.
-        std::vector<int32_t> order = has_wanted_set_ ? wanted_.edges : all_.edges;
-        if (has_wanted_set_)
-            for (int32_t e : all_.edges)
-                if (!mesh_wanted(scene.edges()[size_t(e)].mesh)) order.push_back(e);
-        hierarchy_ = scene.edge_hierarchy(order, has_wanted_set_ ? wanted_.edges.size() : 0);
+        // The wanted meshes' edges first, under a subtree of their own; with the flat edges of
+        // a scene whose vertices move (Edge::flat), empty leaves there, so that the same tree
+        // is refit while moves turn edges flat and back.
+        const std::vector<Edge>& edges = scene.edges();
+        std::vector<int32_t> order;
+        order.reserve(all_.edges.size());
+        size_t group = 0;
+        for (int pass = 0; pass < (has_wanted_set_ ? 2 : 1); ++pass) {
+            for (size_t i = 0; i < edges.size(); ++i) {
+                const Edge& e = edges[i];
+                if (has_wanted_set_ && mesh_wanted(e.mesh) != (pass == 0)) continue;
+                const Mesh& m = scene.meshes[size_t(e.mesh)];
+                if (!(length(m.vertex(e.v1) - m.vertex(e.v0)) > 0.f)) continue;
+                order.push_back(int32_t(i));
+            }
+            if (pass == 0) group = order.size();
+        }
+        hierarchy_ = scene.edge_hierarchy(order, has_wanted_set_ ? group : 0);
         wanted_root_ = has_wanted_set_ ? hierarchy_->group_root() : 0;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.

@@ -85,7 +85,7 @@ Vec2f face_uv(const MeshDesc& m, int64_t f, int32_t v) {
 
 }  // namespace
 
-void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
+void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat) {
     // Weld vertices by position.
     std::vector<int64_t> weld(size_t(m.num_vertices));
     {
@@ -151,7 +151,8 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
             // flat neighbours seen edge-on at its outline): only faces within kCoplanarAngle of
             // one plane, the rounding of a plane's float corners, drop their edge.
             const bool coplanar = nearly_coplanar(m, h0.face, h1.face);
-            if (!coplanar || value_jump || (shading_jump && m.normals != nullptr)) {
+            const bool flat = coplanar && !value_jump && !(shading_jump && m.normals != nullptr);
+            if (!flat || keep_flat) {
                 Edge e;
                 e.mesh = mesh_index;
                 e.v0 = h0.a;
@@ -160,6 +161,7 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 e.f1 = h1.face;
                 e.kind = shading_jump ? EdgeKind::Crease : EdgeKind::Smooth;
                 e.seam = value_jump || (shading_jump && m.normals != nullptr);
+                e.flat = flat;
                 out.push_back(e);
             }
         } else {

@@ -17,7 +17,9 @@
 // Edges between two faces of the same orientation within 1e-5 rad of one plane (the rounding of
 // a plane's float corners), with the same shading, uvs and colours, are dropped (never a
 // silhouette, never a shading discontinuity; faces at a larger angle, however small, fold where
-// the eye lies between their planes); degenerate edges (both ends at one position) too.
+// the eye lies between their planes); degenerate edges (both ends at one position) too. A scene
+// whose vertices move (kept across calls, refittable) keeps the former, marked flat (Edge::flat),
+// so that its edge list is the same from step to step and its edge hierarchy is refit.
 #pragma once
 #include <cstdint>
 #include <vector>
@@ -38,10 +40,19 @@ struct Edge {
     // vertex normals (a texture seam, a modelled crease). A crease that is not a seam (flat
     // shading) jumps only by the angle between its faces, however small.
     bool seam = false;
+    // Its two faces are within the coplanar bound, with the same shading (an edge a scene built
+    // afresh drops): kept, marked, only in the list of a scene whose vertices move
+    // (build_mesh_edges' keep_flat), so that the list does not change when a move of the order
+    // of rounding turns an edge flat or back. The passes skip it as if it were not there; the
+    // edge hierarchy holds it as an empty leaf (zero length), never sampled.
+    bool flat = false;
 };
 
-// All the edges of one mesh (mesh index `mesh` is stored in each edge).
-void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
+// All the edges of one mesh (mesh index `mesh` is stored in each edge). With `keep_flat`, the
+// edges between nearly coplanar faces are kept too, marked Edge::flat: the list then depends on
+// the triangles, uvs, normals and colours only, not on where the vertices are (but for faces
+// that become or stop being degenerate, and positions that start or stop coinciding).
+void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat = false);
 
 // Whether the edge is a silhouette seen from point `p`: a boundary always; otherwise when p is
 // in front of exactly one of the two faces (planes through the edge).

@@ -207,7 +207,9 @@ const std::vector<Edge>& Scene::edges() const {
             d.uvs = m.uvs;
             d.uv_indices = m.uv_indices;
             d.colors = m.colors;
-            build_mesh_edges(d, int32_t(i), edges_);
+            // A scene whose vertices move keeps its nearly flat edges (marked): the same list
+            // from step to step, so that the edge hierarchy is refit.
+            build_mesh_edges(d, int32_t(i), edges_, refittable_);
         }
         edges_ready_.store(true, std::memory_order_release);
     }

@@ -242,7 +242,10 @@ public:
     RTCScene rtc_scene() const { return rtc_; }
 
     // The edges of all meshes (see scene/edges.h), built on first use: only gradient passes
-    // that want geometry or camera derivatives pay for them.
+    // that want geometry or camera derivatives pay for them. Once vertices have moved (the BVH
+    // built for refitting), it holds the nearly flat edges too, marked (Edge::flat), which the
+    // passes skip: the list is then the same whatever the positions, so that a move refits the
+    // edge hierarchy.
     const std::vector<Edge>& edges() const;
 
     // The edge hierarchy (edges/hierarchy.h) over `edges` (indices into edges()), the first

@@ -84,6 +84,43 @@ TEST(Edges, NearlyCoplanarFacesKeepTheirEdge) {
     }
 }
 
+TEST(Edges, KeepFlatKeepsTheListWhateverTheLift) {
+    // A scene whose vertices move keeps the edges between nearly coplanar faces, marked flat, so
+    // that its edge list does not change when a move turns an edge flat or back: the same edges,
+    // in the same order, whether the corner is lifted (a fold) or not (one plane).
+    std::vector<std::vector<Edge>> lists;
+    for (float lift : {0.f, 1e-7f, 1e-4f}) {
+        MeshData m;
+        m.vertices = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, lift};
+        m.indices = {0, 1, 2, 2, 1, 3};
+        std::vector<Edge> dropped, kept;
+        build_mesh_edges(m.desc(0), 0, dropped);
+        build_mesh_edges(m.desc(0), 0, kept, true);
+        const bool fold = lift > 1e-5f;
+        EXPECT_EQ(int(dropped.size()), fold ? 5 : 4) << lift;
+        ASSERT_EQ(kept.size(), 5u) << lift;
+        int flat = 0;
+        for (const Edge& e : kept) flat += e.flat;
+        EXPECT_EQ(flat, fold ? 0 : 1) << lift;
+        for (const Edge& e : dropped) EXPECT_FALSE(e.flat);
+        lists.push_back(kept);
+    }
+    for (const std::vector<Edge>& list : lists)
+        for (size_t i = 0; i < list.size(); ++i) {
+            const Edge &a = list[i], &b = lists[0][i];
+            EXPECT_TRUE(a.mesh == b.mesh && a.v0 == b.v0 && a.v1 == b.v1 && a.f0 == b.f0 && a.f1 == b.f1 &&
+                        a.kind == b.kind && a.seam == b.seam)
+                << "edge " << i;
+        }
+    // A quad with continuous uvs: its diagonal is flat (with a uv seam it would be a crease).
+    MeshData quad = make_quad(Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0));
+    std::vector<Edge> out;
+    build_mesh_edges(quad.desc(0), 0, out, true);
+    int flat = 0;
+    for (const Edge& e : out) flat += e.flat;
+    EXPECT_EQ(flat, 1);  // the diagonal of the one plane
+}
+
 TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
     // Two coplanar triangles: their shared diagonal is dropped while the uvs agree along it, and
     // kept as a crease (textures may jump there) when each face has its own uvs for it.

@@ -592,6 +592,22 @@ namespace edgepath {
 namespace {
 
 // The indices of every edge of `scene`, those of mesh `first` first; and how many those are.
+// A scene of the form of one whose vertices move (built at other positions, then updated to
+// `desc`'s): a BVH built for refitting, an edge list that keeps the nearly flat edges (marked
+// Edge::flat, empty leaves of the hierarchy), so that moves keep the list and refit the tree.
+std::shared_ptr<Scene> build_moved(const SceneDesc& desc) {
+    SceneDesc other = desc;
+    std::vector<std::vector<float>> halved(desc.meshes.size());
+    for (size_t i = 0; i < desc.meshes.size(); ++i) {
+        halved[i].assign(desc.meshes[i].vertices, desc.meshes[i].vertices + 3 * desc.meshes[i].num_vertices);
+        for (float& x : halved[i]) x *= 0.5f;
+        other.meshes[i].vertices = halved[i].data();
+    }
+    const std::shared_ptr<Scene> s = build_scene(other);
+    update_scene(*s, desc);
+    return s;
+}
+
 std::vector<int32_t> edges_mesh_first(const Scene& scene, int first, size_t* group) {
     std::vector<int32_t> ids, rest;
     for (size_t i = 0; i < scene.edges().size(); ++i)
@@ -610,8 +626,9 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
     Rng rng(3, 9);
     // The sphere's vertices moved by a random affine map of their first positions (a shear, a
     // stretch, a turn and a shift): its normals turn unevenly, and its edges stay the same
-    // (vertices at one position stay together; its planar quads, whose diagonals are dropped
-    // as coplanar, stay planar; its degenerate triangles at the poles stay degenerate).
+    // (vertices at one position stay together; the diagonals of its planar quads, flat or not
+    // as rounding has it, are kept by a moving scene; its degenerate triangles at the poles
+    // stay degenerate).
     const std::vector<float> rest = hs.sphere.vertices;
     auto wave = [&] {
         float a[3][3], t[3];
@@ -626,7 +643,7 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
     };
     SceneDesc d = hs.matte.desc();
     d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
-    const std::shared_ptr<Scene> scene = build_scene(d);
+    const std::shared_ptr<Scene> scene = build_moved(d);
     size_t group = 0;
     const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
     ASSERT_GT(group, 0u);
@@ -671,11 +688,16 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
 // scaled by two (every comparison of the median splits comes out the same, every bound scales
 // exactly), the refit kept hierarchy and a fresh build give the same probabilities, bit for bit.
 // A material made two-sided (the creases' flags) is taken up without a rebuild, the same way.
+// Both scenes are of the form of a scene whose vertices move (built at other positions, then
+// updated): their edge lists keep the nearly flat edges, which the trees hold as empty leaves.
 TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     HierarchyScene hs;
     SceneDesc d = hs.matte.desc();
     d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
-    const std::shared_ptr<Scene> scene = build_scene(d);
+    const std::shared_ptr<Scene> scene = build_moved(d);
+    int flat = 0;
+    for (const Edge& e : scene->edges()) flat += e.flat;
+    EXPECT_GT(flat, 0);  // the box's and the quad's diagonals at least
     size_t group = 0;
     const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
     scene->edge_hierarchy(ids, group);
@@ -684,7 +706,7 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     // The kept hierarchy and a fresh build over the scene `d` describes: the same
     // probabilities at random points, both strategies, every edge, from either start.
     auto expect_fresh = [&](const EdgeHierarchy& kept, const SceneDesc& desc) {
-        const std::shared_ptr<Scene> fresh_scene = build_scene(desc);
+        const std::shared_ptr<Scene> fresh_scene = build_moved(desc);
         EdgeHierarchy fresh;
         fresh.build(*fresh_scene, ids, group);
         ASSERT_EQ(kept.group_root(), fresh.group_root());
@@ -720,6 +742,54 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
     EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
     expect_fresh(flags, d);
+}
+
+// A moving scene's flat edges (Edge::flat) are empty leaves: never sampled, zero probability
+// under both strategies; the others' probabilities finite, those sample() reports pdf()'s.
+TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
+    HierarchyScene hs;
+    SceneDesc d = hs.matte.desc();
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    const std::shared_ptr<Scene> scene = build_moved(d);
+    std::vector<int32_t> ids;
+    int flat = 0;
+    for (size_t i = 0; i < scene->edges().size(); ++i) {
+        ids.push_back(int32_t(i));
+        flat += scene->edges()[i].flat;
+    }
+    ASSERT_GT(flat, 0);
+    EdgeHierarchy h;
+    h.build(*scene, ids);
+    EXPECT_EQ(h.check_bounds(*scene, 1e-5f), -1);
+    Rng rng(5, 2);
+    int sampled = 0;
+    for (int i = 0; i < 200; ++i) {
+        EdgeHierarchy::Query q;
+        q.p = Vec3f(4.f * rng.next_float() - 2.f, 0.05f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
+        BoundsCone cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
+        q.cone = &cone;
+        q.direct_only = i % 2 == 0;
+        for (EdgeHierarchy::Strategy s : {EdgeHierarchy::All, EdgeHierarchy::Lights}) {
+            EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
+            const int n = h.sample(q, s, rng.next_float(), c);
+            for (int j = 0; j < n; ++j) {
+                EXPECT_FALSE(scene->edges()[size_t(c[j].edge)].flat) << "edge " << c[j].edge;
+                EXPECT_TRUE(std::isfinite(c[j].prob[0]) && std::isfinite(c[j].prob[1]));
+                // What the sample reports is what pdf() gives (the estimate divides by it).
+                const EdgeHierarchy::Choice p = h.pdf(q, c[j].edge);
+                for (int k = 0; k < 2; ++k) EXPECT_NEAR(c[j].prob[k], p.prob[k], 1e-5f * p.prob[k]);
+                ++sampled;
+            }
+        }
+        for (size_t e = 0; e < scene->edges().size(); ++e)
+            if (scene->edges()[e].flat) {
+                const EdgeHierarchy::Choice c = h.pdf(q, int32_t(e));
+                ASSERT_EQ(c.prob[0], 0.f);
+                ASSERT_EQ(c.prob[1], 0.f);
+            }
+    }
+    EXPECT_GT(sampled, 100);
 }
 
 }  // namespace

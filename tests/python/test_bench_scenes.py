@@ -51,6 +51,16 @@ def test_scenes_load_welded(tmp_path):
     image = ep.render(loaded.scene, spp=2, max_bounces=1)
     assert image.mean() > 0  # the floor is lit, the light faces it
 
+    # The glossy variant: the floor is a GGX roughplastic (no Beckmann-as-GGX warning), the
+    # light's highlight in it brighter than the diffuse floor's brightest pixel.
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        glossy = write(tmp_path, mc.make_glossy(str(tmp_path), 16, 1, 3))
+    floor = glossy.scene.meshes[1].material
+    assert floor.kind == "plastic" and float(floor.roughness) > 0
+    assert ep.render(glossy.scene, spp=16, max_bounces=2).max() > image.max()
+
     xml, triangles = mc.make_scan(str(tmp_path), 16, 1, 2)
     loaded = write(tmp_path, xml)
     assert loaded.shapes["shape0"].indices.shape[0] > 99000  # the same sphere() as above, bumped

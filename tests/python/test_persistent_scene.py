@@ -1,6 +1,9 @@
 """The core scene kept across renders (``Scene._core_cache``): whatever changes between calls,
 the image and the gradients equal those of a scene built afresh, bit for bit (one thread: the
 gradient sums are then in a fixed order), and only what changed is rebuilt (``build_counts``).
+Once its vertices have moved, the kept scene's edge hierarchy is its refittable form (with the
+nearly flat edges as empty leaves), refit at each move: the gradients that edge samples reach
+then equal those of a twin with the same history, and of a scene built afresh in that form.
 """
 
 import pytest
@@ -54,6 +57,9 @@ def fresh(scene):
 # The kept scene's twin: a second kept scene that sees the same tensors and goes through the
 # same calls (so its edge hierarchy is built and refit at the same points).
 _twins = {}
+# The vertices each kept scene was first rendered with, and whether they have moved since.
+_first_vertices = {}
+_moved = {}
 # Whether the kept scene's edge hierarchy was refit since it was last built.
 _refit = {}
 
@@ -66,17 +72,24 @@ def geometric(scene):
 
 
 def assert_same_as_fresh(scene):
-    """The image and the gradients equal those of a fresh scene, bit for bit; except where the
-    kept edge hierarchy was refit since it was built (only vertices moved): a refit tree keeps
-    the splits of the positions it was built at, so it samples the edges seen from path
-    vertices with other (still valid) probabilities than a fresh build, and the gradients of
-    the camera and the vertices, which those edge samples reach, equal those of the twin
-    (the same history) instead. The other gradients do not see those samples (their random
-    numbers are apart) and still equal the fresh scene's. (The refit tree itself is checked
-    against a fresh build in tests/cpp/test_hierarchy.cpp and
-    test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike below.)"""
+    """The image and the gradients equal those of a fresh scene, bit for bit. Once the kept
+    scene's vertices have moved, its edge list keeps the nearly flat edges (empty leaves of its
+    edge hierarchy, so that moves refit the tree): the gradients of the camera and the vertices,
+    which the secondary edge samples reach, then equal those of a scene built afresh in that
+    form (moving_form: built elsewhere, then moved here), not of a plain fresh scene. And where
+    the kept hierarchy was refit since it was built (only vertices moved), a refit tree keeps
+    the splits of the positions it was built at, so it samples those edges with other (still
+    valid) probabilities than a fresh build: those gradients equal the twin's (the same history)
+    instead. The other gradients do not see those samples (their random numbers are apart) and
+    always equal the fresh scene's. (The refit tree itself is checked against a fresh build in
+    tests/cpp/test_hierarchy.cpp and test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike
+    below.)"""
     twin = _twins.setdefault(id(scene), fresh(scene))
     twin.camera, twin.meshes, twin.envmap = scene.camera, list(scene.meshes), scene.envmap
+    vertices = [m.vertices.detach().clone() for m in scene.meshes]
+    first = _first_vertices.setdefault(id(scene), vertices)
+    if len(first) != len(vertices) or any(not torch.equal(a, b) for a, b in zip(first, vertices)):
+        _moved[id(scene)] = True
     before = scene.edge_hierarchy_counts()
     image, grads = image_and_gradients(scene)
     after = scene.edge_hierarchy_counts()
@@ -86,14 +99,21 @@ def assert_same_as_fresh(scene):
         _refit[id(scene)] = True
     image_twin, grads_twin = image_and_gradients(twin)
     image_fresh, grads_fresh = image_and_gradients(fresh(scene))
+    moved, refit = _moved.get(id(scene), False), _refit.get(id(scene), False)
+    if moved:
+        image_form, grads_form = image_and_gradients(moving_form(scene, [v * 0.5 for v in vertices]))
+        assert torch.equal(image, image_form)
     assert torch.equal(image, image_fresh)
     assert torch.equal(image, image_twin)
     assert len(grads) == len(grads_fresh) == len(grads_twin)
-    refit = _refit.get(id(scene), False)
-    for g, h, t, moves in zip(grads, grads_fresh, grads_twin, geometric(scene)):
+    for k, (g, h, t, moves) in enumerate(zip(grads, grads_fresh, grads_twin, geometric(scene))):
         assert torch.equal(g, t)
-        if not (refit and moves):
+        if not moves:
             assert torch.equal(g, h)
+        elif not moved:
+            assert torch.equal(g, h)
+        elif not refit:
+            assert torch.equal(g, grads_form[k])
 
 
 def counts_after(scene, change):
@@ -161,18 +181,21 @@ def test_each_kind_of_change_gives_the_fresh_scene_and_rebuilds_only_what_it_mus
         with torch.no_grad():
             box.vertices[:, 1] += 0.05 * box.vertices[:, 0]
 
-    # The first move builds a BVH that can be refitted; later moves refit it. The edge
-    # hierarchy is refit from the first.
+    # The first move builds a BVH that can be refitted, and the edge hierarchy over the edge
+    # list that keeps the nearly flat edges (the box's face diagonals); later moves refit both.
     hierarchy = scene.edge_hierarchy_counts()
     assert counts_after(scene, move_vertices) == {"builds": 1, "refits": 0, "reuses": 1}
     assert counts_after(scene, move_vertices) == {"builds": 0, "refits": 1, "reuses": 1}
     after = scene.edge_hierarchy_counts()
-    assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 0, "refits": 2, "reuses": 0}
+    assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 1, "refits": 1, "reuses": 0}
 
     def new_vertices_same_shape():
         box.vertices = (box.vertices.detach() * 1.01).requires_grad_()
 
+    hierarchy = scene.edge_hierarchy_counts()
     assert counts_after(scene, new_vertices_same_shape) == {"builds": 0, "refits": 1, "reuses": 1}
+    after = scene.edge_hierarchy_counts()
+    assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 0, "refits": 1, "reuses": 0}
 
     def topology():  # the same shape, other triangles: two faces' winding flipped
         indices = box.indices.clone()
@@ -199,37 +222,202 @@ def test_each_kind_of_change_gives_the_fresh_scene_and_rebuilds_only_what_it_mus
     assert counts_after(scene, remove_envmap) == nothing_rebuilt
 
 
+def moving_form(scene, before):
+    """A new Scene with the tensors of ``scene``, its core scene first built with the vertices
+    ``before`` (one tensor per mesh) and then moved to the scene's own: built afresh, at the
+    scene's positions, in the form of a scene whose vertices move (a BVH built for refitting;
+    an edge list that keeps the nearly flat edges, the edge hierarchy built over it)."""
+    import copy
+    meshes = []
+    for mesh, vertices in zip(scene.meshes, before):
+        moved = copy.copy(mesh)
+        moved.vertices = vertices
+        meshes.append(moved)
+    out = ep.Scene(camera=scene.camera, meshes=meshes, envmap=scene.envmap)
+    with torch.no_grad():
+        ep.render(out, spp=1, num_threads=1)
+    out.meshes = list(scene.meshes)
+    return out
+
+
+def assert_equal_results(a, b):
+    image_a, grads_a = a
+    image_b, grads_b = b
+    assert torch.equal(image_a, image_b)
+    assert len(grads_a) == len(grads_b)
+    for g, h in zip(grads_a, grads_b):
+        assert torch.equal(g, h)
+
+
+def views_image_and_gradients(scene, views):
+    images = ep.render(scene, cameras=views, spp=SPP, num_threads=1, seed=3, backward_seed=5)
+    weight = torch.linspace(-1.0, 2.0, images.numel()).reshape(images.shape)
+    params = [t for t in leaves(scene) if t is not scene.camera.position] + [c.position for c in views]
+    return images.detach(), torch.autograd.grad((images * weight).sum(), params)
+
+
 def test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike():
     """Every vertex scaled by two: the median splits of a fresh build compare the same numbers
     times two and split alike, so the kept hierarchy, refit, must be the fresh one bit for bit,
-    and so must every gradient. A one-sided material made two-sided (which changes which
-    creases the hierarchy skips from behind), and a mesh made an emitter, are taken up without a
-    rebuild, the same way."""
+    and so must every gradient, for one view and for many views in one call. The first move
+    builds the form of a scene whose vertices move (nearly flat edges kept, as empty leaves);
+    the moves after it refit that tree, compared with a scene built afresh in that form at the
+    same positions. A one-sided material made two-sided (which changes which creases the
+    hierarchy skips from behind), and a mesh made an emitter, are taken up without a rebuild,
+    the same way."""
     scene = make_scene()
     assert_same_as_fresh(scene)
-    for mesh in scene.meshes:
-        mesh.vertices = (mesh.vertices.detach() * 2.0).requires_grad_(mesh.vertices.requires_grad)
-    before = scene.edge_hierarchy_counts()
-    image, grads = image_and_gradients(scene)
+
+    def scale_vertices():
+        before = [mesh.vertices.detach() for mesh in scene.meshes]
+        for mesh in scene.meshes:
+            mesh.vertices = (mesh.vertices.detach() * 2.0).requires_grad_(mesh.vertices.requires_grad)
+        return before
+
+    def refit_step(results):
+        before = scale_vertices()
+        counts = scene.edge_hierarchy_counts()
+        kept = results(scene)
+        after = scene.edge_hierarchy_counts()
+        assert {k: after[k] - counts[k] for k in after} == {"builds": 0, "refits": 1, "reuses": 0}
+        built = moving_form(scene, before)
+        assert_equal_results(kept, results(built))
+        assert built.edge_hierarchy_counts()["builds"] == 1
+        return before
+
+    scale_vertices()
+    counts = scene.edge_hierarchy_counts()
+    image_and_gradients(scene)  # the first move: the moving form, built
     after = scene.edge_hierarchy_counts()
-    assert {k: after[k] - before[k] for k in after} == {"builds": 0, "refits": 1, "reuses": 0}
-    image_fresh, grads_fresh = image_and_gradients(fresh(scene))
-    assert torch.equal(image, image_fresh)
-    for g, h in zip(grads, grads_fresh):
-        assert torch.equal(g, h)
+    assert {k: after[k] - counts[k] for k in after} == {"builds": 1, "refits": 0, "reuses": 0}
+    refit_step(image_and_gradients)
+    views = [ep.Camera(position=torch.tensor(p, requires_grad=True), look_at=torch.tensor([0.0, 1.0, 0.0]),
+                       fov=40.0, resolution=RES) for p in ([4.0, 5.0, -8.0], [-6.0, 4.0, -5.0])]
+    # Many views in one call: the views share the refit tree (one refit, then reuses).
+    counts = scene.edge_hierarchy_counts()
+    before = scale_vertices()
+    kept = views_image_and_gradients(scene, views)
+    after = scene.edge_hierarchy_counts()
+    assert {k: after[k] - counts[k] for k in after} == {"builds": 0, "refits": 1, "reuses": 1}
+    assert_equal_results(kept, views_image_and_gradients(moving_form(scene, before), views))
+    assert all(float(g.abs().max()) > 0 for g in kept[1][-2:])
+
     def same_as_fresh_without_a_build():
-        image, grads = image_and_gradients(scene)
-        assert scene.edge_hierarchy_counts()["builds"] == after["builds"]
-        image_fresh, grads_fresh = image_and_gradients(fresh(scene))
-        assert torch.equal(image, image_fresh)
-        for g, h in zip(grads, grads_fresh):
-            assert torch.equal(g, h)
+        builds = scene.edge_hierarchy_counts()["builds"]
+        kept = image_and_gradients(scene)
+        assert scene.edge_hierarchy_counts()["builds"] == builds
+        assert_equal_results(kept, image_and_gradients(moving_form(scene, before)))
 
     scene.meshes[0].material.two_sided = True
     same_as_fresh_without_a_build()
     # The box made an emitter (its creases then count at a last bounce): the same.
     scene.meshes[0].emission = torch.tensor([0.5, 0.5, 0.5])
     same_as_fresh_without_a_build()
+
+
+def test_moves_that_turn_an_edge_flat_and_back_refit_the_edge_hierarchy():
+    """A floor of two triangles whose far corner is lifted by 1e-4 of its size (a fold: the
+    diagonal is an edge) or by 1e-7 (one plane up to rounding: a scene built afresh drops the
+    diagonal), a box on it under a lamp. A scene kept across vertex steps keeps the diagonal
+    (flat when the faces are one plane: an empty leaf of its edge hierarchy), so its edge list is
+    the same at every step and each step refits the hierarchy, as it refits the BVH; before, a
+    step that turned the diagonal flat or back changed the edge list (here, back and forth
+    between two lists, it took the other of the two trees the scene keeps, not refit to the
+    new positions; test_a_finely_tessellated_sphere_scaled_by_rounding_refits: rebuilt). The
+    refit hierarchy gives
+    what a scene built afresh in the same form at those positions gives, bit for bit (the lift
+    is too small to change a split), and so does a twin with the same history."""
+    box_v, box_i = ep.shapes.box(center=(0.3, 0.5, 0.2), half=(0.4, 0.5, 0.4))
+    lamp_v, lamp_i = ep.shapes.quad([[-0.5, 3, -0.5], [0.5, 3, -0.5], [0.5, 3, 0.5], [-0.5, 3, 0.5]])
+    floor_i = torch.tensor([[0, 2, 1], [1, 2, 3]], dtype=torch.int32)
+
+    def floor_vertices(lift):
+        return torch.tensor([[-2.0, 0.0, -2.0], [2.0, 0.0, -2.0], [-2.0, 0.0, 2.0], [2.0, 4.0 * lift, 2.0]],
+                            requires_grad=True)
+
+    camera = ep.Camera(position=torch.tensor([1.0, 3.0, -5.0]), look_at=torch.tensor([0.0, 0.3, 0.0]),
+                       fov=45.0, resolution=RES)
+    floor = ep.Mesh(floor_vertices(1e-4), floor_i, material=ep.Material(diffuse=0.6))
+    meshes = [floor, ep.Mesh(box_v, box_i, material=ep.Material(diffuse=0.4)),
+              ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([6.0, 6.0, 5.0]))]
+    scene, twin = ep.Scene(camera, meshes), ep.Scene(camera, list(meshes))
+
+    def results(s):
+        image = ep.render(s, spp=SPP, num_threads=1, seed=3, backward_seed=5)
+        weight = torch.linspace(-1.0, 2.0, image.numel()).reshape(image.shape)
+        return image.detach(), torch.autograd.grad((image * weight).sum(), [floor.vertices])
+
+    results(scene), results(twin)  # at rest: built
+    floor.vertices = floor_vertices(1e-7)
+    results(scene), results(twin)  # the first move: the moving form, built
+    builds, hierarchy = scene.build_counts(), scene.edge_hierarchy_counts()
+    for lift in (1e-4, 1e-7, 1e-4, 1e-7):
+        before = [m.vertices.detach() for m in scene.meshes]
+        floor.vertices = floor_vertices(lift)
+        kept = results(scene)
+        assert float(kept[1][0].abs().max()) > 0
+        assert_equal_results(kept, results(twin))
+        assert_equal_results(kept, results(moving_form(scene, before)))
+    after = scene.edge_hierarchy_counts()
+    assert {k: after[k] - hierarchy[k] for k in after} == {"builds": 0, "refits": 4, "reuses": 0}
+    after = scene.build_counts()
+    assert {k: after[k] - builds[k] for k in after} == {"builds": 0, "refits": 4, "reuses": 4}
+
+
+def flat_pairs(vertices, indices):
+    """Per pair of faces sharing an edge (welded by position, in a fixed order), whether the
+    core takes them for one plane: within 1e-5 rad, in double precision from the float corners
+    (scene/edges.cpp, nearly_coplanar)."""
+    v = vertices.detach()
+    _, weld = torch.unique(v, dim=0, return_inverse=True)
+    idx = indices.long()
+    t = v.double()[idx]
+    n = torch.linalg.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0])
+    a, b = weld[idx], weld[idx].roll(-1, dims=1)
+    lo, hi = torch.minimum(a, b).reshape(-1), torch.maximum(a, b).reshape(-1)
+    face = torch.arange(idx.shape[0]).repeat_interleave(3)
+    ok = (lo != hi) & (n.norm(dim=1) > 0).repeat_interleave(3)
+    key, face = (lo * (int(weld.max()) + 1) + hi)[ok], face[ok]
+    key, order = torch.sort(key, stable=True)
+    face = face[order]
+    pair = key[1:] == key[:-1]
+    f0, f1 = face[:-1][pair], face[1:][pair]
+    c = (n[f0] * n[f1]).sum(dim=1)
+    return (c > 0) & (torch.linalg.cross(n[f0], n[f1]).norm(dim=1) <= 1e-5 * c)
+
+
+def test_a_finely_tessellated_sphere_scaled_by_rounding_refits():
+    """bench/persist.py's vertex step on a smaller sphere (112 rings, 25k triangles): scaled in
+    place by 1 + 1e-4 and 1 - 1e-4 in turn, its planar quads' diagonals cross the coplanar bound
+    by rounding (checked: the faces' pairs taken for one plane change between steps), which
+    rebuilt the edge hierarchy at those steps; the kept scene's edge list now keeps them (flat),
+    so every step after the first move refits the hierarchy and the BVH."""
+    v, i = ep.shapes.sphere(radius=1.0, rings=112, segments=112)[:2]
+    floor_v, floor_i = ep.shapes.quad([[-4, -1, -4], [-4, -1, 4], [4, -1, 4], [4, -1, -4]])
+    lamp_v, lamp_i = ep.shapes.quad([[-1, 4, -1], [1, 4, -1], [1, 4, 1], [-1, 4, 1]])
+    sphere = ep.Mesh(v.clone().requires_grad_(), i, material=ep.Material(diffuse=0.5))
+    meshes = [sphere, ep.Mesh(floor_v, floor_i), ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([8.0, 8.0, 7.0]))]
+    pixel = ep.Camera(position=torch.tensor([0.0, 1.5, 3.5]), look_at=torch.zeros(3), fov=45.0,
+                      resolution=(64, 64), crop_window=(32, 32, 1, 1))
+    scene = ep.Scene(pixel, meshes)
+
+    def step(k):
+        with torch.no_grad():
+            sphere.vertices.mul_(1.0 + 1e-4 * (-1) ** k)
+        (g,) = torch.autograd.grad(ep.render(scene, spp=1).sum(), [sphere.vertices])
+        return flat_pairs(sphere.vertices, i)
+
+    step(0)  # built
+    flats = [step(1)]  # the first move: built in the moving form
+    builds, hierarchy = scene.build_counts(), scene.edge_hierarchy_counts()
+    for k in range(2, 8):
+        flats.append(step(k))
+    changed = sum(int((a != b).sum()) for a, b in zip(flats, flats[1:]))
+    assert changed > 0, "the steps should turn some diagonals flat or back"
+    after = scene.edge_hierarchy_counts()
+    assert {key: after[key] - hierarchy[key] for key in after} == {"builds": 0, "refits": 6, "reuses": 0}
+    after = scene.build_counts()
+    assert {key: after[key] - builds[key] for key in after} == {"builds": 0, "refits": 6, "reuses": 6}
 
 
 def test_never_stale():
