@@ -60,17 +60,6 @@ LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float 
     return b;
 }
 
-float LobeBound::eval(const Vec3f& w) const {
-    const float c = dot(n, w);
-    if (!(c > 0.f)) return 0.f;
-    float v = diffuse * c;
-    if (specular > 0.f) {
-        const float q = 1.f + sharpness * (1.f - dot(r, w));
-        v += specular / (q * q);
-    }
-    return v;
-}
-
 double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
     // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1] (less than pi apart), with b
     // along the edge and a towards the foot of the perpendicular from p; h the distance to the
