@@ -613,6 +613,9 @@ struct AllGradients {
             slots.envmap_rotation = slot(9);
         }
         slots.camera = slot(kCameraParams);
+        // As the Python API numbers them: the gradient sink's cache places each slot's values
+        // by its key (all keys 0 would pile every slot's first values onto the same entries).
+        number_slots(slots);
     }
 };
 
