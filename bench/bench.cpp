@@ -26,6 +26,11 @@
 //   edgepath_bench --survival-compare [--secondary-survival P] [--size N] [--spp N] [--seeds N]
 //                  [--bounces 1,3]   (that roulette against none on the benchmark scene: the
 //                  variance over seeds of every gradient, times the pass's CPU time)
+//   edgepath_bench --digest [--size N] [--spp N] [--threads N] [--bounces 1,3] [--secondary-survival P]
+//                  (one gradient pass and one derivative image per bounce count on the benchmark
+//                  scene, and one of each on the single triangle: a hash of every output value,
+//                  for bit-for-bit comparisons of two builds; one thread gives the same sums
+//                  whatever the timing)
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
 // the renderer alone. --forward-only stops after the forward tables (A/B runs of two builds).
@@ -96,6 +101,7 @@ struct Options {
     int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
     float secondary_survival = 1.f;  // RenderOptions::secondary_survival of the backward table
     bool survival_compare = false;   // only: the roulette by class against none, at equal time
+    bool digest = false;             // only: hashes of the gradient passes' outputs
 };
 
 [[noreturn]] void usage(const char* msg, int status = 2) {
@@ -106,7 +112,8 @@ struct Options {
                  "                      [--secondary-only [--seeds N] [--case 0-3]]  (alone: secondary-edge samplers' MSE)\n"
                  "                      [--render-only] [--backward-only] [--forward-only]\n"
                  "                      [--secondary-survival P]  (the backward table's roulette floor, default 1)\n"
-                 "                      [--survival-compare]  (alone: that roulette against none at equal time)\n",
+                 "                      [--survival-compare]  (alone: that roulette against none at equal time)\n"
+                 "                      [--digest]  (alone: hashes of gradient passes' outputs, to compare builds)\n",
                  msg);
     std::exit(status);
 }
@@ -141,6 +148,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--backward-only") o.backward_only = true;
         else if (a == "--survival-compare") o.survival_compare = true;
         else if (a == "--forward-only") o.forward_only = true;
+        else if (a == "--digest") o.digest = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
         else if (a == "--secondary-survival") {
@@ -605,6 +613,9 @@ struct AllGradients {
             slots.envmap_rotation = slot(9);
         }
         slots.camera = slot(kCameraParams);
+        // As the Python API numbers them: the gradient sink's cache places each slot's values
+        // by its key (all keys 0 would pile every slot's first values onto the same entries).
+        number_slots(slots);
     }
 };
 
@@ -1009,8 +1020,93 @@ int survival_compare(const Options& o, BenchScene& bs) {
     return 0;
 }
 
+// FNV-1a over the bytes of the values, and their sum of magnitudes (to see what changed).
+struct Digest {
+    uint64_t hash = 1469598103934665603ull;
+    double magnitude = 0.0;
+    size_t count = 0;
+    void add(const float* v, size_t n) {
+        const unsigned char* b = reinterpret_cast<const unsigned char*>(v);
+        for (size_t i = 0; i < n * sizeof(float); ++i) hash = (hash ^ b[i]) * 1099511628211ull;
+        for (size_t i = 0; i < n; ++i) magnitude += std::abs(double(v[i]));
+        count += n;
+    }
+    // The hash first, the pass's process CPU time last (apart, so that two runs' digests can be
+    // compared with the times cut off).
+    void print(const std::string& what, double cpu_ms) const {
+        std::printf("%-44s %016llx  sum|g| %.9g over %zu values  | cpu ms %.1f\n", what.c_str(),
+                    (unsigned long long)hash, magnitude, count, cpu_ms);
+    }
+};
+
+// The passes --digest hashes, each in a function of its own, so that a profiler can collect them
+// alone (valgrind --tool=callgrind --toggle-collect='*measured_gradients*'): the scene's edges
+// and hierarchy are built by a pass before.
+__attribute__((noinline)) void measured_gradients(const Scene& scene, const RenderOptions& ro, const float* adjoint,
+                                                  const SceneGradients& slots) {
+    render_gradients(scene, ro, adjoint, slots);
+}
+__attribute__((noinline)) void measured_derivative_image(const Scene& scene, const RenderOptions& ro,
+                                                         const SceneGradients& dirs, float* out) {
+    derivative_image(scene, ro, dirs, out);
+}
+
+// One reverse-mode pass (every parameter wanted, adjoint 1, after a warm-up pass) and one
+// derivative image (every parameter's direction a fixed pattern) per configuration: their digests.
+int digest(const Options& o, BenchScene& bs) {
+    std::printf("edgepath benchmark: digests of gradient passes, %dx%d, %d spp, %d threads, survival %g\n", o.size,
+                o.size, o.spp, o.threads, o.secondary_survival);
+    auto one = [&](const std::string& name, const SceneDesc& desc, int spp, int bounces) {
+        std::shared_ptr<const Scene> scene = build_scene(desc);
+        const size_t n = size_t(image_width(*scene)) * image_height(*scene) * 3;
+        std::vector<float> adjoint(n, 1.f), image(n);
+        RenderOptions ro;
+        ro.spp = spp;
+        ro.max_bounces = bounces;
+        ro.num_threads = o.threads;
+        ro.seed = 3;
+        ro.secondary_survival = o.secondary_survival;
+        AllGradients grads(desc);
+        render_gradients(*scene, ro, adjoint.data(), grads.slots);  // builds the edges and hierarchy
+        for (auto& b : grads.buffers) std::fill(b.begin(), b.end(), 0.f);
+        const double cpu_g = time_once_cpu([&] { measured_gradients(*scene, ro, adjoint.data(), grads.slots); }).cpu_ms;
+        Digest g;
+        for (const auto& b : grads.buffers) g.add(b.data(), b.size());
+        g.print(name + " bounces=" + std::to_string(bounces) + " gradients", cpu_g);
+        // The same buffers as directions: every parameter moves by 1 (a deterministic pattern).
+        AllGradients dirs(desc);
+        for (auto& b : dirs.buffers)
+            for (size_t i = 0; i < b.size(); ++i) b[i] = float(int(i % 7) - 3) * 0.25f;
+        SceneGradients d = dirs.slots;
+        auto to_dir = [](GradSlot& s) {
+            s.dir = s.grad;
+            s.grad = nullptr;
+        };
+        for (auto& m : d.meshes)
+            for (GradSlot* s : {&m.vertices, &m.uvs, &m.normals, &m.emission}) to_dir(*s);
+        for (auto& m : d.materials)
+            for (GradSlot* s : {&m.diffuse, &m.specular, &m.roughness}) to_dir(*s);
+        to_dir(d.envmap);
+        to_dir(d.envmap_rotation);
+        to_dir(d.camera);
+        const double cpu_d = time_once_cpu([&] { measured_derivative_image(*scene, ro, d, image.data()); }).cpu_ms;
+        Digest di;
+        di.add(image.data(), n);
+        di.print(name + " bounces=" + std::to_string(bounces) + " derivative image", cpu_d);
+    };
+    for (int bounces : o.bounces) one("benchmark", bs.desc, o.spp, bounces);
+    const TriangleScene tri(o.size);
+    one("single triangle", tri.desc, o.spp, 1);
+    return 0;
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
+    if (o.digest) {
+        BenchScene bs;
+        build_bench_scene(bs, o);
+        return digest(o, bs);
+    }
     if (o.backward_memory) {
         BenchScene bs;
         build_bench_scene(bs, o);

@@ -60,17 +60,6 @@ LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float 
     return b;
 }
 
-float LobeBound::eval(const Vec3f& w) const {
-    const float c = dot(n, w);
-    if (!(c > 0.f)) return 0.f;
-    float v = diffuse * c;
-    if (specular > 0.f) {
-        const float q = 1.f + sharpness * (1.f - dot(r, w));
-        v += specular / (q * q);
-    }
-    return v;
-}
-
 double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
     // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1] (less than pi apart), with b
     // along the edge and a towards the foot of the perpendicular from p; h the distance to the
@@ -568,11 +557,6 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         }
     }
     const Vec3f v = n.center - q.p;
-    const float dc2 = length_squared(v), r2 = n.radius * n.radius;
-    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
-    // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
-    // would be infinite for boxes that hold p).
-    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
     // Nothing above the tangent plane (the BSDF's support, n on the side of wo): no light
     // through the node's edges reaches p (edges in the plane itself are seen at grazing angles,
     // where the cosine vanishes).
@@ -582,6 +566,11 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         const Vec3f ea = n.a - q.p, eb = n.b - q.p;
         if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
     }
+    const float dc2 = length_squared(v), r2 = n.radius * n.radius;
+    const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
+    // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
+    // would be infinite for boxes that hold p).
+    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
     if (!(dc2 > r2)) {
         // p inside the bounding sphere: every direction; the lobe's peak. (importance() scores
         // such a node by its children instead, a few levels down: their bounds are tighter.)
@@ -690,30 +679,34 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     }
 }
 
-const EdgeHierarchy::Coarse& EdgeHierarchy::coarse_memo(const Query& q, int32_t index, Coarse& scratch) const {
-    if (q.memo) {
-        bool found;
-        if (Coarse* c = q.memo->lookup(index, found)) {
-            if (!found) coarse(q, nodes_[size_t(index)], *c);
-            return *c;
-        }
+// The memo's entry of a node scored by its own bounds needs no more work where neither the
+// refinement of a node whose sphere holds p nor that of a narrow light cone applies; a small
+// subtree's entry (its leaves' sum) keeps both flags false. Then no node is read at all.
+inline void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
+    bool found = false;
+    Coarse* const kept = q.memo ? q.memo->lookup(index, found) : nullptr;
+    if (found && !(kept->inside && refine > 0) && !(kept->narrow && light_refine > 0)) {
+        out[0] = kept->value[0];
+        out[1] = kept->value[1];
+        return;
     }
-    coarse(q, nodes_[size_t(index)], scratch);
-    return scratch;
+    importance_of(q, index, kept, found, out, refine, light_refine);
 }
 
-void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int refine, int light_refine) const {
+void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
+                                  int light_refine) const {
     const Node& n = nodes_[size_t(index)];
     if (!(n.length > 0.f)) {  // empty leaves only (Edge::flat): never descended into
         out[0] = out[1] = 0.f;
+        if (kept) {  // claimed by importance(): a later hit reads it
+            kept->value[0] = kept->value[1] = 0.f;
+            kept->inside = kept->narrow = false;
+        }
         return;
     }
     if (n.left >= 0 && n.count <= kExactLeaves) {
         // A small subtree: the sum of its leaves' own values (kept in the memo in place of the
         // node's own bounds, which are never needed).
-        // (The entry is claimed before the leaves fill other entries: it is written below.)
-        bool found = false;
-        Coarse* kept = q.memo ? q.memo->lookup(index, found) : nullptr;
         if (found) {
             out[0] = kept->value[0];
             out[1] = kept->value[1];
@@ -727,12 +720,19 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         if (kept) {
             kept->value[0] = out[0];
             kept->value[1] = out[1];
+            kept->inside = kept->narrow = false;
         }
         return;
     }
     Coarse scratch;
-    const Coarse& c = coarse_memo(q, index, scratch);
-    if (c.inside && refine > 0) {
+    const Coarse* c = kept;
+    if (!kept) {
+        coarse(q, n, scratch);
+        c = &scratch;
+    } else if (!found) {
+        coarse(q, n, *kept);
+    }
+    if (c->inside && refine > 0) {
         // p inside the bounding sphere: the children's bounds are tighter (a few levels down).
         float a[2], b[2];
         importance(q, n.left, a, refine - 1, light_refine);
@@ -741,36 +741,15 @@ void EdgeHierarchy::importance(const Query& q, int32_t index, float out[2], int 
         out[1] = a[1] + b[1];
         return;
     }
-    out[0] = c.value[0];
-    out[1] = c.value[1];
-    if (c.narrow && light_refine > 0) {
+    out[0] = c->value[0];
+    out[1] = c->value[1];
+    if (c->narrow && light_refine > 0) {
         // The node's share of a narrow light cone, by its children (summed, a few levels down):
         // descents then rarely end where nothing contributes.
         float a[2], b[2];
         importance(q, n.left, a, 0, light_refine - 1);
         importance(q, n.right, b, 0, light_refine - 1);
         out[1] = a[1] + b[1];
-    }
-}
-
-EdgeHierarchy::Coarse* EdgeHierarchy::Memo::lookup(int32_t node, bool& found) {
-    // One probe sequence for find() and then insert(): insert() takes the first entry find()
-    // stops at.
-    for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
-        Entry& e = entries_[h];
-        if (e.stamp == stamp_) {
-            if (e.node == node) {
-                found = true;
-                return &e.value;
-            }
-            continue;
-        }
-        found = false;
-        if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
-        e.stamp = stamp_;
-        e.node = node;
-        ++used_;
-        return &e.value;
     }
 }
 

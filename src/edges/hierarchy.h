@@ -63,8 +63,17 @@ struct LobeBound {
     float width = 0.f;
     // From a BSDF's mean diffuse and specular albedo, GGX alpha and cos(n, wo) > 0.
     static LobeBound make(const Vec3f& n, const Vec3f& wo, float diffuse, float specular, float alpha);
-    // The value at direction w (unit).
-    float eval(const Vec3f& w) const;
+    // The value at direction w (unit). (Inline: the point sampler tabulates it 17 times an edge.)
+    float eval(const Vec3f& w) const {
+        const float c = dot(n, w);
+        if (!(c > 0.f)) return 0.f;
+        float v = diffuse * c;
+        if (specular > 0.f) {
+            const float q = 1.f + sharpness * (1.f - dot(r, w));
+            v += specular / (q * q);
+        }
+        return v;
+    }
     // Its integral over the arc of directions from p to the segment (v0, v1), in angle (closed
     // form; the glossy part is not cut off below the horizon); *h: the distance from p to the
     // segment's line.
@@ -177,8 +186,26 @@ public:
         void reset();
         const Coarse* find(int32_t node) const;
         Coarse* insert(int32_t node);  // nullptr when full
-        // find(), or else insert() (found false; nullptr when full), in one probe sequence.
-        Coarse* lookup(int32_t node, bool& found);
+        // find(), or else insert() (found false; nullptr when full), in one probe sequence:
+        // insert() takes the first entry find() stops at.
+        Coarse* lookup(int32_t node, bool& found) {
+            for (uint32_t h = slot(node);; h = (h + 1) & (kSize - 1)) {
+                Entry& e = entries_[h];
+                if (e.stamp == stamp_) {
+                    if (e.node == node) {
+                        found = true;
+                        return &e.value;
+                    }
+                    continue;
+                }
+                found = false;
+                if (used_ * 4 >= kSize * 3) return nullptr;  // full enough: computed without keeping
+                e.stamp = stamp_;
+                e.node = node;
+                ++used_;
+                return &e.value;
+            }
+        }
 
     private:
         static constexpr uint32_t kSize = 1024;  // a power of two
@@ -195,13 +222,14 @@ public:
 
 private:
     void coarse(const Query& q, const Node& n, Coarse& out) const;
-    // The memo's entry, or `scratch` filled in.
-    const Coarse& coarse_memo(const Query& q, int32_t index, Coarse& scratch) const;
     // Node `index`'s importance under both strategies: its own bounds, or its children's where
     // they are tighter, or for a subtree of at most kExactLeaves edges the sum of its leaves.
     // refine: levels of children scoring a node whose sphere holds p; light_refine: levels of
     // children scoring its share of a narrow light cone.
     void importance(const Query& q, int32_t index, float out[2], int refine = kRefine, int light_refine = kLightRefine) const;
+    // The same, past the memo's entry (`kept`, or null; `found`: it held the node already).
+    void importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
+                       int light_refine) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).

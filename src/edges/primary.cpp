@@ -292,46 +292,62 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     camera_eye.parallel = cam.type == CameraType::Orthographic;
     camera_eye.dir = cam.forward;
     camera_eye.skip_emitters = opt.hide_emitters;
+    // Each edge's part on the film and its sampling length, in parallel over chunks of the edge
+    // list, then joined in the list's order (the same sums, whatever the thread count).
+    const std::vector<Edge>& all_edges = scene.edges();
+    constexpr int64_t kSetupChunk = 4096;
+    const int64_t num_edges = int64_t(all_edges.size());
+    std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
+    std::vector<std::vector<double>> chunk_lengths(chunk_edges.size());
+    for_each_chunk(opt, num_edges, kSetupChunk, [&](int64_t begin, int64_t end) {
+        std::vector<FilmEdge>& film_edges = chunk_edges[size_t(begin / kSetupChunk)];
+        std::vector<double>& lengths = chunk_lengths[size_t(begin / kSetupChunk)];
+        for (int64_t index = begin; index < end; ++index) {
+            const Edge& e = all_edges[size_t(index)];
+            if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            FilmEdge fe;
+            double len;
+            fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
+            if (uniform) {
+                len = fe.world;  // world length; the film part is found per sample
+            } else if (spherical) {
+                // Folds (and the smooth edges by their weight, as below), by the angle they subtend
+                // at the camera's position; the points of an edge by world length.
+                if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
+                    fe.weight = smooth_edge_weight(m, e);
+                    if (!(fe.weight > 0.0)) continue;
+                }
+                const Vec3d a(m.vertex(e.v0) - cam.position), b(m.vertex(e.v1) - cam.position);
+                // A fisheye sees nothing beyond half its fov from its axis (up to rounding).
+                if (cam.type == CameraType::Fisheye && min_angle_from(a, b, Vec3d(cam.forward)) > double(cam.half_fov) + 1e-5)
+                    continue;
+                len = std::atan2(length(cross(a, b)), dot(a, b)) * fe.weight;
+            } else {
+                // Folds and creases (shading or texture jumps) at full density. A smooth edge that
+                // does not fold separates different values of the geometric normal, and steps where
+                // the mesh shadows itself along it (the light between its faces' planes reaches one
+                // face and not the other, while the smooth normals give both a weight): sampled in
+                // proportion to the angle between its faces, the weight dividing the sample's.
+                const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
+                if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
+                    fe.weight = smooth_edge_weight(m, e);
+                    if (!(fe.weight > 0.0)) continue;
+                }
+                if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
+                len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
+            }
+            fe.edge = size_t(index);
+            if (!(len > 0.0)) continue;
+            film_edges.push_back(fe);
+            lengths.push_back(len);
+        }
+    });
     std::vector<FilmEdge> film_edges;
     std::vector<double> lengths;
-    for (const Edge& e : scene.edges()) {
-        if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
-        const Mesh& m = scene.meshes[size_t(e.mesh)];
-        FilmEdge fe;
-        double len;
-        fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
-        if (uniform) {
-            len = fe.world;  // world length; the film part is found per sample
-        } else if (spherical) {
-            // Folds (and the smooth edges by their weight, as below), by the angle they subtend
-            // at the camera's position; the points of an edge by world length.
-            if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
-                fe.weight = smooth_edge_weight(m, e);
-                if (!(fe.weight > 0.0)) continue;
-            }
-            const Vec3d a(m.vertex(e.v0) - cam.position), b(m.vertex(e.v1) - cam.position);
-            // A fisheye sees nothing beyond half its fov from its axis (up to rounding).
-            if (cam.type == CameraType::Fisheye && min_angle_from(a, b, Vec3d(cam.forward)) > double(cam.half_fov) + 1e-5)
-                continue;
-            len = std::atan2(length(cross(a, b)), dot(a, b)) * fe.weight;
-        } else {
-            // Folds and creases (shading or texture jumps) at full density. A smooth edge that
-            // does not fold separates different values of the geometric normal, and steps where
-            // the mesh shadows itself along it (the light between its faces' planes reaches one
-            // face and not the other, while the smooth normals give both a weight): sampled in
-            // proportion to the angle between its faces, the weight dividing the sample's.
-            const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
-            if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
-                fe.weight = smooth_edge_weight(m, e);
-                if (!(fe.weight > 0.0)) continue;
-            }
-            if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
-            len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
-        }
-        fe.edge = size_t(&e - scene.edges().data());
-        if (!(len > 0.0)) continue;
-        film_edges.push_back(fe);
-        lengths.push_back(len);
+    for (size_t c = 0; c < chunk_edges.size(); ++c) {
+        film_edges.insert(film_edges.end(), chunk_edges[c].begin(), chunk_edges[c].end());
+        lengths.insert(lengths.end(), chunk_lengths[c].begin(), chunk_lengths[c].end());
     }
     if (film_edges.empty()) return;
     // Cumulative film length: sample i takes the point at length (i + u) / n * total, so the
