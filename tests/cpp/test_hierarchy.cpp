@@ -11,6 +11,7 @@
 
 #include "edgepath.h"
 #include "edges/hierarchy.h"
+#include "moved_scene.h"
 #include "sampling/rng.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
@@ -298,6 +299,33 @@ TEST(EdgeHierarchy, GroupSubtreeSamplesOnlyItsEdges) {
     EXPECT_EQ(all.group_root(), 0);
 }
 
+// Draws `rounds` samples of `h` for `plain` and for `kept` (the same query with a memo), the
+// strategies alternating, with the same random numbers, and expects the same choices bit for
+// bit (and, with `with_pdf`, the same pdf() of each chosen edge); returns how many it compared.
+int expect_same_samples(const EdgeHierarchy& h, const EdgeHierarchy::Query& plain, const EdgeHierarchy::Query& kept,
+                        Rng& rng, int rounds, bool with_pdf) {
+    int compared = 0;
+    for (int k = 0; k < rounds; ++k) {
+        const auto strategy = EdgeHierarchy::Strategy(k % 2);
+        const float u = rng.next_float();
+        EdgeHierarchy::Choice a[EdgeHierarchy::kMaxChoices], b[EdgeHierarchy::kMaxChoices];
+        const int na = h.sample(plain, strategy, u, a), nb = h.sample(kept, strategy, u, b);
+        EXPECT_EQ(na, nb);
+        for (int j = 0; j < std::min(na, nb); ++j) {
+            EXPECT_EQ(a[j].edge, b[j].edge);
+            EXPECT_EQ(a[j].prob[0], b[j].prob[0]);
+            EXPECT_EQ(a[j].prob[1], b[j].prob[1]);
+            if (with_pdf && a[j].edge == b[j].edge) {
+                const EdgeHierarchy::Choice pa = h.pdf(plain, a[j].edge), pb = h.pdf(kept, a[j].edge);
+                EXPECT_EQ(pa.prob[0], pb.prob[0]);
+                EXPECT_EQ(pa.prob[1], pb.prob[1]);
+            }
+            ++compared;
+        }
+    }
+    return compared;
+}
+
 // The memo of node bounds changes nothing: with and without it (and with one memo kept across
 // both strategies and many descents, as a render keeps it per vertex), sample() picks the same
 // edges with the same expected counts, bit for bit.
@@ -318,19 +346,7 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamples) {
         EdgeHierarchy::Query kept = plain;
         kept.memo = &memo;
         memo.reset();
-        for (int k = 0; k < 6; ++k) {
-            const auto strategy = EdgeHierarchy::Strategy(k % 2);
-            const float u = rng.next_float();
-            EdgeHierarchy::Choice a[EdgeHierarchy::kMaxChoices], b[EdgeHierarchy::kMaxChoices];
-            const int na = h.sample(plain, strategy, u, a), nb = h.sample(kept, strategy, u, b);
-            ASSERT_EQ(na, nb);
-            for (int j = 0; j < na; ++j) {
-                EXPECT_EQ(a[j].edge, b[j].edge);
-                EXPECT_EQ(a[j].prob[0], b[j].prob[0]);
-                EXPECT_EQ(a[j].prob[1], b[j].prob[1]);
-                ++compared;
-            }
-        }
+        compared += expect_same_samples(h, plain, kept, rng, 6, false);
     }
     EXPECT_GT(compared, 1000);
 }
@@ -592,22 +608,6 @@ namespace edgepath {
 namespace {
 
 // The indices of every edge of `scene`, those of mesh `first` first; and how many those are.
-// A scene of the form of one whose vertices move (built at other positions, then updated to
-// `desc`'s): a BVH built for refitting, an edge list that keeps the nearly flat edges (marked
-// Edge::flat, empty leaves of the hierarchy), so that moves keep the list and refit the tree.
-std::shared_ptr<Scene> build_moved(const SceneDesc& desc) {
-    SceneDesc other = desc;
-    std::vector<std::vector<float>> halved(desc.meshes.size());
-    for (size_t i = 0; i < desc.meshes.size(); ++i) {
-        halved[i].assign(desc.meshes[i].vertices, desc.meshes[i].vertices + 3 * desc.meshes[i].num_vertices);
-        for (float& x : halved[i]) x *= 0.5f;
-        other.meshes[i].vertices = halved[i].data();
-    }
-    const std::shared_ptr<Scene> s = build_scene(other);
-    update_scene(*s, desc);
-    return s;
-}
-
 std::vector<int32_t> edges_mesh_first(const Scene& scene, int first, size_t* group) {
     std::vector<int32_t> ids, rest;
     for (size_t i = 0; i < scene.edges().size(); ++i)
@@ -832,22 +832,7 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamplesWithFlatEdges) {
         EdgeHierarchy::Choice scratch[EdgeHierarchy::kMaxChoices];
         for (int k = 0; k < 8; ++k) other.sample(dirty, EdgeHierarchy::Strategy(k % 2), rng.next_float(), scratch);
         memo.reset();
-        for (int k = 0; k < 4; ++k) {
-            const auto strategy = EdgeHierarchy::Strategy(k % 2);
-            const float u = rng.next_float();
-            EdgeHierarchy::Choice a[EdgeHierarchy::kMaxChoices], b[EdgeHierarchy::kMaxChoices];
-            const int na = h.sample(plain, strategy, u, a), nb = h.sample(kept, strategy, u, b);
-            ASSERT_EQ(na, nb);
-            for (int j = 0; j < na; ++j) {
-                ASSERT_EQ(a[j].edge, b[j].edge);
-                EXPECT_EQ(a[j].prob[0], b[j].prob[0]);
-                EXPECT_EQ(a[j].prob[1], b[j].prob[1]);
-                const EdgeHierarchy::Choice pa = h.pdf(plain, a[j].edge), pb = h.pdf(kept, a[j].edge);
-                EXPECT_EQ(pa.prob[0], pb.prob[0]);
-                EXPECT_EQ(pa.prob[1], pb.prob[1]);
-                ++compared;
-            }
-        }
+        compared += expect_same_samples(h, plain, kept, rng, 4, true);
         // Every edge's probabilities, every tenth query: the walks from the root reach the
         // small subtrees that hold flat edges, whose entries the samples left in the memo.
         if (i % 10 == 0)

@@ -6,6 +6,7 @@
 #include <vector>
 
 #include "edgepath.h"
+#include "moved_scene.h"
 #include "render/packet.h"
 #include "render/path.h"
 #include "scene/scene.h"
@@ -340,15 +341,9 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     // to d's.
     auto fresh_build = [&](const SceneDesc& d, bool moved) {
         if (!moved) return build_scene(d);
-        SceneDesc other = d;
-        std::vector<std::vector<float>> halved(d.meshes.size());
-        for (size_t i = 0; i < d.meshes.size(); ++i) {
-            halved[i].assign(d.meshes[i].vertices, d.meshes[i].vertices + 3 * d.meshes[i].num_vertices);
-            for (float& x : halved[i]) x *= 0.5f;
-            other.meshes[i].vertices = halved[i].data();
-        }
-        const auto s = build_scene(other);
-        EXPECT_EQ(update_scene(*s, d), SceneUpdate::Built);
+        SceneUpdate done;
+        const auto s = build_moved(d, &done);
+        EXPECT_EQ(done, SceneUpdate::Built);
         return s;
     };
     // Image and vertex gradients of `scene`, against a fresh build of `d` (of the form of a scene
@@ -561,8 +556,9 @@ TEST(Render, SphereLightSampledBySolidAngle) {
                 if (!scene->sample_area_light(points[i], u0, u1, u2, ls)) continue;
                 const SurfacePoint q = scene->surface_point(ls.hit);
                 ASSERT_GT(dot(q.ng, -ls.dir), 0.f);
-                if (mode == 0 && s < 1000)
+                if (mode == 0 && s < 1000) {
                     EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 1e-4f * ls.pdf);
+                }
                 sum += ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf;
             }
             estimate[mode][i] = sum / N;
@@ -626,7 +622,9 @@ TEST(Render, QuadLightSampledBySphericalTriangles) {
                     }
                     const SurfacePoint q = scene->surface_point(ls.hit);
                     ASSERT_GT(dot(q.ng, -ls.dir), 0.f);
-                    if (checked++ < 2000) EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 2e-4f * ls.pdf);
+                    if (checked++ < 2000) {
+                        EXPECT_NEAR(ls.pdf, scene->light_pdf(points[i], q), 2e-4f * ls.pdf);
+                    }
                     acc.add(ls.radiance.x * std::max(0.f, dot(n, ls.dir)) / ls.pdf);
                 }
                 const double expect = 2.0 * polygon_irradiance(Vec3d(points[i]), Vec3d(n), poly);
