@@ -374,8 +374,12 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.num_normals = md.normals ? md.num_normals : -1;
             k.normals = copy_of(md.normals, 3 * md.num_normals);
             k.colors = copy_of(md.colors, 3 * md.num_vertices);
+            k.corners.resize(size_t(9 * md.num_triangles));
+            for (int64_t t = 0; t < 3 * md.num_triangles; ++t)
+                std::copy_n(md.vertices + 3 * int64_t(md.indices[t]), 3, k.corners.data() + 3 * t);
         }
     }
+    for (size_t i = 0; i < n; ++i) meshes[i].corners = kept_[i].corners.data();
     build_lights();
     ++(what == Update::Built ? stats_.builds : what == Update::Refit ? stats_.refits : stats_.reuses);
     return what;
@@ -616,8 +620,8 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     sp.b1 = b1;
     sp.b2 = b2;
     float b0 = 1.f - b1 - b2;
-    const int32_t* tri = m.indices + 3 * prim;
-    Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
+    const float* c = m.corners + 9 * prim;
+    const Vec3f v0 = Vec3f::load(c), v1 = Vec3f::load(c + 3), v2 = Vec3f::load(c + 6);
     sp.p = v0 * b0 + v1 * b1 + v2 * b2;
     sp.p_error = triangle_point_error(v0, v1, v2, b0, b1, b2);
     sp.ng = normalize(cross(v1 - v0, v2 - v0));

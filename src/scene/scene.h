@@ -77,6 +77,10 @@ struct Mesh {
     bool spherical_by_mesh = false;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
+    // The corners of each triangle, 9 floats a triangle (its vertices 0, 1, 2, as `vertices`
+    // holds them): a hit's vertices in one or two cache lines, found without the index array
+    // (Scene::surface_point). Owned by the scene, kept up to date by Scene::update.
+    const float* corners = nullptr;
 
     Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
     // cross(v1 - v0, v2 - v0) of triangle f: the face normal (by the winding), not normalised.
@@ -287,6 +291,7 @@ private:
         int64_t num_vertices = 0, num_uvs = -1, num_normals = -1;
         std::vector<float> vertices, uvs, normals, colors;
         std::vector<int32_t> indices, uv_indices, normal_indices;
+        std::vector<float> corners;  // Mesh::corners
     };
     std::vector<Kept> kept_;
     BuildStats stats_;
