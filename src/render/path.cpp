@@ -27,8 +27,15 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         if (record) record->camera_missed = true;
         return L;
     }
-    SurfacePoint sp = scene.surface_point(hit);
-    if (!opt.hide_emitters) L += scene.emitted(sp, -ray.dir);
+    // A vertex's surface point serves its emission and, when the path goes on, its scattering:
+    // where neither is needed (a path's last vertex on a surface that does not emit) it is not
+    // computed (its triangle's data are often not in cache).
+    auto needs_point = [&](const Hit& h, int bounce) {
+        return bounce < opt.max_bounces || scene.meshes[size_t(h.mesh)].is_emitter();
+    };
+    SurfacePoint sp;
+    if (needs_point(hit, 0)) sp = scene.surface_point(hit);
+    if (!opt.hide_emitters && scene.meshes[size_t(hit.mesh)].is_emitter()) L += scene.emitted(sp, -ray.dir);
     PathVertexRecord* rv = nullptr;
     auto push_vertex = [&](const Ray& r, float emission_weight) {
         if (!record) return;
@@ -125,9 +132,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             }
             break;
         }
-        sp = scene.surface_point(hit);
+        if (needs_point(hit, bounce + 1)) sp = scene.surface_point(hit);
         float emission_weight = 0.f;
-        if (counted) {
+        if (counted && scene.meshes[size_t(hit.mesh)].is_emitter()) {
             Vec3f Le = scene.emitted(sp, -dir);
             if (!is_black(Le)) {
                 emission_weight = weighted ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
