@@ -63,6 +63,26 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             ue1 = rng.next_float();
             ue2 = rng.next_float();
         }
+        // BSDF sampling. Its ray is traced before the shadow rays, and the surface it meets
+        // fetched while they are: they do not depend on it, and the memory latency of a random
+        // triangle's data is hidden behind their traversal.
+        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
+        BsdfSample bs;
+        Vec3f next_beta(0.f);
+        if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
+        const bool goes_on = !is_black(next_beta);
+        Vec3f dir;
+        Ray next_ray;
+        Hit next_hit;
+        bool found = false;
+        if (goes_on) {
+            dir = frame.to_world(bs.wi);
+            next_ray = spawn_ray(sp, dir);
+            ++counters.bounce;
+            found = scene.intersect(next_ray, next_hit);
+            if (found) scene.prefetch(next_hit);
+        }
+
         auto next_event = [&](const LightSample& ls, NeeRecord* nr) {
             Vec3f wi = frame.to_local(ls.dir);
             Vec3f f = bsdf_eval(bp, wo, wi);
@@ -96,13 +116,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
                 L += beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2);
             }
 
-        // BSDF sampling.
-        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
-        BsdfSample bs;
-        if (!bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) break;
-        beta *= bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf;
-        if (is_black(beta)) break;
-        Vec3f dir = frame.to_world(bs.wi);
+        // The continuation.
+        if (!goes_on) break;
+        beta = next_beta;
         Vec3f prev_p = sp.p;
         if (rv) {
             rv->next = true;
@@ -115,9 +131,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         // the sampling strategy.
         const bool counted = use_hits || bs.delta;
         const bool weighted = mis && use_nee && !bs.delta;
-        ray = spawn_ray(sp, dir);
-        ++counters.bounce;
-        if (!scene.intersect(ray, hit)) {
+        ray = next_ray;
+        hit = next_hit;
+        if (!found) {
             if (scene.has_envmap && counted) {
                 // The value and, for the weight, the density (as scene.env_pdf gives it) from
                 // one lookup of the direction.
