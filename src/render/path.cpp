@@ -19,14 +19,17 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         record->camera_missed = record->escaped = false;
         record->emitters_hidden = opt.hide_emitters;
     }
-    const FirstHit f = first ? *first : first_hit(scene, ray, opt.hide_emitters);
-    const bool found = f.found;
-    hit = f.hit;
-    if (!found) {
+    FirstHit traced;
+    if (!first) {
+        traced = first_hit(scene, ray, opt.hide_emitters);
+        first = &traced;
+    }
+    if (!first->found) {
         if (scene.has_envmap && !opt.hide_emitters) L += scene.envmap.eval(ray.dir);
         if (record) record->camera_missed = true;
         return L;
     }
+    hit = first->hit;
     // A vertex's surface point serves its emission and, when the path goes on, its scattering:
     // where neither is needed (a path's last vertex on a surface that does not emit) it is not
     // computed (its triangle's data are often not in cache).
