@@ -891,7 +891,7 @@ bool Scene::sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float 
     ls.p = q.p;
     ls.p_error = q.p_error;
     ls.ng = q.ng;
-    ls.pdf = float(pmf) / lm.triangle_area(prim) * dist2 / cos_l;
+    ls.pdf = float(pmf) / light_triangle_area(lm, prim) * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }
 
@@ -928,7 +928,7 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);
     if (!(cos_l > 0.f)) return 0.f;
-    return float(pmf) / m.triangle_area(q.prim) * dist2 / cos_l;
+    return float(pmf) / light_triangle_area(m, q.prim) * dist2 / cos_l;
 }
 
 }  // namespace edgepath

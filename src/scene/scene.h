@@ -246,6 +246,12 @@ public:
     // Solid-angle density with which sample_area_light would produce the direction from p to
     // the emitting surface point `on_light`.
     float light_pdf(const Vec3f& p, const SurfacePoint& on_light) const;
+    // Area of emitting triangle `prim` of mesh m: its light entry's (as build_lights computed
+    // it, Mesh::triangle_area) where it has one of its own.
+    float light_triangle_area(const Mesh& m, int64_t prim) const {
+        return m.solid_angle || m.spherical_by_mesh ? m.triangle_area(prim)
+                                                    : lights[size_t(m.light_offset + prim)].area;
+    }
     // Solid-angle density with which sample_env would produce `dir`.
     float env_pdf(const Vec3f& dir) const { return env_sampled ? envmap.pdf(dir) : 0.f; }
 
