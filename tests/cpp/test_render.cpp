@@ -343,6 +343,14 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     // built afresh too (`refit`: false).
     std::shared_ptr<Scene> twin;
     auto expect_fresh = [&](const Scene& scene, const SceneDesc& d, bool refit = false) {
+        // The kept corners (Mesh::corners, what surface points read) are the vertices the
+        // description's index arrays name now.
+        ASSERT_EQ(scene.meshes.size(), d.meshes.size());
+        for (size_t m = 0; m < d.meshes.size(); ++m)
+            for (int64_t k = 0; k < 3 * d.meshes[m].num_triangles; ++k)
+                for (int c = 0; c < 3; ++c)
+                    ASSERT_EQ(scene.meshes[m].corners[3 * k + c], d.meshes[m].vertices[3 * int64_t(d.meshes[m].indices[k]) + c])
+                        << "mesh " << m << ", corner " << k;
         std::vector<float> a(pixels), b(pixels), adjoint(pixels);
         for (size_t i = 0; i < pixels; ++i) adjoint[i] = float(i % 7) - 3.f;
         render(scene, opt, a.data());
