@@ -33,10 +33,18 @@ constexpr float rounding_gamma(int n) {
 // The second term is Embree's: its test works with the vertices relative to the ray origin, so
 // a point the interpolation puts exactly in the triangle's plane (a floor at y = 0) would meet
 // its own triangle at t = 0, whose rounding is of the order of the edges.
-inline Vec3f triangle_point_error(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2, float b0, float b1, float b2) {
+// The triangle's largest edge component, for the second term.
+inline float triangle_largest_edge(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2) {
+    return std::max(max_abs_component(v1 - v0), std::max(max_abs_component(v2 - v0), max_abs_component(v2 - v1)));
+}
+// The same with the triangle's largest edge component `edge` given (triangle_largest_edge).
+inline Vec3f triangle_point_error(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2, float b0, float b1, float b2,
+                                  float edge) {
     auto a = [](const Vec3f& v, float b) { return Vec3f(std::abs(v.x * b), std::abs(v.y * b), std::abs(v.z * b)); };
-    const float edge = std::max(max_abs_component(v1 - v0), std::max(max_abs_component(v2 - v0), max_abs_component(v2 - v1)));
     return (a(v0, b0) + a(v1, b1) + a(v2, b2)) * rounding_gamma(7) + Vec3f(edge * rounding_gamma(4));
+}
+inline Vec3f triangle_point_error(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2, float b0, float b1, float b2) {
+    return triangle_point_error(v0, v1, v2, b0, b1, b2, triangle_largest_edge(v0, v1, v2));
 }
 
 // The next float above x (towards +infinity), as std::nextafter(x, +inf) gives it, inline: by

@@ -46,9 +46,8 @@ struct CameraSample {
 };
 
 // Camera sample s of output pixel (x, y) with the random numbers of Rng::for_sample(seed,
-// pixel, s): its film and lens points and its ray (first not yet found).
-inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int y, int s) {
-    CameraSample c;
+// pixel, s): its film and lens points and its ray, written into c (c.first is left as it is).
+inline void set_camera_sample(CameraSample& c, const Scene& scene, uint64_t seed, int x, int y, int s) {
     c.s = s;
     c.x = x;
     c.y = y;
@@ -58,6 +57,12 @@ inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int 
     c.lens = sample_lens_point(scene, c.rng);
     c.ray = scene.camera.generate_ray(c.film.x, c.film.y, c.lens.x, c.lens.y);
     c.outside = !scene.camera.sees(c.film.x, c.film.y);
+}
+
+// The same, returned (first not yet found).
+inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int y, int s) {
+    CameraSample c;
+    set_camera_sample(c, scene, seed, x, y, s);
     return c;
 }
 
@@ -72,14 +77,22 @@ bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0
     CameraSample batch[kPacketSize];
     Ray rays[kPacketSize];
     FirstHit first[kPacketSize];
-    const int width = x1 - x0, spp = opt.spp;
-    const int64_t count = int64_t(width) * (y1 - y0) * spp;
+    const int spp = opt.spp;
+    const int64_t count = int64_t(x1 - x0) * (y1 - y0) * spp;
+    // The next sample: sample s of pixel (x, y).
+    int x = x0, y = y0, s = 0;
     for (int64_t begin = 0; begin < count; begin += kPacketSize) {
         if (opt.cancelled()) return false;
         const int n = int(std::min<int64_t>(kPacketSize, count - begin));
         for (int i = 0; i < n; ++i) {
-            const int64_t k = begin + i, p = k / spp;
-            batch[i] = camera_sample(scene, opt.seed, x0 + int(p % width), y0 + int(p / width), int(k - p * spp));
+            set_camera_sample(batch[i], scene, opt.seed, x, y, s);
+            if (++s == spp) {
+                s = 0;
+                if (++x == x1) {
+                    x = x0;
+                    ++y;
+                }
+            }
             rays[i] = batch[i].ray;
             if (batch[i].outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
         }

@@ -19,16 +19,26 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         record->camera_missed = record->escaped = false;
         record->emitters_hidden = opt.hide_emitters;
     }
-    const FirstHit f = first ? *first : first_hit(scene, ray, opt.hide_emitters);
-    const bool found = f.found;
-    hit = f.hit;
-    if (!found) {
+    FirstHit traced;
+    if (!first) {
+        traced = first_hit(scene, ray, opt.hide_emitters);
+        first = &traced;
+    }
+    if (!first->found) {
         if (scene.has_envmap && !opt.hide_emitters) L += scene.envmap.eval(ray.dir);
         if (record) record->camera_missed = true;
         return L;
     }
-    SurfacePoint sp = scene.surface_point(hit);
-    if (!opt.hide_emitters) L += scene.emitted(sp, -ray.dir);
+    hit = first->hit;
+    // A vertex's surface point serves its emission and, when the path goes on, its scattering:
+    // where neither is needed (a path's last vertex on a surface that does not emit) it is not
+    // computed (its triangle's data are often not in cache).
+    auto needs_point = [&](const Hit& h, int bounce) {
+        return bounce < opt.max_bounces || scene.meshes[size_t(h.mesh)].is_emitter();
+    };
+    SurfacePoint sp;
+    if (needs_point(hit, 0)) sp = scene.surface_point(hit);
+    if (!opt.hide_emitters && scene.meshes[size_t(hit.mesh)].is_emitter()) L += scene.emitted(sp, -ray.dir);
     PathVertexRecord* rv = nullptr;
     auto push_vertex = [&](const Ray& r, float emission_weight) {
         if (!record) return;
@@ -56,6 +66,26 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             ue1 = rng.next_float();
             ue2 = rng.next_float();
         }
+        // BSDF sampling. Its ray is traced before the shadow rays, and the surface it meets
+        // fetched while they are: they do not depend on it, and the memory latency of a random
+        // triangle's data is hidden behind their traversal.
+        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
+        BsdfSample bs;
+        Vec3f next_beta(0.f);
+        if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
+        const bool goes_on = !is_black(next_beta);
+        Vec3f dir;
+        Ray next_ray;
+        Hit next_hit;
+        bool found = false;
+        if (goes_on) {
+            dir = frame.to_world(bs.wi);
+            next_ray = spawn_ray(sp, dir);
+            ++counters.bounce;
+            found = scene.intersect(next_ray, next_hit);
+            if (found) scene.prefetch(next_hit);
+        }
+
         auto next_event = [&](const LightSample& ls, NeeRecord* nr) {
             Vec3f wi = frame.to_local(ls.dir);
             Vec3f f = bsdf_eval(bp, wo, wi);
@@ -89,13 +119,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
                 L += beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2);
             }
 
-        // BSDF sampling.
-        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
-        BsdfSample bs;
-        if (!bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) break;
-        beta *= bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf;
-        if (is_black(beta)) break;
-        Vec3f dir = frame.to_world(bs.wi);
+        // The continuation.
+        if (!goes_on) break;
+        beta = next_beta;
         Vec3f prev_p = sp.p;
         if (rv) {
             rv->next = true;
@@ -108,9 +134,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         // the sampling strategy.
         const bool counted = use_hits || bs.delta;
         const bool weighted = mis && use_nee && !bs.delta;
-        ray = spawn_ray(sp, dir);
-        ++counters.bounce;
-        if (!scene.intersect(ray, hit)) {
+        ray = next_ray;
+        hit = next_hit;
+        if (!found) {
             if (scene.has_envmap && counted) {
                 // The value and, for the weight, the density (as scene.env_pdf gives it) from
                 // one lookup of the direction.
@@ -125,9 +151,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             }
             break;
         }
-        sp = scene.surface_point(hit);
+        if (needs_point(hit, bounce + 1)) sp = scene.surface_point(hit);
         float emission_weight = 0.f;
-        if (counted) {
+        if (counted && scene.meshes[size_t(hit.mesh)].is_emitter()) {
             Vec3f Le = scene.emitted(sp, -dir);
             if (!is_black(Le)) {
                 emission_weight = weighted ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;

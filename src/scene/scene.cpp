@@ -376,8 +376,19 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.num_normals = md.normals ? md.num_normals : -1;
             k.normals = copy_of(md.normals, 3 * md.num_normals);
             k.colors = copy_of(md.colors, 3 * md.num_vertices);
+            k.triangle_data.resize(size_t(md.num_triangles));
+            for (int64_t t = 0; t < md.num_triangles; ++t) {
+                TriangleData& td = k.triangle_data[size_t(t)];
+                const int32_t* tri = md.indices + 3 * t;
+                td.v0 = Vec3f::load(md.vertices + 3 * int64_t(tri[0]));
+                td.v1 = Vec3f::load(md.vertices + 3 * int64_t(tri[1]));
+                td.v2 = Vec3f::load(md.vertices + 3 * int64_t(tri[2]));
+                td.ng = normalize(cross(td.v1 - td.v0, td.v2 - td.v0));
+                td.largest_edge = triangle_largest_edge(td.v0, td.v1, td.v2);
+            }
         }
     }
+    for (size_t i = 0; i < n; ++i) meshes[i].triangle_data = kept_[i].triangle_data.data();
     build_lights();
     ++(what == Update::Built ? stats_.builds : what == Update::Refit ? stats_.refits : stats_.reuses);
     return what;
@@ -618,11 +629,10 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
     sp.b1 = b1;
     sp.b2 = b2;
     float b0 = 1.f - b1 - b2;
-    const int32_t* tri = m.indices + 3 * prim;
-    Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
-    sp.p = v0 * b0 + v1 * b1 + v2 * b2;
-    sp.p_error = triangle_point_error(v0, v1, v2, b0, b1, b2);
-    sp.ng = normalize(cross(v1 - v0, v2 - v0));
+    const TriangleData& td = m.triangle_data[prim];
+    sp.p = td.v0 * b0 + td.v1 * b1 + td.v2 * b2;
+    sp.p_error = triangle_point_error(td.v0, td.v1, td.v2, b0, b1, b2, td.largest_edge);
+    sp.ng = td.ng;
     if (m.normals) {
         const int32_t* ni = m.normal_indices + 3 * prim;
         Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * b0 + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
@@ -889,7 +899,7 @@ bool Scene::sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float 
     ls.p = q.p;
     ls.p_error = q.p_error;
     ls.ng = q.ng;
-    ls.pdf = float(pmf) / lm.triangle_area(prim) * dist2 / cos_l;
+    ls.pdf = float(pmf) / light_triangle_area(lm, prim) * dist2 / cos_l;
     return ls.pdf > 0.f && std::isfinite(ls.pdf);
 }
 
@@ -926,7 +936,7 @@ float Scene::light_pdf(const Vec3f& p, const SurfacePoint& q) const {
     float dist2 = length_squared(d);
     float cos_l = std::abs(dot(q.ng, d)) / std::sqrt(dist2);
     if (!(cos_l > 0.f)) return 0.f;
-    return float(pmf) / m.triangle_area(q.prim) * dist2 / cos_l;
+    return float(pmf) / light_triangle_area(m, q.prim) * dist2 / cos_l;
 }
 
 }  // namespace edgepath

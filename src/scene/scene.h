@@ -49,6 +49,14 @@ inline RTCRayHit to_rtc_ray_hit(const Ray& ray) {
     return rh;
 }
 
+// What a surface point needs of a triangle that depends on the triangle alone, kept triangle by
+// triangle (Mesh::triangle_data): 52 bytes a triangle, found without the index array.
+struct TriangleData {
+    Vec3f v0, v1, v2;  // its vertices 0, 1, 2, as the mesh's `vertices` holds them
+    Vec3f ng;          // normalize(cross(v1 - v0, v2 - v0))
+    float largest_edge = 0.f;  // triangle_largest_edge(v0, v1, v2) (math/ray.h)
+};
+
 // Meshes sampled by spherical triangles with at most this many triangles pick one by the
 // solid angle it shows the shading point (each sample weighs them all); larger ones by power.
 constexpr int64_t kSphericalPickMax = 16;
@@ -77,6 +85,9 @@ struct Mesh {
     bool spherical_by_mesh = false;
     int64_t light_offset = -1;  // index of triangle 0 in Scene::lights, -1 if not emissive
     int64_t num_degenerate = 0; // triangles skipped as degenerate (is_degenerate)
+    // Each triangle's TriangleData (Scene::surface_point reads a hit's there). Owned by the
+    // scene, kept up to date by Scene::update.
+    const TriangleData* triangle_data = nullptr;
 
     Vec3f vertex(int64_t i) const { return Vec3f::load(vertices + 3 * i); }
     // cross(v1 - v0, v2 - v0) of triangle f: the face normal (by the winding), not normalised.
@@ -217,6 +228,12 @@ public:
     Vec3f unmapped_normal(int mesh, int64_t prim, float b1, float b2) const;
     bool triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const;
     SurfacePoint surface_point(const Hit& h) const { return surface_point(h.mesh, h.prim, h.b1, h.b2); }
+    // Starts loading what surface_point(h) reads of h's triangle (a hint; it changes nothing).
+    void prefetch(const Hit& h) const {
+        const char* d = reinterpret_cast<const char*>(meshes[size_t(h.mesh)].triangle_data + h.prim);
+        __builtin_prefetch(d);
+        __builtin_prefetch(d + sizeof(TriangleData) - 1);
+    }
     BsdfParams bsdf_params(const SurfacePoint& sp) const;
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
@@ -236,6 +253,12 @@ public:
     // Solid-angle density with which sample_area_light would produce the direction from p to
     // the emitting surface point `on_light`.
     float light_pdf(const Vec3f& p, const SurfacePoint& on_light) const;
+    // Area of emitting triangle `prim` of mesh m: its light entry's (as build_lights computed
+    // it, Mesh::triangle_area) where it has one of its own.
+    float light_triangle_area(const Mesh& m, int64_t prim) const {
+        return m.solid_angle || m.spherical_by_mesh ? m.triangle_area(prim)
+                                                    : lights[size_t(m.light_offset + prim)].area;
+    }
     // Solid-angle density with which sample_env would produce `dir`.
     float env_pdf(const Vec3f& dir) const { return env_sampled ? envmap.pdf(dir) : 0.f; }
 
@@ -290,6 +313,7 @@ private:
         int64_t num_vertices = 0, num_uvs = -1, num_normals = -1;
         std::vector<float> vertices, uvs, normals, colors;
         std::vector<int32_t> indices, uv_indices, normal_indices;
+        std::vector<TriangleData> triangle_data;  // Mesh::triangle_data
     };
     std::vector<Kept> kept_;
     BuildStats stats_;

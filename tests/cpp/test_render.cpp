@@ -356,6 +356,25 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     std::shared_ptr<Scene> twin;
     bool moved = false;
     auto expect_fresh = [&](const Scene& scene, const SceneDesc& d, bool refit = false) {
+        // The kept triangle data (Mesh::triangle_data, what surface points read) are those of
+        // the vertices the description's index arrays name now.
+        ASSERT_EQ(scene.meshes.size(), d.meshes.size());
+        for (size_t m = 0; m < d.meshes.size(); ++m)
+            for (int64_t t = 0; t < d.meshes[m].num_triangles; ++t) {
+                const TriangleData& td = scene.meshes[m].triangle_data[t];
+                const int32_t* tri = d.meshes[m].indices + 3 * t;
+                const Vec3f v0 = Vec3f::load(d.meshes[m].vertices + 3 * int64_t(tri[0]));
+                const Vec3f v1 = Vec3f::load(d.meshes[m].vertices + 3 * int64_t(tri[1]));
+                const Vec3f v2 = Vec3f::load(d.meshes[m].vertices + 3 * int64_t(tri[2]));
+                const Vec3f ng = normalize(cross(v1 - v0, v2 - v0));
+                for (int c = 0; c < 3; ++c) {
+                    ASSERT_EQ(td.v0[c], v0[c]) << "mesh " << m << ", triangle " << t;
+                    ASSERT_EQ(td.v1[c], v1[c]) << "mesh " << m << ", triangle " << t;
+                    ASSERT_EQ(td.v2[c], v2[c]) << "mesh " << m << ", triangle " << t;
+                    ASSERT_EQ(td.ng[c], ng[c]) << "mesh " << m << ", triangle " << t;
+                }
+                ASSERT_EQ(td.largest_edge, triangle_largest_edge(v0, v1, v2)) << "mesh " << m << ", triangle " << t;
+            }
         std::vector<float> a(pixels), b(pixels), adjoint(pixels);
         for (size_t i = 0; i < pixels; ++i) adjoint[i] = float(i % 7) - 3.f;
         render(scene, opt, a.data());
