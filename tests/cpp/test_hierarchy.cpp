@@ -607,6 +607,19 @@ TEST(LobeBound, IntegralMatchesQuadrature) {
 namespace edgepath {
 namespace {
 
+// A query at a random point of the box [-half, half] x [y0, y0 + height] x [-half, half], with a
+// glossy lobe about a random direction near the up axis and the cone towards a light at (0, 8,
+// 0) (written to `cone`, which the query points to).
+EdgeHierarchy::Query random_query(Rng& rng, float half, float y0, float height, bool direct_only, BoundsCone& cone) {
+    EdgeHierarchy::Query q;
+    q.p = Vec3f(2.f * half * rng.next_float() - half, y0 + height * rng.next_float(), 2.f * half * rng.next_float() - half);
+    q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
+    cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
+    q.cone = &cone;
+    q.direct_only = direct_only;
+    return q;
+}
+
 // The indices of every edge of `scene`, those of mesh `first` first; and how many those are.
 std::vector<int32_t> edges_mesh_first(const Scene& scene, int first, size_t* group) {
     std::vector<int32_t> ids, rest;
@@ -713,12 +726,8 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
         Rng rng(8, 1);
         int nonzero = 0;
         for (int i = 0; i < 20; ++i) {
-            EdgeHierarchy::Query q;
-            q.p = Vec3f(8.f * rng.next_float() - 4.f, 0.1f + 4.f * rng.next_float(), 8.f * rng.next_float() - 4.f);
-            q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
-            BoundsCone cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
-            q.cone = &cone;
-            q.direct_only = i % 2 == 0;
+            BoundsCone cone;
+            const EdgeHierarchy::Query q = random_query(rng, 4.f, 0.1f, 4.f, i % 2 == 0, cone);
             for (int32_t start : {0, kept.group_root()})
                 for (int32_t e : ids) {
                     const EdgeHierarchy::Choice a = kept.pdf(q, e, start), b = fresh.pdf(q, e, start);
@@ -764,12 +773,8 @@ TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
     Rng rng(5, 2);
     int sampled = 0;
     for (int i = 0; i < 200; ++i) {
-        EdgeHierarchy::Query q;
-        q.p = Vec3f(4.f * rng.next_float() - 2.f, 0.05f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
-        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, 0.3f)), 0.5f, 0.3f, 0.2f);
-        BoundsCone cone = cone_towards(q.p, Vec3f(0.f, 8.f, 0.f), 0.5f);
-        q.cone = &cone;
-        q.direct_only = i % 2 == 0;
+        BoundsCone cone;
+        const EdgeHierarchy::Query q = random_query(rng, 2.f, 0.05f, 2.f, i % 2 == 0, cone);
         for (EdgeHierarchy::Strategy s : {EdgeHierarchy::All, EdgeHierarchy::Lights}) {
             EdgeHierarchy::Choice c[EdgeHierarchy::kMaxChoices];
             const int n = h.sample(q, s, rng.next_float(), c);
