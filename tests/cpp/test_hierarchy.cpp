@@ -40,10 +40,12 @@ struct HierarchyScene {
              quad = make_quad(Vec3f(-2, 0, -2), Vec3f(4, 0, 0), Vec3f(0, 0, 4));
     MatteScene matte;
     std::shared_ptr<const Scene> scene;
-    HierarchyScene() {
+    HierarchyScene() { scene = build_scene(desc()); }
+    // The description of the sphere, the box and the quad (matte).
+    SceneDesc desc() {
         SceneDesc d = matte.desc();
         d.meshes = {sphere.desc(0), box.desc(0), quad.desc(0)};
-        scene = build_scene(d);
+        return d;
     }
 };
 
@@ -705,8 +707,7 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
 // updated): their edge lists keep the nearly flat edges, which the trees hold as empty leaves.
 TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     HierarchyScene hs;
-    SceneDesc d = hs.matte.desc();
-    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    SceneDesc d = hs.desc();
     const std::shared_ptr<Scene> scene = build_moved(d);
     int flat = 0;
     for (const Edge& e : scene->edges()) flat += e.flat;
@@ -757,9 +758,7 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
 // under both strategies; the others' probabilities finite, those sample() reports pdf()'s.
 TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
     HierarchyScene hs;
-    SceneDesc d = hs.matte.desc();
-    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
-    const std::shared_ptr<Scene> scene = build_moved(d);
+    const std::shared_ptr<Scene> scene = build_moved(hs.desc());
     std::vector<int32_t> ids;
     int flat = 0;
     for (size_t i = 0; i < scene->edges().size(); ++i) {
@@ -804,9 +803,7 @@ TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
 // be read by a later hit with whatever an earlier query left in its slot.)
 TEST(EdgeHierarchy, MemoGivesTheSameSamplesWithFlatEdges) {
     HierarchyScene hs;
-    SceneDesc d = hs.matte.desc();
-    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
-    const std::shared_ptr<Scene> scene = build_moved(d);
+    const std::shared_ptr<Scene> scene = build_moved(hs.desc());
     std::vector<int32_t> ids;
     for (size_t i = 0; i < scene->edges().size(); ++i) ids.push_back(int32_t(i));
     EdgeHierarchy h;
