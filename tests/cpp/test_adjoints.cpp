@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <functional>
+#include <memory>
 #include <random>
 #include <vector>
 
@@ -46,42 +47,52 @@ void check_adjoint(const Fn& f, const std::function<std::vector<double>(const st
 Vec3d v3(const std::vector<double>& x, size_t i) { return Vec3d(x[i], x[i + 1], x[i + 2]); }
 void put(std::vector<double>& out, size_t i, const Vec3d& v) { out[i] = v.x; out[i + 1] = v.y; out[i + 2] = v.z; }
 
-// Inputs: diffuse[3], specular[3], alpha, n[3] (normalised inside), wo[3], wi[3] (normalised inside).
+// The material's parameters from the inputs x (a coating's table, if any, kept alive in `coat`).
+using ParamsOf = std::function<TBsdfParams<double>(const std::vector<double>& x, std::shared_ptr<const CoatTable>& coat)>;
+
+// bsdf_eval_world's adjoint against finite differences. Inputs x: diffuse[3], specular[3],
+// alpha, eta (only `with_eta`), n[3], wo[3], wi[3] (the directions normalised inside);
+// params_of reads the material's parameters from them.
+void check_bsdf_eval_adjoint(const ParamsOf& params_of, bool with_eta, const std::vector<double>& x, const char* name,
+                             double h = 1e-6, double tol = 1e-5) {
+    const size_t dirs = with_eta ? 8 : 7;  // where n, wo and wi start
+    Fn f = [&](const std::vector<double>& x) {
+        std::shared_ptr<const CoatTable> coat;
+        const TBsdfParams<double> p = params_of(x, coat);
+        Vec3d r = bsdf_eval_world(p, v3(x, dirs), v3(x, dirs + 3), v3(x, dirs + 6));
+        return std::vector<double>{r.x, r.y, r.z};
+    };
+    auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
+        std::shared_ptr<const CoatTable> coat;
+        const TBsdfParams<double> p = params_of(x, coat);
+        DBsdf<double> d;
+        d_bsdf_eval_world(p, v3(x, dirs), v3(x, dirs + 3), v3(x, dirs + 6), Vec3d(yb[0], yb[1], yb[2]), d);
+        std::vector<double> g(dirs + 9);
+        put(g, 0, d.diffuse);
+        put(g, 3, d.specular);
+        g[6] = d.alpha;
+        if (with_eta) g[7] = d.eta;
+        put(g, dirs, d.n);
+        put(g, dirs + 3, d.wo);
+        put(g, dirs + 6, d.wi);
+        return g;
+    };
+    check_adjoint(f, adj, x, name, h, tol);
+}
+
+// The standard material (diffuse and GGX specular).
 void bsdf_case(bool two_sided, Vec3d n, Vec3d wo, Vec3d wi, double alpha, const char* name) {
-    auto unpack = [two_sided](const std::vector<double>& x, TBsdfParams<double>& p, Vec3d& N, Vec3d& O, Vec3d& I) {
+    auto params_of = [two_sided](const std::vector<double>& x, std::shared_ptr<const CoatTable>&) {
+        TBsdfParams<double> p;
         p.diffuse = v3(x, 0);
         p.specular = v3(x, 3);
         p.alpha = x[6];
         p.two_sided = two_sided;
-        N = v3(x, 7);
-        O = v3(x, 10);
-        I = v3(x, 13);
+        return p;
     };
     std::vector<double> x = {0.5, 0.3, 0.2, 0.4, 0.2, 0.6, alpha};
     for (const Vec3d& v : {normalize(n), normalize(wo), normalize(wi)}) x.insert(x.end(), {v.x, v.y, v.z});
-    Fn f = [&](const std::vector<double>& x) {
-        TBsdfParams<double> p;
-        Vec3d N, O, I;
-        unpack(x, p, N, O, I);
-        Vec3d r = bsdf_eval_world(p, N, O, I);
-        return std::vector<double>{r.x, r.y, r.z};
-    };
-    auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
-        TBsdfParams<double> p;
-        Vec3d N, O, I;
-        unpack(x, p, N, O, I);
-        DBsdf<double> d;
-        d_bsdf_eval_world(p, N, O, I, Vec3d(yb[0], yb[1], yb[2]), d);
-        std::vector<double> g(16);
-        put(g, 0, d.diffuse);
-        put(g, 3, d.specular);
-        g[6] = d.alpha;
-        put(g, 7, d.n);
-        put(g, 10, d.wo);
-        put(g, 13, d.wi);
-        return g;
-    };
-    check_adjoint(f, adj, x, name);
+    check_bsdf_eval_adjoint(params_of, false, x, name);
 }
 
 TEST(Adjoint, BsdfEvalWorld) {
@@ -144,14 +155,13 @@ TEST(Adjoint, RoughDielectricEvalWorld) {
     rough_dielectric_case(n, Vec3d(0.6, 0.1, 0.3), Vec3d(-0.5, 0.2, -0.6), 0.1, 1.7, "grazing, sharp");
 }
 
-// The world-space rough dielectric equals the sampler's local model.
-// The plastic. Inputs: diffuse[3], specular[3], alpha, eta, n[3], wo[3], wi[3] (normalised
-// inside). Its coating's tables are rebuilt for each alpha and eta, so the differences in those
-// two see the tabulated function itself (float tables: a coarser step and tolerance).
+// The plastic (inputs with eta). Its coating's tables are rebuilt for each alpha and eta, so the
+// differences in those two see the tabulated function itself (float tables: a coarser step and
+// tolerance).
 void plastic_case(bool smooth, bool nonlinear, bool two_sided, Vec3d n, Vec3d wo, Vec3d wi, double alpha,
                   double eta, const char* name) {
-    auto unpack = [&](const std::vector<double>& x, TBsdfParams<double>& p, Vec3d& N, Vec3d& O, Vec3d& I,
-                      std::shared_ptr<const CoatTable>& coat) {
+    auto params_of = [&](const std::vector<double>& x, std::shared_ptr<const CoatTable>& coat) {
+        TBsdfParams<double> p;
         p.kind = MaterialKind::Plastic;
         p.diffuse = v3(x, 0);
         p.specular = v3(x, 3);
@@ -162,45 +172,16 @@ void plastic_case(bool smooth, bool nonlinear, bool two_sided, Vec3d n, Vec3d wo
         p.two_sided = two_sided;
         coat = coat_table(float(x[6]), float(x[7]), smooth);
         p.coat = coat.get();
-        N = v3(x, 8);
-        O = v3(x, 11);
-        I = v3(x, 14);
+        return p;
     };
     std::vector<double> x = {0.5, 0.3, 0.2, 0.4, 0.2, 0.6, alpha, eta};
     for (const Vec3d& v : {normalize(n), normalize(wo), normalize(wi)}) x.insert(x.end(), {v.x, v.y, v.z});
-    Fn f = [&](const std::vector<double>& x) {
-        TBsdfParams<double> p;
-        Vec3d N, O, I;
-        std::shared_ptr<const CoatTable> coat;
-        unpack(x, p, N, O, I, coat);
-        Vec3d r = bsdf_eval_world(p, N, O, I);
-        return std::vector<double>{r.x, r.y, r.z};
-    };
-    auto adj = [&](const std::vector<double>& x, const std::vector<double>& yb) {
-        TBsdfParams<double> p;
-        Vec3d N, O, I;
-        std::shared_ptr<const CoatTable> coat;
-        unpack(x, p, N, O, I, coat);
-        DBsdf<double> d;
-        d_bsdf_eval_world(p, N, O, I, Vec3d(yb[0], yb[1], yb[2]), d);
-        std::vector<double> g(17);
-        put(g, 0, d.diffuse);
-        put(g, 3, d.specular);
-        g[6] = d.alpha;
-        g[7] = d.eta;
-        put(g, 8, d.n);
-        put(g, 11, d.wo);
-        put(g, 14, d.wi);
-        return g;
-    };
     {
-        TBsdfParams<double> p;
-        Vec3d N, O, I;
         std::shared_ptr<const CoatTable> coat;
-        unpack(x, p, N, O, I, coat);
-        EXPECT_GT(bsdf_eval_world(p, N, O, I).x, 1e-3) << name << ": the case must not be zero";
+        const TBsdfParams<double> p = params_of(x, coat);
+        EXPECT_GT(bsdf_eval_world(p, v3(x, 8), v3(x, 11), v3(x, 14)).x, 1e-3) << name << ": the case must not be zero";
     }
-    check_adjoint(f, adj, x, name, 1e-4, 1e-3);
+    check_bsdf_eval_adjoint(params_of, true, x, name, 1e-4, 1e-3);
 }
 
 TEST(Adjoint, PlasticEvalWorld) {
@@ -212,6 +193,7 @@ TEST(Adjoint, PlasticEvalWorld) {
                  "two-sided from below");
 }
 
+// The world-space rough dielectric equals the sampler's local model.
 TEST(Adjoint, RoughDielectricWorldMatchesLocalModel) {
     BsdfParams p;
     p.kind = MaterialKind::Dielectric;
