@@ -128,6 +128,24 @@ def assert_matches_finite_difference(d_image: torch.Tensor, fd_image: torch.Tens
     assert abs(ratio - 1.0) <= sum_tol
 
 
+def fit_roughness(render, target: torch.Tensor, start: float, steps: int, floor: float) -> float:
+    """Inverse rendering of one roughness: Adam (learning rate 0.03, decayed by 0.95 a step, to
+    settle in the noise) on the mean square difference between render(roughness, seed=step) and
+    `target`, from `start`, the roughness kept at `floor` or above. Returns the roughness found."""
+    roughness = torch.tensor(start, requires_grad=True)
+    optimizer = torch.optim.Adam([roughness], lr=0.03)
+    schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.95)
+    for it in range(steps):
+        optimizer.zero_grad()
+        ((render(roughness, it) - target) ** 2).mean().backward()
+        optimizer.step()
+        schedule.step()
+        with torch.no_grad():
+            roughness.clamp_(min=floor)
+    print("recovered roughness", roughness.item())
+    return roughness.item()
+
+
 def error_map(image: torch.Tensor, ref: torch.Tensor, floor: float) -> torch.Tensor:
     """Per-value err = |image - ref| / max(|ref|, floor), shape (H, W, 3)."""
     r = ref.detach().to(torch.float64)

@@ -96,19 +96,10 @@ def test_inverse_rendering_recovers_a_plastic_roughness():
     the plastic floor that rendered the target (the reflected stripes blur with it). Measured:
     0.367 after 40 steps."""
     target = ep.render(plastic_scene(roughness=torch.tensor(0.35), size=(12, 12)), spp=256, max_bounces=2, seed=7)
-    roughness = torch.tensor(0.1, requires_grad=True)
-    optimizer = torch.optim.Adam([roughness], lr=0.03)
-    schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.95)
-    for it in range(40):
-        optimizer.zero_grad()
-        image = ep.render(plastic_scene(roughness=roughness, size=(12, 12)), spp=16, max_bounces=2, seed=it)
-        ((image - target) ** 2).mean().backward()
-        optimizer.step()
-        schedule.step()
-        with torch.no_grad():
-            roughness.clamp_(min=0.02)
-    print("recovered roughness", roughness.item())
-    assert roughness.item() == pytest.approx(0.35, abs=0.03)
+    found = C.fit_roughness(
+        lambda r, seed: ep.render(plastic_scene(roughness=r, size=(12, 12)), spp=16, max_bounces=2, seed=seed),
+        target, start=0.1, steps=40, floor=0.02)
+    assert found == pytest.approx(0.35, abs=0.03)
 
 
 def test_plastic_is_darker_than_the_sum_of_its_lobes():

@@ -117,19 +117,10 @@ def test_inverse_rendering_recovers_a_roughness():
     0.3 that rendered the target (the stripes behind it blur with it). Measured: 0.309 (it
     overshoots to 0.35 by iteration 20, then settles as the step shrinks)."""
     target = ep.render(glass_slab_scene(roughness=torch.tensor(0.3)), spp=256, max_bounces=4, seed=7)
-    roughness = torch.tensor(0.08, requires_grad=True)
-    optimizer = torch.optim.Adam([roughness], lr=0.03)
-    schedule = torch.optim.lr_scheduler.ExponentialLR(optimizer, gamma=0.95)  # settle in the noise
-    for it in range(60):
-        optimizer.zero_grad()
-        image = ep.render(glass_slab_scene(roughness=roughness), spp=16, max_bounces=4, seed=it)
-        ((image - target) ** 2).mean().backward()
-        optimizer.step()
-        schedule.step()
-        with torch.no_grad():
-            roughness.clamp_(min=0.01)
-    print("recovered roughness", roughness.item())
-    assert roughness.item() == pytest.approx(0.3, abs=0.03)
+    found = C.fit_roughness(
+        lambda r, seed: ep.render(glass_slab_scene(roughness=r), spp=16, max_bounces=4, seed=seed),
+        target, start=0.08, steps=60, floor=0.01)
+    assert found == pytest.approx(0.3, abs=0.03)
 
 
 def _write_scene(tmp_path, bsdf):
