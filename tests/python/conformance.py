@@ -128,6 +128,18 @@ def assert_matches_finite_difference(d_image: torch.Tensor, fd_image: torch.Tens
     assert abs(ratio - 1.0) <= sum_tol
 
 
+def assert_matches_reference_image(image: torch.Tensor, ref: torch.Tensor, label: str, k: int = 4,
+                                   mean_max: float = 0.04, max_max: float = 0.4, means: float = 0.02) -> None:
+    """An image against another renderer's: the mean of each channel within `means` (relative),
+    and Mitsuba's metric (image_error, floor 0.02) on k x k blocks of pixels (averaging the noise
+    of both renders) below `mean_max` on average and `max_max` at worst."""
+    relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
+    mean_err, max_err = image_error(block_means(image, k), block_means(ref, k), 0.02)
+    print(label, "channel means", relative.tolist(), "blocks", (mean_err, max_err))
+    assert float(relative.abs().max()) < means
+    assert mean_err < mean_max and max_err < max_max
+
+
 def fit_roughness(render, target: torch.Tensor, start: float, steps: int, floor: float) -> float:
     """Inverse rendering of one roughness: Adam (learning rate 0.03, decayed by 0.95 a step, to
     settle in the noise) on the mean square difference between render(roughness, seed=step) and

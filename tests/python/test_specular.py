@@ -299,11 +299,7 @@ def test_scene_file_matches_mitsuba(name):
     loaded = ep.load_mitsuba(SCENE_DIR / f"{name}.xml")
     ref = ep.imread(SCENE_DIR / f"{name}.exr")[..., :3].float()
     image = loaded.render(spp=spp)
-    relative = image.mean((0, 1)) / ref.mean((0, 1)) - 1
-    print(name, "channel means", relative.tolist(), "blocks", C.image_error(C.block_means(image, k), C.block_means(ref, k), 0.02))
-    assert float(relative.abs().max()) < 0.02
-    mean_err, max_err = C.image_error(C.block_means(image, k), C.block_means(ref, k), 0.02)
-    assert mean_err < mean_max and max_err < max_max
+    C.assert_matches_reference_image(image, ref, name, k, mean_max, max_max)
 
 
 def test_scene_files_map_the_new_elements():
