@@ -660,9 +660,7 @@ SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) co
 
 Vec3f Scene::unmapped_normal(int mesh, int64_t prim, float b1, float b2) const {
     const Mesh& m = meshes[size_t(mesh)];
-    const int32_t* tri = m.indices + 3 * prim;
-    const Vec3f v0 = m.vertex(tri[0]), v1 = m.vertex(tri[1]), v2 = m.vertex(tri[2]);
-    const Vec3f ng = normalize(cross(v1 - v0, v2 - v0));
+    const Vec3f ng = m.triangle_data[prim].ng;
     if (!m.normals) return ng;
     const int32_t* ni = m.normal_indices + 3 * prim;
     const Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * (1.f - b1 - b2) + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
