@@ -614,55 +614,68 @@ TEST(Render, BatchedPathsMatchTracePath) {
     RenderOptions opt;
     opt.spp = 3;  // batches straddle pixels; a tile's last batch is partial
     opt.seed = 5;
-    int compared = 0;
-    for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
-        for (bool hide : {false, true})
-            for (int bounces : {0, 1, 3, 40}) {
-                if (sampling != LightSampling::MIS && (hide || bounces == 40)) continue;
-                opt.sampling = sampling;
-                opt.hide_emitters = hide;
-                opt.max_bounces = bounces;
-                std::vector<float> reference(size_t(W) * H * 3);
-                RayCounters counters;
-                for (int y = 0; y < H; ++y)
-                    for (int x = 0; x < W; ++x) {
-                        double sum[3] = {0, 0, 0};
-                        for (int s = 0; s < opt.spp; ++s) {
-                            CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
-                            const Vec3f L = trace_path(*scene, opt, cs.ray, cs.rng, counters);
-                            for (int k = 0; k < 3; ++k) sum[k] += L[k];
+    int compared = 0, outside = 0;
+    // A fisheye's film points outside its image circle are black (CameraSample::outside).
+    for (CameraType type : {CameraType::Perspective, CameraType::Fisheye}) {
+        d.camera.type = type;
+        scene->set_camera(d.camera);
+        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
+            for (bool hide : {false, true})
+                for (int bounces : {0, 1, 3, 40}) {
+                    if (sampling != LightSampling::MIS && (hide || bounces == 40)) continue;
+                    if (type == CameraType::Fisheye && (sampling != LightSampling::MIS || hide || bounces != 3))
+                        continue;
+                    opt.sampling = sampling;
+                    opt.hide_emitters = hide;
+                    opt.max_bounces = bounces;
+                    std::vector<float> reference(size_t(W) * H * 3);
+                    RayCounters counters;
+                    for (int y = 0; y < H; ++y)
+                        for (int x = 0; x < W; ++x) {
+                            double sum[3] = {0, 0, 0};
+                            for (int s = 0; s < opt.spp; ++s) {
+                                CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
+                                outside += cs.outside;
+                                const Vec3f L =
+                                    cs.outside ? Vec3f(0.f) : trace_path(*scene, opt, cs.ray, cs.rng, counters);
+                                for (int k = 0; k < 3; ++k) sum[k] += L[k];
+                            }
+                            for (int k = 0; k < 3; ++k)
+                                reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
                         }
-                        for (int k = 0; k < 3; ++k) reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
+                    const std::string what = "camera " + std::to_string(int(type)) + ", sampling " +
+                                             std::to_string(int(sampling)) + ", hide " + std::to_string(hide) + ", " +
+                                             std::to_string(bounces) + " bounces";
+                    double total = 0;
+                    for (float v : reference) total += v;
+                    if (hide && bounces == 0)
+                        EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
+                    else
+                        EXPECT_GT(total, 0.0) << what;
+                    for (int threads : {1, 2}) {
+                        opt.num_threads = threads;
+                        std::vector<float> image(reference.size());
+                        const RenderStats st = render(*scene, opt, image.data());
+                        int differing = 0;
+                        for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
+                        EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
+                        // The same rays as trace_path's.
+                        EXPECT_EQ(st.camera_rays, counters.camera) << what;
+                        EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
+                        EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
+                        ++compared;
                     }
-                const std::string what = "sampling " + std::to_string(int(sampling)) + ", hide " +
-                                         std::to_string(hide) + ", " + std::to_string(bounces) + " bounces";
-                double total = 0;
-                for (float v : reference) total += v;
-                if (hide && bounces == 0)
-                    EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
-                else
-                    EXPECT_GT(total, 0.0) << what;
-                for (int threads : {1, 2}) {
-                    opt.num_threads = threads;
-                    std::vector<float> image(reference.size());
-                    const RenderStats st = render(*scene, opt, image.data());
+                    const ChannelLayout layout({Channel::Depth, Channel::Radiance});
+                    std::vector<float> values(size_t(W) * H * 4);
+                    render_channels(*scene, opt, layout, values.data(), nullptr);
                     int differing = 0;
-                    for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
-                    EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
-                    // The same rays as trace_path's.
-                    EXPECT_EQ(st.camera_rays, counters.camera) << what;
-                    EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
-                    EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
-                    ++compared;
+                    for (size_t i = 0; i < reference.size(); ++i)
+                        differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
+                    EXPECT_EQ(differing, 0) << what << ", render_channels";
                 }
-                const ChannelLayout layout({Channel::Depth, Channel::Radiance});
-                std::vector<float> values(size_t(W) * H * 4);
-                render_channels(*scene, opt, layout, values.data(), nullptr);
-                int differing = 0;
-                for (size_t i = 0; i < reference.size(); ++i) differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
-                EXPECT_EQ(differing, 0) << what << ", render_channels";
-            }
-    EXPECT_EQ(compared, 2 * (8 + 3 + 3));
+    }
+    EXPECT_EQ(compared, 2 * (8 + 3 + 3 + 1));
+    EXPECT_GT(outside, 0);
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
