@@ -2,8 +2,6 @@
 
 #include <embree3/rtcore.h>
 
-#include "scene/bsdf_diff.h"
-
 namespace edgepath {
 
 namespace {
@@ -71,7 +69,7 @@ struct PathState {
 struct PathBatch::Impl {
     const Scene& scene;
     const RenderOptions& opt;
-    bool use_nee, use_hits, mis, both_lights;
+    PathSettings settings;
     PathState paths[kBatchSize];  // path i: camera sample i of the batch
     int live[kBatchSize];         // the live paths, in batch order
     // A bounce's shadow rays: what each adds if nothing is in its way, and their packets.
@@ -79,11 +77,7 @@ struct PathBatch::Impl {
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
 
-    Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o) {
-        use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
-        use_hits = opt.sampling != LightSampling::LightOnly;
-        mis = opt.sampling == LightSampling::MIS;
-        both_lights = scene.light_distribution.valid() && scene.env_sampled;
+    Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         // At most one on the area lights, one on the environment and one a point light for
         // each path.
         const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
@@ -135,69 +129,26 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
         // what each would add.
         int nshadow = 0, nnext = 0;
-        auto push_shadow = [&](const Ray& r, const Vec3f& value) {
-            set_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-            shadow_value[size_t(nshadow)] = value;
-            ++nshadow;
-            ++counters.shadow;
-        };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
-            Rng& rng = samples[live[j]].rng;
-            SurfacePoint& sp = ps.sp;
-            const Vec3f beta = ps.beta;
-            BsdfParams bp = scene.bsdf_params(sp);
-            sp.ns = bend_normal(sp.ns, sp.ng, -ps.dir);
-            Frame frame(sp.ns);
-            Vec3f wo = frame.to_local(-ps.dir);
-
-            float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
-            float ue1 = ul1, ue2 = ul2;
-            if (both_lights) {
-                ue1 = rng.next_float();
-                ue2 = rng.next_float();
-            }
-            float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
-            BsdfSample bs;
-            Vec3f next_beta(0.f);
-            if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs))
-                next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
-            ps.goes_on = !is_black(next_beta);
-            if (ps.goes_on) {
-                ps.next_beta = next_beta;
-                ps.pdf = bs.pdf;
-                ps.delta = bs.delta;
-                ps.next = nnext;
-                set_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, spawn_ray(sp, frame.to_world(bs.wi)));
-                ++nnext;
-                ++counters.bounce;
-            }
-
+            ps.goes_on = false;
             ps.shadow_begin = nshadow;
-            auto next_event = [&](const LightSample& ls) {
-                Vec3f wi = frame.to_local(ls.dir);
-                Vec3f f = bsdf_eval(bp, wo, wi);
-                if (is_black(f)) return;
-                float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
-                push_shadow(shadow_ray(sp, ls), beta * f * ls.radiance * (w / ls.pdf));
-            };
-            const bool nee_here = use_nee && !is_delta(bp);
-            LightSample ls;
-            if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls);
-            if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ls);
-            if (!is_delta(bp))
-                for (const PointLightDesc& pl : scene.point_lights) {
-                    // see_point_light (render/path.h), its shadow ray traced with the others.
-                    const Vec3f to = Vec3f::load(pl.position) - sp.p;
-                    const float dist2 = length_squared(to);
-                    if (!(dist2 > 0.f)) continue;
-                    const Vec3f wl = to / std::sqrt(dist2);
-                    const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
-                    if (!(s > 0.f)) continue;
-                    Ray r = spawn_ray(sp, wl);
-                    r.tmax = length(Vec3f::load(pl.position) - r.origin) * (1.f - kShadowEpsilon);
-                    push_shadow(r, beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2));
-                }
+            shade_vertex(
+                scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
+                [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
+                    ps.goes_on = true;
+                    ps.next_beta = next_beta;
+                    ps.pdf = bs.pdf;
+                    ps.delta = bs.delta;
+                    ps.next = nnext;
+                    set_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+                    ++nnext;
+                },
+                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
+                    set_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+                    shadow_value[size_t(nshadow)] = value;
+                    ++nshadow;
+                });
             ps.shadow_end = nshadow;
         }
 
@@ -241,8 +192,8 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             const int lane = ps.next % kLanes;
             const Vec3f beta = ps.beta = ps.next_beta;
             // Light met after a smooth bounce could not have been sampled: full weight.
-            const bool counted = use_hits || ps.delta;
-            const bool weighted = mis && use_nee && !ps.delta;
+            const bool counted = settings.use_hits || ps.delta;
+            const bool weighted = settings.mis && settings.use_nee && !ps.delta;
             const Vec3f dir(pk.rh.ray.dir_x[lane], pk.rh.ray.dir_y[lane], pk.rh.ray.dir_z[lane]);
             if (pk.rh.hit.geomID[lane] == RTC_INVALID_GEOMETRY_ID) {
                 if (scene.has_envmap && counted) {
