@@ -10,7 +10,9 @@
 // emitter samples (Scene::sample_area_light or sample_env) on the visible side of the surface;
 // bounce rays from the same hit points in cosine-distributed directions. Their counts are the
 // renderer's RenderStats. Deeper path vertices are stood in for by first hits, so at several
-// bounces the Embree-only rays are somewhat more coherent than the renderer's.
+// bounces the Embree-only rays are somewhat more coherent than the renderer's. They are traced
+// one by one, where the renderer traces its shadow and bounce rays in packets of 16 across a
+// batch of paths (render/batch.h), which Embree takes faster.
 //
 // Renderer and Embree-only runs alternate within each timed run, so both see the same machine
 // load; fractions are medians of per-run fractions, in wall time and in process CPU time (the

@@ -3,7 +3,8 @@
 // their first intersections are found by one packet query (rays of neighbouring pixels travel
 // together through the BVH, so the nodes they visit are loaded once for all), and each sample
 // is then handed on, in that order, with its random stream, its film point, its ray and its
-// first hit. The rest of the path is traced one ray at a time (render/path.h).
+// first hit. The rest of the path is traced by trace_path (render/path.h), one ray at a time, or,
+// in the forward pass, with the other paths of its batch (render/batch.h).
 //
 // Each sample keeps its own random stream, drawn before the packet is traced exactly as a single
 // sample would draw it, so an image does not depend on how the samples are grouped or on the
@@ -66,46 +67,62 @@ inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int 
     return c;
 }
 
-// Calls fn(sample) for every camera sample of the output pixels [x0, x1) x [y0, y1), in order
-// (rows, pixels, samples), with the random numbers of Rng::for_sample(opt.seed, pixel, s) and the
-// first hits traced in packets (with opt.hide_emitters, past the emitters, as first_hit
-// finds them). A sample outside the camera's image (CameraSample::outside) has no hit; the
-// passes count it black. Stops (returns false) once opt is cancelled.
-template <class SampleFn>
-bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0, int y0, int x1, int y1,
-                            SampleFn&& fn) {
-    CameraSample batch[kPacketSize];
+// Calls fn(samples, n) for the camera samples of the output pixels [x0, x1) x [y0, y1), in
+// order (rows, pixels, samples), `capacity` (a multiple of kPacketSize) at a time in `samples`
+// (n <= capacity; fewer at the end), with the random numbers of Rng::for_sample(opt.seed, pixel,
+// s) and the first hits traced in packets of kPacketSize (with opt.hide_emitters, past the
+// emitters, as first_hit finds them). A sample outside the camera's image
+// (CameraSample::outside) has no hit; the passes count it black. Stops (returns false) once opt
+// is cancelled.
+template <class BatchFn>
+bool for_each_camera_batch(const Scene& scene, const RenderOptions& opt, int x0, int y0, int x1, int y1,
+                           CameraSample* samples, int capacity, BatchFn&& fn) {
     Ray rays[kPacketSize];
     FirstHit first[kPacketSize];
     const int spp = opt.spp;
     const int64_t count = int64_t(x1 - x0) * (y1 - y0) * spp;
     // The next sample: sample s of pixel (x, y).
     int x = x0, y = y0, s = 0;
-    for (int64_t begin = 0; begin < count; begin += kPacketSize) {
+    for (int64_t begin = 0; begin < count; begin += capacity) {
         if (opt.cancelled()) return false;
-        const int n = int(std::min<int64_t>(kPacketSize, count - begin));
-        for (int i = 0; i < n; ++i) {
-            set_camera_sample(batch[i], scene, opt.seed, x, y, s);
-            if (++s == spp) {
-                s = 0;
-                if (++x == x1) {
-                    x = x0;
-                    ++y;
+        const int n = int(std::min<int64_t>(capacity, count - begin));
+        for (int p = 0; p < n; p += kPacketSize) {
+            CameraSample* batch = samples + p;
+            const int m = std::min(kPacketSize, n - p);
+            for (int i = 0; i < m; ++i) {
+                set_camera_sample(batch[i], scene, opt.seed, x, y, s);
+                if (++s == spp) {
+                    s = 0;
+                    if (++x == x1) {
+                        x = x0;
+                        ++y;
+                    }
                 }
+                rays[i] = batch[i].ray;
+                if (batch[i].outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
             }
-            rays[i] = batch[i].ray;
-            if (batch[i].outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
+            intersect_packet(scene, rays, m, first);
+            for (int i = 0; i < m; ++i) {
+                if (batch[i].outside) first[i] = FirstHit();
+                batch[i].first = first[i];
+                if (opt.hide_emitters && first[i].found && scene.meshes[size_t(first[i].hit.mesh)].is_emitter())
+                    batch[i].first = first_hit(scene, rays[i], true);
+            }
         }
-        intersect_packet(scene, rays, n, first);
-        for (int i = 0; i < n; ++i) {
-            if (batch[i].outside) first[i] = FirstHit();
-            batch[i].first = first[i];
-            if (opt.hide_emitters && first[i].found && scene.meshes[size_t(first[i].hit.mesh)].is_emitter())
-                batch[i].first = first_hit(scene, rays[i], true);
-            fn(batch[i]);
-        }
+        fn(samples, n);
     }
     return true;
+}
+
+// Calls fn(sample) for every camera sample of the output pixels [x0, x1) x [y0, y1), in order,
+// as for_each_camera_batch makes them.
+template <class SampleFn>
+bool for_each_camera_sample(const Scene& scene, const RenderOptions& opt, int x0, int y0, int x1, int y1,
+                            SampleFn&& fn) {
+    CameraSample batch[kPacketSize];
+    return for_each_camera_batch(scene, opt, x0, y0, x1, y1, batch, kPacketSize, [&](CameraSample* samples, int n) {
+        for (int i = 0; i < n; ++i) fn(samples[i]);
+    });
 }
 
 }  // namespace edgepath

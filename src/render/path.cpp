@@ -6,10 +6,8 @@ namespace edgepath {
 
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record, const FirstHit* first) {
-    const bool use_nee = opt.sampling != LightSampling::BSDFOnly && scene.has_lights();
-    const bool use_hits = opt.sampling != LightSampling::LightOnly;
-    const bool mis = opt.sampling == LightSampling::MIS;
-    const bool both_lights = scene.light_distribution.valid() && scene.env_sampled;
+    const PathSettings settings(scene, opt);
+    const bool use_nee = settings.use_nee, use_hits = settings.use_hits, mis = settings.mis;
 
     Vec3f L(0.f), beta(1.f);
     ++counters.camera;
@@ -53,71 +51,35 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
     push_vertex(ray, opt.hide_emitters ? 0.f : 1.f);
 
     for (int bounce = 0; bounce < opt.max_bounces; ++bounce) {
-        BsdfParams bp = scene.bsdf_params(sp);
-        sp.ns = bend_normal(sp.ns, sp.ng, -ray.dir);
-        Frame frame(sp.ns);
-        Vec3f wo = frame.to_local(-ray.dir);
-
-        // Next-event estimation: one sample on the area lights and one on the environment
-        // (the latter's two random numbers are drawn only when the scene has both).
-        float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
-        float ue1 = ul1, ue2 = ul2;
-        if (both_lights) {
-            ue1 = rng.next_float();
-            ue2 = rng.next_float();
-        }
-        // BSDF sampling. Its ray is traced before the shadow rays, and the surface it meets
-        // fetched while they are: they do not depend on it, and the memory latency of a random
+        // The continuation is traced before the shadow rays, and the surface it meets fetched
+        // while they are: they do not depend on it, and the memory latency of a random
         // triangle's data is hidden behind their traversal.
-        float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
+        bool goes_on = false, found = false;
         BsdfSample bs;
-        Vec3f next_beta(0.f);
-        if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
-        const bool goes_on = !is_black(next_beta);
-        Vec3f dir;
+        Vec3f next_beta, dir;
         Ray next_ray;
         Hit next_hit;
-        bool found = false;
-        if (goes_on) {
-            dir = frame.to_world(bs.wi);
-            next_ray = spawn_ray(sp, dir);
-            ++counters.bounce;
+        auto on_next = [&](const Ray& r, const BsdfSample& s, const Vec3f& nb) {
+            goes_on = true;
+            bs = s;
+            next_beta = nb;
+            next_ray = r;
+            dir = r.dir;
             found = scene.intersect(next_ray, next_hit);
             if (found) scene.prefetch(next_hit);
-        }
-
-        auto next_event = [&](const LightSample& ls, NeeRecord* nr) {
-            Vec3f wi = frame.to_local(ls.dir);
-            Vec3f f = bsdf_eval(bp, wo, wi);
-            if (is_black(f)) return;
-            Ray shadow = shadow_ray(sp, ls);
-            ++counters.shadow;
-            if (scene.occluded(shadow)) return;
-            float w = mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
-            L += beta * f * ls.radiance * (w / ls.pdf);
-            if (nr) {
-                nr->used = true;
-                nr->dir = ls.dir;
-                nr->scale = w / ls.pdf;
-                nr->hit = ls.hit;
-            }
         };
-        // A smooth material reflects light from one direction only: nothing to sample.
-        const bool nee_here = use_nee && !is_delta(bp);
-        LightSample ls;
-        if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ls, rv ? &rv->nee_area : nullptr);
-        if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ls, rv ? &rv->nee_env : nullptr);
-        // Point lights, each at every vertex, whatever the sampling strategy: no other way
-        // finds them. Their contribution f I s(-w) / r^2 has no random numbers.
-        if (rv) rv->point_lights = !is_delta(bp);
-        if (!is_delta(bp))
-            for (const PointLightDesc& pl : scene.point_lights) {
-                Vec3f wl;
-                float dist2;
-                if (!see_point_light(scene, sp, pl, wl, dist2, &counters)) continue;
-                const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
-                L += beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2);
-            }
+        auto on_shadow = [&](ShadowKind kind, const Ray& shadow, const Vec3f& value, const LightSample* ls, float scale) {
+            if (scene.occluded(shadow)) return;
+            L += value;
+            if (!rv || kind == ShadowKind::Point) return;
+            NeeRecord* nr = kind == ShadowKind::Area ? &rv->nee_area : &rv->nee_env;
+            nr->used = true;
+            nr->dir = ls->dir;
+            nr->scale = scale;
+            nr->hit = ls->hit;
+        };
+        const bool delta = shade_vertex(scene, settings, sp, ray.dir, beta, rng, counters, on_next, on_shadow);
+        if (rv) rv->point_lights = !delta;
 
         // The continuation.
         if (!goes_on) break;

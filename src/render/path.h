@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include "sampling/rng.h"
+#include "sampling/warp.h"
+#include "scene/bsdf_diff.h"
 #include "scene/desc.h"
 #include "scene/scene.h"
 
@@ -81,21 +83,108 @@ inline bool same_surface(const FirstHit& a, const FirstHit& b) {
     return a.found == b.found && (!a.found || (a.hit.mesh == b.hit.mesh && a.hit.prim == b.hit.prim));
 }
 
-// Point light `light` seen from sp: the unit direction towards it, the squared distance, and
-// whether it lights sp (in front of it, within its spot profile, nothing in between).
-// `counters` counts the shadow ray, if one is traced.
-inline bool see_point_light(const Scene& scene, const SurfacePoint& sp, const PointLightDesc& light, Vec3f& dir,
-                            float& dist2, RayCounters* counters = nullptr) {
+// Point light `light` seen from sp: the unit direction towards it, the squared distance and the
+// shadow ray towards it; false if it cannot light sp (at sp, or sp outside its spot profile):
+// then no ray.
+inline bool point_light_ray(const SurfacePoint& sp, const PointLightDesc& light, Vec3f& dir, float& dist2,
+                            Ray& shadow) {
     const Vec3f to = Vec3f::load(light.position) - sp.p;
     dist2 = length_squared(to);
     if (!(dist2 > 0.f)) return false;
     const float dist = std::sqrt(dist2);
     dir = to / dist;
     if (!(Scene::spot_scale(light.spot, light.spot_profile, -dir) > 0.f)) return false;
-    Ray shadow = spawn_ray(sp, dir);
+    shadow = spawn_ray(sp, dir);
     shadow.tmax = length(Vec3f::load(light.position) - shadow.origin) * (1.f - kShadowEpsilon);
+    return true;
+}
+
+// The same, and whether it lights sp (in front of it, within its spot profile, nothing in
+// between). `counters` counts the shadow ray, if one is traced.
+inline bool see_point_light(const Scene& scene, const SurfacePoint& sp, const PointLightDesc& light, Vec3f& dir,
+                            float& dist2, RayCounters* counters = nullptr) {
+    Ray shadow;
+    if (!point_light_ray(sp, light, dir, dist2, shadow)) return false;
     if (counters) ++counters->shadow;
     return !scene.occluded(shadow);
+}
+
+// What the path tracer does with the options, once for all its paths.
+struct PathSettings {
+    bool use_nee, use_hits, mis, both_lights;
+    PathSettings(const Scene& scene, const RenderOptions& opt)
+        : use_nee(opt.sampling != LightSampling::BSDFOnly && scene.has_lights()),
+          use_hits(opt.sampling != LightSampling::LightOnly),
+          mis(opt.sampling == LightSampling::MIS),
+          both_lights(scene.light_distribution.valid() && scene.env_sampled) {}
+};
+
+// The light sample a shadow ray of shade_vertex tests.
+enum class ShadowKind { Area, Env, Point };
+
+// The scattering at a path's vertex sp, reached by a ray along `dir` with throughput `beta`, as
+// trace_path and PathBatch (render/batch.h) both do it: bends sp's shading normal, draws the
+// vertex's random numbers from `rng`, samples the BSDF and, if the path goes on, calls
+// on_next(ray, bs, next_beta) with the continuation's ray; then, for each light sample that sp
+// would see (one on the area lights, one on the environment, every point light), calls
+// on_shadow(kind, ray, value, ls, scale): `value` is what it adds to the radiance if nothing
+// hides it, `ls` the sample (null for a point light) and `scale` its MIS weight / pdf. Counts
+// the rays. Returns whether the BSDF is smooth (nothing sampled towards the lights).
+template <class OnNext, class OnShadow>
+inline bool shade_vertex(const Scene& scene, const PathSettings& ps, SurfacePoint& sp, const Vec3f& dir,
+                         const Vec3f& beta, Rng& rng, RayCounters& counters, OnNext&& on_next, OnShadow&& on_shadow) {
+    const BsdfParams bp = scene.bsdf_params(sp);
+    sp.ns = bend_normal(sp.ns, sp.ng, -dir);
+    const Frame frame(sp.ns);
+    const Vec3f wo = frame.to_local(-dir);
+
+    // Next-event estimation: one sample on the area lights and one on the environment (the
+    // latter's two random numbers are drawn only when the scene has both).
+    const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
+    float ue1 = ul1, ue2 = ul2;
+    if (ps.both_lights) {
+        ue1 = rng.next_float();
+        ue2 = rng.next_float();
+    }
+    // BSDF sampling: its ray is handed on first (trace_path traces it before the shadow rays).
+    const float ub0 = rng.next_float(), ub1 = rng.next_float(), ub2 = rng.next_float();
+    BsdfSample bs;
+    Vec3f next_beta(0.f);
+    if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
+    if (!is_black(next_beta)) {
+        ++counters.bounce;
+        on_next(spawn_ray(sp, frame.to_world(bs.wi)), bs, next_beta);
+    }
+
+    // A smooth material reflects light from one direction only: nothing to sample.
+    const bool delta = is_delta(bp);
+    auto next_event = [&](ShadowKind kind, const LightSample& ls) {
+        const Vec3f wi = frame.to_local(ls.dir);
+        const Vec3f f = bsdf_eval(bp, wo, wi);
+        if (is_black(f)) return;
+        const float w = ps.mis ? mis_power(ls.pdf, bsdf_pdf(bp, wo, wi)) : 1.f;
+        ++counters.shadow;
+        on_shadow(kind, shadow_ray(sp, ls), beta * f * ls.radiance * (w / ls.pdf), &ls, w / ls.pdf);
+    };
+    const bool nee_here = ps.use_nee && !delta;
+    LightSample ls;
+    if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ShadowKind::Area, ls);
+    if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ShadowKind::Env, ls);
+    // Point lights, each at every vertex, whatever the sampling strategy: no other way finds
+    // them. Their contribution f I s(-w) / r^2 has no random numbers.
+    if (!delta)
+        for (const PointLightDesc& pl : scene.point_lights) {
+            Vec3f wl;
+            float dist2;
+            Ray shadow;
+            if (!point_light_ray(sp, pl, wl, dist2, shadow)) continue;
+            const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
+            ++counters.shadow;
+            on_shadow(ShadowKind::Point, shadow,
+                      beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2), nullptr,
+                      0.f);
+        }
+    return delta;
 }
 
 // Radiance arriving along `ray` (a camera ray). Consumes random numbers from `rng`. When

@@ -1,7 +1,9 @@
 #include "render/render.h"
 
 #include <atomic>
+#include <memory>
 
+#include "render/batch.h"
 #include "render/packet.h"
 #include "render/path.h"
 #include "render/tiles.h"
@@ -33,14 +35,19 @@ RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
     for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
         RayCounters c;
         double sum[3] = {0, 0, 0};
-        for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
-            const Vec3f L = cs.outside ? Vec3f(0.f) : trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
-            for (int k = 0; k < 3; ++k) sum[k] += L[k];
-            if (cs.s + 1 < opt.spp) return;
-            float* out = image + (int64_t(cs.y) * scene.out_width + cs.x) * 3;
-            for (int k = 0; k < 3; ++k) {
-                out[k] = float(sum[k] / opt.spp);
-                sum[k] = 0.0;
+        PathBatch paths(scene, opt);
+        CameraSample samples[kBatchSize];
+        Vec3f L[kBatchSize];
+        for_each_camera_batch(scene, opt, x0, y0, x1, y1, samples, kBatchSize, [&](CameraSample* cs, int n) {
+            paths.trace(cs, n, L, c);
+            for (int i = 0; i < n; ++i) {
+                for (int k = 0; k < 3; ++k) sum[k] += L[i][k];
+                if (cs[i].s + 1 < opt.spp) continue;
+                float* out = image + (int64_t(cs[i].y) * scene.out_width + cs[i].x) * 3;
+                for (int k = 0; k < 3; ++k) {
+                    out[k] = float(sum[k] / opt.spp);
+                    sum[k] = 0.0;
+                }
             }
         });
         tally.add(c);
@@ -60,23 +67,29 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
         RayCounters c;
         float v[kMaxChannelValues];
         double sum[kMaxChannelValues] = {};
-        if (nv > 0)
-            for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
-                if (hit_values) eval_hit_channels(scene, layout, cs.ray, cs.first.found, cs.first.hit, v);
-                if (radiance) {
-                    const Vec3f L = cs.outside ? Vec3f(0.f) : trace_path(scene, opt, cs.ray, cs.rng, c, nullptr, &cs.first);
-                    for (int k = 0; k < 3; ++k) v[ro + k] = L[k];
-                } else if (!cs.outside) {
-                    ++c.camera;
-                }
-                for (int k = 0; k < nv; ++k) sum[k] += v[k];
-                if (cs.s + 1 < opt.spp) return;
-                float* out = values + (int64_t(cs.y) * scene.out_width + cs.x) * nv;
-                for (int k = 0; k < nv; ++k) {
-                    out[k] = float(sum[k] / opt.spp);
-                    sum[k] = 0.0;
+        if (nv > 0) {
+            std::unique_ptr<PathBatch> paths;
+            if (radiance) paths = std::make_unique<PathBatch>(scene, opt);
+            CameraSample samples[kBatchSize];
+            Vec3f L[kBatchSize];
+            for_each_camera_batch(scene, opt, x0, y0, x1, y1, samples, kBatchSize, [&](CameraSample* cs, int n) {
+                if (radiance) paths->trace(cs, n, L, c);
+                for (int i = 0; i < n; ++i) {
+                    if (hit_values) eval_hit_channels(scene, layout, cs[i].ray, cs[i].first.found, cs[i].first.hit, v);
+                    if (radiance)
+                        for (int k = 0; k < 3; ++k) v[ro + k] = L[i][k];
+                    else if (!cs[i].outside)
+                        ++c.camera;
+                    for (int k = 0; k < nv; ++k) sum[k] += v[k];
+                    if (cs[i].s + 1 < opt.spp) continue;
+                    float* out = values + (int64_t(cs[i].y) * scene.out_width + cs[i].x) * nv;
+                    for (int k = 0; k < nv; ++k) {
+                        out[k] = float(sum[k] / opt.spp);
+                        sum[k] = 0.0;
+                    }
                 }
             });
+        }
         // Ids: of the ray through each pixel's centre.
         for (int y = y0; y < y1 && ni > 0; ++y)
             for (int x = x0; x < x1; ++x) {

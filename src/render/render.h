@@ -1,6 +1,6 @@
-// The forward pass over the whole image: every camera sample of every pixel traced by
-// trace_path (render/path.h), in tiles on oneTBB threads (render/tiles.h). Part of the public
-// API (edgepath.h).
+// The forward pass over the whole image: every camera sample of every pixel traced by the path
+// tracer of render/path.h, its paths advanced in batches (render/batch.h), in tiles on oneTBB
+// threads (render/tiles.h). Part of the public API (edgepath.h).
 #pragma once
 #include <cstdint>
 #include "render/channels.h"

@@ -547,6 +547,137 @@ TEST(Render, PacketsMatchSingleRays) {
     }
 }
 
+// The forward pass advances its paths in batches, bounce by bounce, their shadow and
+// continuation rays traced in Embree packets (render/batch.h). Each path's radiance is still
+// trace_path's, bit for bit: the image equals, pixel by pixel, the mean of trace_path over the
+// pixel's samples traced one at a time with their own streams, for every material (rough,
+// mirror, smooth and rough glass, plastic), every kind of light (area, point, spot point,
+// environment), each sampling strategy, hidden emitters and path lengths from 0 to many
+// bounces, on 1 and 2 threads; and render_channels' radiance is the same image.
+TEST(Render, BatchedPathsMatchTracePath) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData glass = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
+    MeshData rough_glass = make_sphere(Vec3f(-1.0f, -0.5f, 0.9f), 0.45f, 10, 20);
+    MeshData mirror = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
+    MeshData plastic = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), ks({0.2f, 0.2f, 0.2f}), r({0.3f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
+    ConstTex metal({0.9f, 0.8f, 0.6f}), smooth({0.f}), rough({0.25f}), ior({1.5f}), white({1, 1, 1});
+    // A sky with a bright patch, so that sampling it by radiance differs from uniform.
+    std::vector<float> sky(4 * 8 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);  // its upper half sees the sky past the floor
+    d.camera.crop_x = 2;
+    d.camera.crop_y = 1;
+    d.camera.crop_width = 22;
+    d.camera.crop_height = 21;
+    d.materials.push_back(material(kd, ks, r));           // 0: rough
+    d.materials.push_back(material(black, black, r));     // 1: the lamp's
+    d.materials.push_back(material(black, metal, r));     // 2: mirror
+    d.materials[2].kind = MaterialKind::Conductor;
+    d.materials.push_back(material(black, white, smooth));  // 3: smooth glass
+    d.materials[3].kind = MaterialKind::Dielectric;
+    d.materials[3].ior = ior.desc();
+    d.materials.push_back(material(black, white, rough));  // 4: rough glass
+    d.materials[4].kind = MaterialKind::Dielectric;
+    d.materials[4].ior = ior.desc();
+    d.materials.push_back(material(kd, white, rough));     // 5: plastic
+    d.materials[5].kind = MaterialKind::Plastic;
+    d.materials[5].ior = ior.desc();
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(glass.desc(3));
+    d.meshes.push_back(rough_glass.desc(4));
+    d.meshes.push_back(mirror.desc(2));
+    d.meshes.push_back(plastic.desc(5));
+    d.meshes.push_back(lamp.desc(1));
+    d.meshes[5].emission = le.desc();
+    d.has_envmap = true;
+    d.envmap.values = {sky.data(), 4, 8, 3};
+    PointLightDesc bulb, spot;
+    bulb.position[0] = 1.5f;
+    bulb.position[1] = 1.f;
+    bulb.position[2] = 1.f;
+    spot.position[0] = -1.f;
+    spot.position[1] = 1.5f;
+    spot.position[2] = 0.5f;
+    spot.intensity[0] = 3.f;
+    spot.spot = true;
+    spot.spot_profile[1] = -1.f;  // pointing down, 60 degrees wide: part of the floor outside its cone
+    spot.spot_profile[2] = 0.f;
+    spot.spot_profile[3] = 0.5f;
+    spot.spot_profile[4] = 0.3f;
+    d.point_lights = {bulb, spot};
+    auto scene = build_scene(d);
+    const int W = image_width(*scene), H = image_height(*scene);
+
+    RenderOptions opt;
+    opt.spp = 3;  // batches straddle pixels; a tile's last batch is partial
+    opt.seed = 5;
+    int compared = 0, outside = 0;
+    // A fisheye's film points outside its image circle are black (CameraSample::outside).
+    for (CameraType type : {CameraType::Perspective, CameraType::Fisheye}) {
+        d.camera.type = type;
+        scene->set_camera(d.camera);
+        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
+            for (bool hide : {false, true})
+                for (int bounces : {0, 1, 3, 40}) {
+                    if (sampling != LightSampling::MIS && (hide || bounces == 40)) continue;
+                    if (type == CameraType::Fisheye && (sampling != LightSampling::MIS || hide || bounces != 3))
+                        continue;
+                    opt.sampling = sampling;
+                    opt.hide_emitters = hide;
+                    opt.max_bounces = bounces;
+                    std::vector<float> reference(size_t(W) * H * 3);
+                    RayCounters counters;
+                    for (int y = 0; y < H; ++y)
+                        for (int x = 0; x < W; ++x) {
+                            double sum[3] = {0, 0, 0};
+                            for (int s = 0; s < opt.spp; ++s) {
+                                CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
+                                outside += cs.outside;
+                                const Vec3f L =
+                                    cs.outside ? Vec3f(0.f) : trace_path(*scene, opt, cs.ray, cs.rng, counters);
+                                for (int k = 0; k < 3; ++k) sum[k] += L[k];
+                            }
+                            for (int k = 0; k < 3; ++k)
+                                reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
+                        }
+                    const std::string what = "camera " + std::to_string(int(type)) + ", sampling " +
+                                             std::to_string(int(sampling)) + ", hide " + std::to_string(hide) + ", " +
+                                             std::to_string(bounces) + " bounces";
+                    double total = 0;
+                    for (float v : reference) total += v;
+                    if (hide && bounces == 0)
+                        EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
+                    else
+                        EXPECT_GT(total, 0.0) << what;
+                    for (int threads : {1, 2}) {
+                        opt.num_threads = threads;
+                        std::vector<float> image(reference.size());
+                        const RenderStats st = render(*scene, opt, image.data());
+                        int differing = 0;
+                        for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
+                        EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
+                        // The same rays as trace_path's.
+                        EXPECT_EQ(st.camera_rays, counters.camera) << what;
+                        EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
+                        EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
+                        ++compared;
+                    }
+                    const ChannelLayout layout({Channel::Depth, Channel::Radiance});
+                    std::vector<float> values(size_t(W) * H * 4);
+                    render_channels(*scene, opt, layout, values.data(), nullptr);
+                    int differing = 0;
+                    for (size_t i = 0; i < reference.size(); ++i)
+                        differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
+                    EXPECT_EQ(differing, 0) << what << ", render_channels";
+                }
+    }
+    EXPECT_EQ(compared, 2 * (8 + 3 + 3 + 1));
+    EXPECT_GT(outside, 0);
+}
+
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
 // is the one light_pdf gives the same point (MIS needs both to agree), and the irradiance it
 // estimates at a few points equals the area sampling's estimate of the same mesh (measured:

@@ -1,0 +1,232 @@
+#include "render/batch.h"
+
+#include <embree3/rtcore.h>
+
+namespace edgepath {
+
+namespace {
+
+// Embree's packets, each with its lane mask.
+struct alignas(64) RayHitPacket {
+    RTCRayHit16 rh;
+    alignas(64) int valid[kLanes];
+};
+struct alignas(64) RayPacket {
+    RTCRay16 r;
+    alignas(64) int valid[kLanes];
+};
+
+inline void set_lane(RTCRay16& r, int i, const Ray& ray) {
+    r.org_x[i] = ray.origin.x;
+    r.org_y[i] = ray.origin.y;
+    r.org_z[i] = ray.origin.z;
+    r.dir_x[i] = ray.dir.x;
+    r.dir_y[i] = ray.dir.y;
+    r.dir_z[i] = ray.dir.z;
+    r.tnear[i] = ray.tmin;
+    r.tfar[i] = ray.tmax;
+    r.mask[i] = 0xFFFFFFFFu;
+    r.flags[i] = 0;
+    r.time[i] = 0.f;
+    r.id[i] = unsigned(i);
+}
+
+// Lanes [0, n) on; the others off, each a copy of lane 0 (a valid ray, should Embree read it).
+inline void close_packet(RTCRay16& r, int* valid, int n) {
+    for (int i = 0; i < kLanes; ++i) valid[i] = i < n ? -1 : 0;
+    for (int i = n; i < kLanes; ++i) {
+        r.org_x[i] = r.org_x[0];
+        r.org_y[i] = r.org_y[0];
+        r.org_z[i] = r.org_z[0];
+        r.dir_x[i] = r.dir_x[0];
+        r.dir_y[i] = r.dir_y[0];
+        r.dir_z[i] = r.dir_z[0];
+        r.tnear[i] = r.tnear[0];
+        r.tfar[i] = r.tfar[0];
+        r.mask[i] = 0xFFFFFFFFu;
+        r.flags[i] = 0;
+        r.time[i] = 0.f;
+        r.id[i] = unsigned(i);
+    }
+}
+
+}  // namespace
+
+// One path of the batch between bounces.
+struct PathState {
+    SurfacePoint sp;  // its current vertex
+    Vec3f beta;       // throughput up to the vertex
+    Vec3f dir;        // direction of the ray that found the vertex
+    // The continuation chosen by the shading: the throughput past it, the BSDF sample's density
+    // and whether it was smooth; its ray's index among the bounce's continuations.
+    Vec3f next_beta;
+    float pdf = 0.f;
+    bool delta = false, goes_on = false;
+    int next = 0;
+    int shadow_begin = 0, shadow_end = 0;  // its shadow rays of this bounce
+};
+
+struct PathBatch::Impl {
+    const Scene& scene;
+    const RenderOptions& opt;
+    PathSettings settings;
+    PathState paths[kBatchSize];  // path i: camera sample i of the batch
+    int live[kBatchSize];         // the live paths, in batch order
+    // A bounce's shadow rays: what each adds if nothing is in its way, and their packets.
+    std::vector<Vec3f> shadow_value;
+    std::vector<RayPacket> shadow;
+    RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
+
+    Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
+        // At most one on the area lights, one on the environment and one a point light for
+        // each path.
+        const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
+        shadow_value.resize(max_shadow);
+        shadow.resize((max_shadow + kLanes - 1) / kLanes);
+    }
+
+    void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
+};
+
+PathBatch::PathBatch(const Scene& scene, const RenderOptions& opt) : impl_(new Impl(scene, opt)) {}
+PathBatch::~PathBatch() = default;
+
+void PathBatch::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters) {
+    impl_->trace(samples, n, L, counters);
+}
+
+// trace_path (render/path.cpp) for n paths at once: the same operations, path by path, in the
+// same order; only the rays are traced between the steps, in packets.
+void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters) {
+    const RTCScene rtc = scene.rtc_scene();
+    RTCIntersectContext ctx;
+    rtcInitIntersectContext(&ctx);
+    ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;
+
+    // The camera rays' first vertices.
+    int nlive = 0;
+    for (int i = 0; i < n; ++i) {
+        const CameraSample& cs = samples[i];
+        L[i] = Vec3f(0.f);
+        if (cs.outside) continue;
+        ++counters.camera;
+        if (!cs.first.found) {
+            if (scene.has_envmap && !opt.hide_emitters) L[i] += scene.envmap.eval(cs.ray.dir);
+            continue;
+        }
+        const bool emitter = scene.meshes[size_t(cs.first.hit.mesh)].is_emitter();
+        if (opt.max_bounces == 0 && !emitter) continue;  // no surface point needed
+        PathState& ps = paths[i];
+        ps.sp = scene.surface_point(cs.first.hit);
+        if (!opt.hide_emitters && emitter) L[i] += scene.emitted(ps.sp, -cs.ray.dir);
+        if (opt.max_bounces == 0) continue;
+        ps.beta = Vec3f(1.f);
+        ps.dir = cs.ray.dir;
+        live[nlive++] = i;
+    }
+
+    for (int bounce = 0; nlive > 0; ++bounce) {
+        // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
+        // what each would add.
+        int nshadow = 0, nnext = 0;
+        for (int j = 0; j < nlive; ++j) {
+            PathState& ps = paths[live[j]];
+            ps.goes_on = false;
+            ps.shadow_begin = nshadow;
+            shade_vertex(
+                scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
+                [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
+                    ps.goes_on = true;
+                    ps.next_beta = next_beta;
+                    ps.pdf = bs.pdf;
+                    ps.delta = bs.delta;
+                    ps.next = nnext;
+                    set_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+                    ++nnext;
+                },
+                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
+                    set_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+                    shadow_value[size_t(nshadow)] = value;
+                    ++nshadow;
+                });
+            ps.shadow_end = nshadow;
+        }
+
+        // The continuations, each hit's triangle fetched while the packets after it are traced;
+        // then the shadow rays.
+        for (int p = 0; p * kLanes < nnext; ++p) {
+            RayHitPacket& pk = next[p];
+            const int m = std::min(kLanes, nnext - p * kLanes);
+            close_packet(pk.rh.ray, pk.valid, m);
+            for (int i = 0; i < kLanes; ++i) {
+                pk.rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+                pk.rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+            }
+            rtcIntersect16(pk.valid, rtc, &ctx, &pk.rh);
+            for (int i = 0; i < m; ++i) {
+                if (pk.rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
+                Hit h;
+                h.mesh = int(pk.rh.hit.geomID[i]);
+                h.prim = int64_t(pk.rh.hit.primID[i]);
+                scene.prefetch(h);
+            }
+        }
+        for (int p = 0; p * kLanes < nshadow; ++p) {
+            RayPacket& pk = shadow[size_t(p)];
+            close_packet(pk.r, pk.valid, std::min(kLanes, nshadow - p * kLanes));
+            rtcOccluded16(pk.valid, rtc, &ctx, &pk.r);
+        }
+
+        // Each path adds what it sees, in trace_path's order: its light samples that nothing
+        // hides (an occluded ray's tfar is -inf), then the light its continuation meets.
+        int kept = 0;
+        const bool last = bounce + 1 >= opt.max_bounces;
+        for (int j = 0; j < nlive; ++j) {
+            const int i = live[j];
+            PathState& ps = paths[i];
+            Vec3f& Li = L[i];
+            for (int k = ps.shadow_begin; k < ps.shadow_end; ++k)
+                if (!(shadow[size_t(k / kLanes)].r.tfar[k % kLanes] < 0.f)) Li += shadow_value[size_t(k)];
+            if (!ps.goes_on) continue;
+            const RayHitPacket& pk = next[ps.next / kLanes];
+            const int lane = ps.next % kLanes;
+            const Vec3f beta = ps.beta = ps.next_beta;
+            // Light met after a smooth bounce could not have been sampled: full weight.
+            const bool counted = settings.use_hits || ps.delta;
+            const bool weighted = settings.mis && settings.use_nee && !ps.delta;
+            const Vec3f dir(pk.rh.ray.dir_x[lane], pk.rh.ray.dir_y[lane], pk.rh.ray.dir_z[lane]);
+            if (pk.rh.hit.geomID[lane] == RTC_INVALID_GEOMETRY_ID) {
+                if (scene.has_envmap && counted) {
+                    float env_pdf = 0.f;
+                    const Vec3f Le = weighted && scene.env_sampled ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
+                    float w = weighted ? mis_power(ps.pdf, env_pdf) : 1.f;
+                    Li += beta * Le * w;
+                }
+                continue;
+            }
+            Hit hit;
+            hit.mesh = int(pk.rh.hit.geomID[lane]);
+            hit.prim = int64_t(pk.rh.hit.primID[lane]);
+            hit.b1 = pk.rh.hit.u[lane];
+            hit.b2 = pk.rh.hit.v[lane];
+            hit.t = pk.rh.ray.tfar[lane];
+            const bool emitter = scene.meshes[size_t(hit.mesh)].is_emitter();
+            // A path's last vertex matters only for light it sees there.
+            if (last && !(counted && emitter)) continue;
+            const Vec3f prev_p = ps.sp.p;
+            ps.sp = scene.surface_point(hit);
+            ps.dir = dir;
+            if (counted && emitter) {
+                Vec3f Le = scene.emitted(ps.sp, -dir);
+                if (!is_black(Le)) {
+                    const float emission_weight = weighted ? mis_power(ps.pdf, scene.light_pdf(prev_p, ps.sp)) : 1.f;
+                    Li += beta * Le * emission_weight;
+                }
+            }
+            if (!last) live[kept++] = i;
+        }
+        nlive = kept;
+    }
+}
+
+}  // namespace edgepath
