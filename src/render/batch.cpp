@@ -191,17 +191,11 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             const RayHitPacket& pk = next[ps.next / kLanes];
             const int lane = ps.next % kLanes;
             const Vec3f beta = ps.beta = ps.next_beta;
-            // Light met after a smooth bounce could not have been sampled: full weight.
-            const bool counted = settings.use_hits || ps.delta;
-            const bool weighted = settings.mis && settings.use_nee && !ps.delta;
             const Vec3f dir(pk.rh.ray.dir_x[lane], pk.rh.ray.dir_y[lane], pk.rh.ray.dir_z[lane]);
+            Vec3f Le;
+            float w;
             if (pk.rh.hit.geomID[lane] == RTC_INVALID_GEOMETRY_ID) {
-                if (scene.has_envmap && counted) {
-                    float env_pdf = 0.f;
-                    const Vec3f Le = weighted && scene.env_sampled ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
-                    float w = weighted ? mis_power(ps.pdf, env_pdf) : 1.f;
-                    Li += beta * Le * w;
-                }
+                if (escaped_light(scene, settings, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
                 continue;
             }
             Hit hit;
@@ -210,19 +204,13 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             hit.b1 = pk.rh.hit.u[lane];
             hit.b2 = pk.rh.hit.v[lane];
             hit.t = pk.rh.ray.tfar[lane];
-            const bool emitter = scene.meshes[size_t(hit.mesh)].is_emitter();
             // A path's last vertex matters only for light it sees there.
-            if (last && !(counted && emitter)) continue;
+            if (last && !(continuation_counts(settings, ps.delta) && scene.meshes[size_t(hit.mesh)].is_emitter()))
+                continue;
             const Vec3f prev_p = ps.sp.p;
             ps.sp = scene.surface_point(hit);
             ps.dir = dir;
-            if (counted && emitter) {
-                Vec3f Le = scene.emitted(ps.sp, -dir);
-                if (!is_black(Le)) {
-                    const float emission_weight = weighted ? mis_power(ps.pdf, scene.light_pdf(prev_p, ps.sp)) : 1.f;
-                    Li += beta * Le * emission_weight;
-                }
-            }
+            if (met_emission(scene, settings, hit.mesh, prev_p, ps.sp, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
             if (!last) live[kept++] = i;
         }
         nlive = kept;

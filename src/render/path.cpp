@@ -7,7 +7,6 @@ namespace edgepath {
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record, const FirstHit* first) {
     const PathSettings settings(scene, opt);
-    const bool use_nee = settings.use_nee, use_hits = settings.use_hits, mis = settings.mis;
 
     Vec3f L(0.f), beta(1.f);
     ++counters.camera;
@@ -92,19 +91,12 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             rv->next_dir = dir;
             rv->next_inv_pdf = 1.f / bs.pdf;
         }
-        // Light met after a smooth bounce could not have been sampled: full weight, whatever
-        // the sampling strategy.
-        const bool counted = use_hits || bs.delta;
-        const bool weighted = mis && use_nee && !bs.delta;
         ray = next_ray;
         hit = next_hit;
+        Vec3f Le;
+        float w;
         if (!found) {
-            if (scene.has_envmap && counted) {
-                // The value and, for the weight, the density (as scene.env_pdf gives it) from
-                // one lookup of the direction.
-                float env_pdf = 0.f;
-                const Vec3f Le = weighted && scene.env_sampled ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
-                float w = weighted ? mis_power(bs.pdf, env_pdf) : 1.f;
+            if (escaped_light(scene, settings, dir, bs.pdf, bs.delta, Le, w)) {
                 L += beta * Le * w;
                 if (record) {
                     record->escaped = true;
@@ -115,12 +107,9 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
         }
         if (needs_point(hit, bounce + 1)) sp = scene.surface_point(hit);
         float emission_weight = 0.f;
-        if (counted && scene.meshes[size_t(hit.mesh)].is_emitter()) {
-            Vec3f Le = scene.emitted(sp, -dir);
-            if (!is_black(Le)) {
-                emission_weight = weighted ? mis_power(bs.pdf, scene.light_pdf(prev_p, sp)) : 1.f;
-                L += beta * Le * emission_weight;
-            }
+        if (met_emission(scene, settings, hit.mesh, prev_p, sp, dir, bs.pdf, bs.delta, Le, w)) {
+            emission_weight = w;
+            L += beta * Le * w;
         }
         push_vertex(ray, emission_weight);
     }

@@ -119,6 +119,37 @@ struct PathSettings {
           both_lights(scene.light_distribution.valid() && scene.env_sampled) {}
 };
 
+// Light met by a BSDF-sampled continuation (of density `pdf`, smooth if `delta`), as trace_path
+// and PathBatch both count it: the two functions below return whether it counts, and then set
+// Le to the light, unweighted, and w to its MIS weight (the caller adds beta * Le * w). Light
+// met after a smooth bounce could not have been sampled: full weight, whatever the sampling
+// strategy.
+inline bool continuation_counts(const PathSettings& ps, bool delta) { return ps.use_hits || delta; }
+inline bool continuation_weighted(const PathSettings& ps, bool delta) { return ps.mis && ps.use_nee && !delta; }
+
+// The environment seen along `dir` by a continuation that left the scene: its value and, for
+// the weight, its density (as scene.env_pdf gives it) from one lookup of the direction.
+inline bool escaped_light(const Scene& scene, const PathSettings& ps, const Vec3f& dir, float pdf, bool delta,
+                          Vec3f& Le, float& w) {
+    if (!scene.has_envmap || !continuation_counts(ps, delta)) return false;
+    const bool weighted = continuation_weighted(ps, delta);
+    float env_pdf = 0.f;
+    Le = weighted && scene.env_sampled ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
+    w = weighted ? mis_power(pdf, env_pdf) : 1.f;
+    return true;
+}
+
+// The emission of sp, a point of mesh `mesh`, met along `dir` by a continuation from prev_p
+// (counted where it is not black).
+inline bool met_emission(const Scene& scene, const PathSettings& ps, int mesh, const Vec3f& prev_p,
+                         const SurfacePoint& sp, const Vec3f& dir, float pdf, bool delta, Vec3f& Le, float& w) {
+    if (!continuation_counts(ps, delta) || !scene.meshes[size_t(mesh)].is_emitter()) return false;
+    Le = scene.emitted(sp, -dir);
+    if (is_black(Le)) return false;
+    w = continuation_weighted(ps, delta) ? mis_power(pdf, scene.light_pdf(prev_p, sp)) : 1.f;
+    return true;
+}
+
 // The light sample a shadow ray of shade_vertex tests.
 enum class ShadowKind { Area, Env, Point };
 
