@@ -60,6 +60,14 @@ LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float 
     return b;
 }
 
+float LobeBound::glossy_share(const BoundsCone& cone) const {
+    if (!(specular > 0.f)) return 0.f;
+    if (cone.cos_half <= -1.f) return 1.f;  // every direction
+    const float angle = std::acos(std::clamp(dot(r, cone.axis), -1.f, 1.f));
+    const float q = 1.f + sharpness * (1.f - std::cos(std::max(0.f, angle - cone.half)));
+    return 1.f / (q * q);
+}
+
 double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
     // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1] (less than pi apart), with b
     // along the edge and a towards the foot of the perpendicular from p; h the distance to the

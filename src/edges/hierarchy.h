@@ -74,6 +74,10 @@ struct LobeBound {
         }
         return v;
     }
+    // The glossy part's largest value over the directions of `cone`, over its peak: 1 where the
+    // mirror direction lies inside the cone, falling as the lobe does with the angle between
+    // them beyond the cone's half angle; 0 without a glossy part.
+    float glossy_share(const BoundsCone& cone) const;
     // Its integral over the arc of directions from p to the segment (v0, v1), in angle (closed
     // form; the glossy part is not cut off below the horizon); *h: the distance from p to the
     // segment's line.

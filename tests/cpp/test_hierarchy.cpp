@@ -413,6 +413,38 @@ TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     EXPECT_LT(1 - share[1], 0.67 * (1 - share[0]));
 }
 
+// The glossy share that sets the light strategy's probability (edges/secondary.cpp): 1 with the
+// mirror direction inside the light cone; outside it, the lobe's own value at the cone's nearest
+// direction over its peak (the angle from the mirror direction less the cone's half angle), so
+// it falls as the lobe turns away; 0 without a glossy part.
+TEST(LobeBound, GlossyShareIsTheLobeAtTheConesNearestDirection) {
+    const Vec3f n(0, 1, 0), wo = normalize(Vec3f(-1, 2, 0)), p(0, 0, 0);
+    const LobeBound glossy = LobeBound::make(n, wo, 0.f, 0.8f, 0.08f), matte = LobeBound::make(n, wo, 0.5f, 0.f, 0.08f);
+    const Vec3f r = glossy.r;
+    EXPECT_NEAR(length(r), 1.f, 1e-5f);
+    // A cone around the mirror direction, and one whose border it just touches.
+    EXPECT_FLOAT_EQ(glossy.glossy_share(cone_towards(p, r * 5.f, 0.3f)), 1.f);
+    EXPECT_EQ(matte.glossy_share(cone_towards(p, r * 5.f, 0.3f)), 0.f);
+    // Cones turned away from r about z by growing angles: the share equals the lobe's value at the
+    // direction turned by (angle - half angle), over its value at r (diffuse 0: glossy alone).
+    float last = 2.f;
+    for (float angle : {0.05f, 0.1f, 0.2f, 0.4f, 0.8f}) {
+        const float c = std::cos(angle), s = std::sin(angle);
+        const Vec3f axis(c * r.x - s * r.y, s * r.x + c * r.y, r.z);
+        const BoundsCone cone = cone_towards(p, axis * 4.f, 0.2f);
+        const float beyond = std::max(0.f, angle - cone.half), cb = std::cos(beyond), sb = std::sin(beyond);
+        const Vec3f nearest(cb * r.x - sb * r.y, sb * r.x + cb * r.y, r.z);
+        const float share = glossy.glossy_share(cone);
+        EXPECT_NEAR(share, glossy.eval(nearest) / glossy.eval(r), 1e-3f) << "angle " << angle;
+        EXPECT_LE(share, last);
+        if (beyond > 0.f) EXPECT_LT(share, 1.f);
+        last = share;
+    }
+    EXPECT_LT(last, 0.01f);  // 0.8 rad away (0.75 beyond the cone): far outside a lobe of alpha 0.08
+    // Every direction (p inside the lights' sphere): the whole lobe.
+    EXPECT_FLOAT_EQ(glossy.glossy_share(BoundsCone()), 1.f);
+}
+
 // The point sampler: each strategy's density integrates to one over the edge (the light strategy
 // over the part inside the cone, and is zero elsewhere); samples follow it (the empirical
 // cumulative distribution matches the integral of pdf(), i.e. the inverse CDF is right).
