@@ -31,7 +31,7 @@
 // its cumulative distribution inverted by Newton's method with a bisection safeguard). Strategy
 // Lights: over the part of the edge inside the light cone (found in closed form:
 // w(phi) . axis = R cos(phi - psi) >= cos(half angle)), uniform by length, or where the lobe
-// bound has a glossy part an even mixture of uniform by length and the lobe bound
+// bound has a glossy part a mixture of uniform by length (a tenth, as strategy All) and the lobe bound
 // tabulated over that part alone (a lobe narrower than the light's cone: the highlight).
 //
 // Built in O(n log n) (parallel median splits), kept in the scene across calls and views
@@ -293,7 +293,7 @@ public:
     static constexpr float kUniform = 0.1f;  // strategy All's share of uniform by length
     // Strategy Lights' share of uniform by length over the part inside the cone where the lobe
     // bound has a glossy part (the rest follows the lobe bound there); 1 otherwise.
-    static constexpr float kLightsUniform = 0.5f;
+    static constexpr float kLightsUniform = 0.1f;
 
 private:
     // The lobe bound tabulated over an interval of angles [lo, hi] (kBins bins, piecewise linear)
