@@ -9,7 +9,7 @@ Mitsuba's time over edgepath's (above 1: edgepath is faster). Each call is timed
 makes it: edgepath's includes building the scene (BVH, light tables), Mitsuba's its kernel
 tracing (its compiled kernels are cached after the first, untimed, call).
 
-    python bench/mitsuba_compare.py [--runs N] [--size N] [--spp N] [--threads N]
+    python bench/mitsuba_compare.py [--runs N] [--size N] [--spp N] [--threads N] [--no-forward | --no-gradient]
 
 Needs the ``mitsuba`` package (``pip install -e '.[bench]'``) and, for its ``llvm_ad_rgb``
 variant, a libLLVM of version 16 or newer (Debian: ``apt-get install libllvm19``; found by
@@ -399,7 +399,8 @@ def main(argv=None):
     parser.add_argument("--grad-spp", type=int, default=16, help="Mitsuba's spp for the derivative image")
     parser.add_argument("--grad-ref-spp", type=int, default=4096, help="spp of edgepath's reference")
     parser.add_argument("--seeds", type=int, default=3)
-    parser.add_argument("--no-gradient", action="store_true")
+    parser.add_argument("--no-gradient", action="store_true", help="skip the derivative images")
+    parser.add_argument("--no-forward", action="store_true", help="skip the forward renders (derivative images only)")
     args = parser.parse_args(argv)
 
     if np is None:
@@ -416,7 +417,8 @@ def main(argv=None):
           f"{os.environ.get('DRJIT_LIBLLVM_PATH', 'found by Dr.Jit')}), {args.threads} threads, "
           f"load average {os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as folder:
-        forward(mi, dr, ep, args, folder)
+        if not args.no_forward:
+            forward(mi, dr, ep, args, folder)
         if not args.no_gradient:
             gradient_at_equal_time(mi, dr, ep, args, folder, "Shadow of a welded cube", make_shadow, 1)
             gradient_at_equal_time(mi, dr, ep, args, folder, "The cube over a glossy floor (its shadow, its "

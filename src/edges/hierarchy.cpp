@@ -60,6 +60,14 @@ LobeBound LobeBound::make(const Vec3f& n, const Vec3f& wo, float diffuse, float 
     return b;
 }
 
+float LobeBound::glossy_share(const BoundsCone& cone) const {
+    if (!(specular > 0.f)) return 0.f;
+    if (cone.cos_half <= -1.f) return 1.f;  // every direction
+    const float angle = std::acos(std::clamp(dot(r, cone.axis), -1.f, 1.f));
+    const float q = 1.f + sharpness * (1.f - std::cos(std::max(0.f, angle - cone.half)));
+    return 1.f / (q * q);
+}
+
 double LobeBound::integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h_out) const {
     // The arc: w(phi) = a cos(phi) + b sin(phi), phi in [phi0, phi1] (less than pi apart), with b
     // along the edge and a towards the foot of the perpendicular from p; h the distance to the
@@ -909,6 +917,53 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge, int32_t s
 
 // ---- the point on the edge --------------------------------------------------------------------
 
+void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo_, float hi_) {
+    lo = lo_;
+    hi = hi_;
+    // (cos, sin) of the bins' ends by rotation, one step at a time.
+    const float step = (hi - lo) / float(kBins), cs = std::cos(step), ss = std::sin(step);
+    float c = std::cos(lo), sn = std::sin(lo);
+    cdf[0] = 0.f;
+    for (int k = 0; k <= kBins; ++k) {
+        g[k] = lobe.eval(a * c + b * sn);
+        if (k > 0) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
+        const float next_c = c * cs - sn * ss;
+        sn = sn * cs + c * ss;
+        c = next_c;
+    }
+    total = cdf[kBins];
+    if (!(total > 0.f) || !std::isfinite(total)) total = 0.f;
+}
+
+float EdgePointSampler::Table::invert(float u) const {
+    // The bin, then x in [0, 1] inside it with
+    //   g0 x + (g1 - g0) x^2 / 2 = c,
+    // by Newton's method kept inside a shrinking bracket (bisection when a step leaves it).
+    const float target = u * total, step = (hi - lo) / float(kBins);
+    int k = 0;
+    while (k < kBins - 1 && cdf[k + 1] <= target) ++k;
+    const float g0 = g[k], g1 = g[k + 1], c = (target - cdf[k]) / step;
+    float a = 0.f, b = 1.f, x = g0 + g1 > 0.f ? std::clamp(2.f * c / (g0 + g1), 0.f, 1.f) : 0.5f;
+    for (int it = 0; it < 20; ++it) {
+        const float F = g0 * x + 0.5f * (g1 - g0) * x * x - c, dF = g0 + (g1 - g0) * x;
+        if (F > 0.f) b = x;
+        else a = x;
+        float next = dF > 0.f ? x - F / dF : 0.5f * (a + b);
+        if (!(next > a && next < b)) next = 0.5f * (a + b);
+        const bool done = std::abs(next - x) < 1e-7f;
+        x = next;
+        if (done) break;
+    }
+    return lo + (float(k) + x) * step;
+}
+
+float EdgePointSampler::Table::value(float phi) const {
+    const float step = (hi - lo) / float(kBins), f = (phi - lo) / step;
+    const int k = std::clamp(int(f), 0, kBins - 1);
+    const float x = std::clamp(f - float(k), 0.f, 1.f);
+    return g[k] + (g[k + 1] - g[k]) * x;
+}
+
 bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
                              const BoundsCone* cone) {
     const Vec3f e = v1 - v0;
@@ -924,21 +979,10 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
     phi1_ = std::atan((len_ - s_foot_) / h_);
     if (!(phi1_ - phi0_ > 1e-7f)) return false;
     // The lobe bound along the edge, in angle, and its integral.
-    // (cos, sin) of the bins' ends by rotation, one step at a time.
-    const float step = (phi1_ - phi0_) / float(kBins), cs = std::cos(step), ss = std::sin(step);
-    float c = std::cos(phi0_), sn = std::sin(phi0_);
-    cdf_[0] = 0.f;
-    for (int k = 0; k <= kBins; ++k) {
-        g_[k] = lobe.eval(a * c + b * sn);
-        if (k > 0) cdf_[k] = cdf_[k - 1] + 0.5f * (g_[k - 1] + g_[k]) * step;
-        const float next_c = c * cs - sn * ss;
-        sn = sn * cs + c * ss;
-        c = next_c;
-    }
-    total_ = cdf_[kBins];
-    if (!(total_ > 0.f) || !std::isfinite(total_)) total_ = 0.f;
+    all_.build(a, b, lobe, phi0_, phi1_);
     // The part inside the light cone: w(phi) . axis = R cos(phi - psi) >= cos_half.
     cone0_ = cone1_ = 0.f;
+    lights_uniform_ = 1.f;
     if (cone) {
         if (cone->cos_half <= 0.f) {  // a hemisphere or more: the whole edge
             cone0_ = phi0_;
@@ -954,6 +998,11 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
                 cone1_ = std::min(hi, phi1_);
             }
         }
+        // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it.
+        if (cone1_ > cone0_ && lobe.specular > 0.f) {
+            lights_.build(a, b, lobe, cone0_, cone1_);
+            if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
+        }
     }
     return true;
 }
@@ -962,38 +1011,29 @@ float EdgePointSampler::angle(float t) const { return std::atan((t * len_ - s_fo
 float EdgePointSampler::param(float phi) const {
     return std::clamp((s_foot_ + h_ * std::tan(phi)) / len_, 0.f, 1.f);
 }
+float EdgePointSampler::dphi_dt(float t) const {
+    const float along = t * len_ - s_foot_;
+    return len_ * h_ / (h_ * h_ + along * along);
+}
 
 bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return false;
         const float t0 = param(cone0_), t1 = param(cone1_);
         if (!(t1 > t0)) return false;
-        t = t0 + u * (t1 - t0);
+        if (u < lights_uniform_) {
+            t = t0 + u / lights_uniform_ * (t1 - t0);
+            return true;
+        }
+        t = std::clamp(param(lights_.invert((u - lights_uniform_) / (1.f - lights_uniform_))), t0, t1);
         return true;
     }
-    if (u < kUniform || total_ <= 0.f) {
+    if (u < kUniform || all_.total <= 0.f) {
         t = u < kUniform ? u / kUniform : (u - kUniform) / (1.f - kUniform);
         return true;
     }
-    // The piecewise-linear density in angle: the bin, then x in [0, 1] inside it with
-    //   g0 x + (g1 - g0) x^2 / 2 = c,
-    // by Newton's method kept inside a shrinking bracket (bisection when a step leaves it).
-    const float target = (u - kUniform) / (1.f - kUniform) * total_, step = (phi1_ - phi0_) / float(kBins);
-    int k = 0;
-    while (k < kBins - 1 && cdf_[k + 1] <= target) ++k;
-    const float g0 = g_[k], g1 = g_[k + 1], c = (target - cdf_[k]) / step;
-    float lo = 0.f, hi = 1.f, x = g0 + g1 > 0.f ? std::clamp(2.f * c / (g0 + g1), 0.f, 1.f) : 0.5f;
-    for (int it = 0; it < 20; ++it) {
-        const float F = g0 * x + 0.5f * (g1 - g0) * x * x - c, dF = g0 + (g1 - g0) * x;
-        if (F > 0.f) hi = x;
-        else lo = x;
-        float next = dF > 0.f ? x - F / dF : 0.5f * (lo + hi);
-        if (!(next > lo && next < hi)) next = 0.5f * (lo + hi);
-        const bool done = std::abs(next - x) < 1e-7f;
-        x = next;
-        if (done) break;
-    }
-    t = param(phi0_ + (float(k) + x) * step);
+    // The piecewise-linear density in angle.
+    t = param(all_.invert((u - kUniform) / (1.f - kUniform)));
     return true;
 }
 
@@ -1002,15 +1042,12 @@ float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return 0.f;
         const float t0 = param(cone0_), t1 = param(cone1_);
-        return t1 > t0 && t >= t0 && t <= t1 ? 1.f / (t1 - t0) : 0.f;
+        if (!(t1 > t0 && t >= t0 && t <= t1)) return 0.f;
+        if (!(lights_uniform_ < 1.f)) return 1.f / (t1 - t0);
+        return lights_uniform_ / (t1 - t0) + (1.f - lights_uniform_) * lights_.value(angle(t)) / lights_.total * dphi_dt(t);
     }
-    if (total_ <= 0.f) return 1.f;
-    const float along = t * len_ - s_foot_;
-    const float dphi_dt = len_ * h_ / (h_ * h_ + along * along);
-    const float step = (phi1_ - phi0_) / float(kBins), f = (angle(t) - phi0_) / step;
-    const int k = std::clamp(int(f), 0, kBins - 1);
-    const float x = std::clamp(f - float(k), 0.f, 1.f), g = g_[k] + (g_[k + 1] - g_[k]) * x;
-    return kUniform + (1.f - kUniform) * g / total_ * dphi_dt;
+    if (all_.total <= 0.f) return 1.f;
+    return kUniform + (1.f - kUniform) * all_.value(angle(t)) / all_.total * dphi_dt(t);
 }
 
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or

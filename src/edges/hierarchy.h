@@ -29,8 +29,10 @@
 // and a density in the angle phi the edge subtends at the point (directions w(phi) in the plane
 // through the point and the edge) proportional to the lobe bound (tabulated, piecewise linear,
 // its cumulative distribution inverted by Newton's method with a bisection safeguard). Strategy
-// Lights: uniform by length over the part of the edge inside the light cone (found in closed
-// form: w(phi) . axis = R cos(phi - psi) >= cos(half angle)).
+// Lights: over the part of the edge inside the light cone (found in closed form:
+// w(phi) . axis = R cos(phi - psi) >= cos(half angle)), uniform by length, or where the lobe
+// bound has a glossy part a mixture of uniform by length (a tenth, as strategy All) and the lobe bound
+// tabulated over that part alone (a lobe narrower than the light's cone: the highlight).
 //
 // Built in O(n log n) (parallel median splits), kept in the scene across calls and views
 // (Scene::edge_hierarchy), refit when only vertices move.
@@ -74,6 +76,10 @@ struct LobeBound {
         }
         return v;
     }
+    // The glossy part's largest value over the directions of `cone`, over its peak: 1 where the
+    // mirror direction lies inside the cone, falling as the lobe does with the angle between
+    // them beyond the cone's half angle; 0 without a glossy part.
+    float glossy_share(const BoundsCone& cone) const;
     // Its integral over the arc of directions from p to the segment (v0, v1), in angle (closed
     // form; the glossy part is not cut off below the horizon); *h: the distance from p to the
     // segment's line.
@@ -285,14 +291,32 @@ public:
     float param(float phi) const;
     static constexpr int kBins = 16;
     static constexpr float kUniform = 0.1f;  // strategy All's share of uniform by length
+    // Strategy Lights' share of uniform by length over the part inside the cone where the lobe
+    // bound has a glossy part (the rest follows the lobe bound there); 1 otherwise.
+    static constexpr float kLightsUniform = 0.1f;
 
 private:
+    // The lobe bound tabulated over an interval of angles [lo, hi] (kBins bins, piecewise linear)
+    // and its integral up to the bins' ends.
+    struct Table {
+        float lo = 0.f, hi = 0.f;
+        float g[kBins + 1] = {};    // the lobe bound at the bins' ends
+        float cdf[kBins + 1] = {};  // its integral (in angle) up to them
+        float total = 0.f;          // 0 where the integral is zero or not finite
+        // Over the directions a cos(phi) + b sin(phi), phi in [lo, hi].
+        void build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo, float hi);
+        // The angle below which a share u in [0, 1) of the integral lies.
+        float invert(float u) const;
+        // The (unnormalised) piecewise-linear value at angle phi.
+        float value(float phi) const;
+    };
+    float dphi_dt(float t) const;
     float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;
     float phi0_ = 0.f, phi1_ = 0.f;
     float cone0_ = 0.f, cone1_ = 0.f;  // the part inside the light cone; empty when cone1 <= cone0
-    float g_[kBins + 1] = {};          // the lobe bound at the bins' ends
-    float cdf_[kBins + 1] = {};        // its integral (in angle) up to them
-    float total_ = 0.f;
+    Table all_;                        // over the whole edge [phi0, phi1]
+    Table lights_;                     // over the part inside the cone, where lights_uniform_ < 1
+    float lights_uniform_ = 1.f;
 };
 
 }  // namespace edgepath

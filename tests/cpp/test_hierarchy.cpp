@@ -413,6 +413,38 @@ TEST(EdgeHierarchy, GlossyLobeFavoursMirrorDirection) {
     EXPECT_LT(1 - share[1], 0.67 * (1 - share[0]));
 }
 
+// The glossy share that sets the light strategy's probability (edges/secondary.cpp): 1 with the
+// mirror direction inside the light cone; outside it, the lobe's own value at the cone's nearest
+// direction over its peak (the angle from the mirror direction less the cone's half angle), so
+// it falls as the lobe turns away; 0 without a glossy part.
+TEST(LobeBound, GlossyShareIsTheLobeAtTheConesNearestDirection) {
+    const Vec3f n(0, 1, 0), wo = normalize(Vec3f(-1, 2, 0)), p(0, 0, 0);
+    const LobeBound glossy = LobeBound::make(n, wo, 0.f, 0.8f, 0.08f), matte = LobeBound::make(n, wo, 0.5f, 0.f, 0.08f);
+    const Vec3f r = glossy.r;
+    EXPECT_NEAR(length(r), 1.f, 1e-5f);
+    // A cone around the mirror direction, and one whose border it just touches.
+    EXPECT_FLOAT_EQ(glossy.glossy_share(cone_towards(p, r * 5.f, 0.3f)), 1.f);
+    EXPECT_EQ(matte.glossy_share(cone_towards(p, r * 5.f, 0.3f)), 0.f);
+    // Cones turned away from r about z by growing angles: the share equals the lobe's value at the
+    // direction turned by (angle - half angle), over its value at r (diffuse 0: glossy alone).
+    float last = 2.f;
+    for (float angle : {0.05f, 0.1f, 0.2f, 0.4f, 0.8f}) {
+        const float c = std::cos(angle), s = std::sin(angle);
+        const Vec3f axis(c * r.x - s * r.y, s * r.x + c * r.y, r.z);
+        const BoundsCone cone = cone_towards(p, axis * 4.f, 0.2f);
+        const float beyond = std::max(0.f, angle - cone.half), cb = std::cos(beyond), sb = std::sin(beyond);
+        const Vec3f nearest(cb * r.x - sb * r.y, sb * r.x + cb * r.y, r.z);
+        const float share = glossy.glossy_share(cone);
+        EXPECT_NEAR(share, glossy.eval(nearest) / glossy.eval(r), 1e-3f) << "angle " << angle;
+        EXPECT_LE(share, last);
+        if (beyond > 0.f) EXPECT_LT(share, 1.f);
+        last = share;
+    }
+    EXPECT_LT(last, 0.01f);  // 0.8 rad away (0.75 beyond the cone): far outside a lobe of alpha 0.08
+    // Every direction (p inside the lights' sphere): the whole lobe.
+    EXPECT_FLOAT_EQ(glossy.glossy_share(BoundsCone()), 1.f);
+}
+
 // The point sampler: each strategy's density integrates to one over the edge (the light strategy
 // over the part inside the cone, and is zero elsewhere); samples follow it (the empirical
 // cumulative distribution matches the integral of pdf(), i.e. the inverse CDF is right).
@@ -466,6 +498,66 @@ TEST(EdgePointSampler, DensityIntegratesToOneAndInverseMatches) {
 
 // Degenerate configurations: a zero-length edge, the point on the edge's line, on the edge
 // itself, at an end: no sample, never a NaN.
+// Strategy Lights with a glossy lobe narrower than the light cone: the density over the part of
+// the edge inside the cone mixes uniform by length with the lobe bound there. It integrates to
+// one, is zero outside that part, follows the lobe (far from uniform), and the samples'
+// histogram over that part matches its integral bin by bin.
+TEST(EdgePointSampler, LightStrategyFollowsANarrowLobeInsideTheCone) {
+    const Vec3f p(0.2f, 0.f, 0.1f), v0(-1.f, 1.f, -0.3f), v1(2.f, 1.f, 0.4f);
+    const BoundsCone cone = cone_towards(p, Vec3f(0.3f, 1.f, 0.1f), 0.3f);
+    // The mirror direction towards the middle of the part of the edge inside the cone.
+    const Vec3f n(0, 1, 0), towards = normalize(Vec3f(0.35f, 1.f, 0.12f) - p);
+    const Vec3f wo = n * (2.f * dot(n, towards)) - towards;
+    for (float alpha : {0.02f, 0.08f}) {
+        const LobeBound lobe = LobeBound::make(n, wo, 0.05f, 0.8f, alpha);
+        EdgePointSampler ps;
+        ASSERT_TRUE(ps.setup(p, v0, v1, lobe, &cone));
+        const auto L = EdgeHierarchy::Lights;
+        // The support: where the density is positive, on a fine grid.
+        const int grid = 400000;
+        float t0 = 2.f, t1 = -1.f, lo = 1e30f, hi = 0.f;
+        double integral = 0;
+        std::vector<float> d(grid);
+        for (int i = 0; i < grid; ++i) {
+            const float t = (float(i) + 0.5f) / float(grid);
+            d[size_t(i)] = ps.pdf(L, t);
+            ASSERT_TRUE(std::isfinite(d[size_t(i)]) && d[size_t(i)] >= 0.f);
+            integral += double(d[size_t(i)]) / grid;
+            if (d[size_t(i)] > 0.f) {
+                t0 = std::min(t0, t);
+                t1 = std::max(t1, t);
+                lo = std::min(lo, d[size_t(i)]);
+                hi = std::max(hi, d[size_t(i)]);
+            }
+        }
+        ASSERT_LT(t0, t1);
+        EXPECT_GT(t0, 0.01f);  // the cone holds a part of the edge, not all of it
+        EXPECT_LT(t1, 0.99f);
+        EXPECT_NEAR(integral, 1.0, 2e-3) << "alpha " << alpha;
+        EXPECT_GT(hi, (alpha < 0.05f ? 4.f : 1.5f) * lo) << "alpha " << alpha;  // not uniform
+        // Histogram of samples over [t0, t1] in bins, against the density's integral over each.
+        const int bins = 20, samples = 200000;
+        std::vector<double> want(bins, 0.0);
+        for (int i = 0; i < grid; ++i) {
+            const float t = (float(i) + 0.5f) / float(grid);
+            if (d[size_t(i)] > 0.f) want[size_t(std::min(bins - 1, int((t - t0) / (t1 - t0) * bins)))] += double(d[size_t(i)]) / grid;
+        }
+        std::vector<int> got(bins, 0);
+        Rng rng(11, 0);
+        for (int i = 0; i < samples; ++i) {
+            float t;
+            ASSERT_TRUE(ps.sample(L, rng.next_float(), t));
+            ASSERT_TRUE(t >= t0 - 1e-5f && t <= t1 + 1e-5f) << t;
+            EXPECT_GT(ps.pdf(L, t), 0.f);
+            ++got[size_t(std::clamp(int((t - t0) / (t1 - t0) * bins), 0, bins - 1))];
+        }
+        for (int b = 0; b < bins; ++b) {
+            const double f = double(got[size_t(b)]) / samples, sigma = std::sqrt(want[size_t(b)] * (1 - want[size_t(b)]) / samples);
+            EXPECT_NEAR(f, want[size_t(b)], 5 * sigma + 1e-3) << "alpha " << alpha << ", bin " << b;
+        }
+    }
+}
+
 TEST(EdgePointSampler, DegenerateEdgesGiveNoSample) {
     const LobeBound lobe = LobeBound::make(Vec3f(0, 1, 0), Vec3f(0, 1, 0), 0.5f, 0.5f, 0.2f);
     EdgePointSampler ps;
