@@ -127,6 +127,9 @@ private:
     bool has_lights_ = false;
     Vec3f lights_center_;  // a bounding sphere of the area lights
     float lights_radius_ = 0.f;
+    // The light triangles' corners where there are few (none otherwise): LightTriangles.
+    Vec3f light_corners_[LightTriangles::kMax][3];
+    int light_count_ = 0;
     std::vector<float> survival_;  // per survival_class(); empty: 1 everywhere
 };
 
