@@ -161,13 +161,10 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     // The light triangles seen from p, with the cone's margin: the directions the light strategy
     // takes towards them (EdgePointSampler). Every direction where either side of an edge can
     // meet a light's emission (a side moves its ray off by less than the margin) lies in their
-    // part, so strategy Lights alone (c_lights = 1 below) stays unbiased.
+    // part, so strategy Lights alone (c_lights = 1 below) stays unbiased. Set up at the first
+    // edge sampled.
     LightTriangles tris;
     const LightTriangles* lights = nullptr;
-    if (q.cone && light_count_ > 0) {
-        tris.set(sp.p, light_corners_, light_count_, 4.f * kTouchStep);
-        lights = &tris;
-    }
     // One descent per vertex: strategy All, or Lights with probability c_lights. One-sample
     // multiple importance sampling: the balance heuristic on the mixture of the two joint
     // densities. A descent may split (up to EdgeHierarchy::kMaxChoices edges); the densities are
@@ -205,6 +202,10 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         const Edge& e = edges[choice.edge];
         const Mesh& m = scene_.meshes[size_t(e.mesh)];
         const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
+        if (!lights && q.cone && light_count_ > 0) {
+            tris.set(sp.p, light_corners_, light_count_, 4.f * kTouchStep);
+            lights = &tris;
+        }
         EdgePointSampler points;
         float t;
         if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, lights) || !points.sample(s, ut, t)) continue;

@@ -16,7 +16,8 @@
 // multiple importance sampling (balance heuristic on the joint density of the edge and the point
 // on it). The point on the edge is sampled by angle (EdgePointSampler): weighted by a bound of
 // the BSDF lobe, or inside the light cone uniformly (mixed with the lobe bound there for a
-// glossy lobe).
+// glossy lobe), and where the scene has at most LightTriangles::kMax light triangles, only
+// where the directions pass within a small margin of one of them.
 // opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
 // instead (the baseline).
 #pragma once
