@@ -964,8 +964,48 @@ float EdgePointSampler::Table::value(float phi) const {
     return g[k] + (g[k + 1] - g[k]) * x;
 }
 
+void LightTriangles::set(const Vec3f& p, const Vec3f (*corners)[3], int count_, float margin_) {
+    count = std::min(count_, kMax);
+    margin = margin_;
+    for (int i = 0; i < count; ++i) {
+        const Vec3f d[3] = {corners[i][0] - p, corners[i][1] - p, corners[i][2] - p};
+        // The sign of det(d0, d1, d2) turns each side's plane to face the opposite corner (the
+        // same sign for all three). Where p lies in (or within 1e-5 rad of) the triangle's plane
+        // that sign is not to be trusted: no bound from this triangle.
+        const float det = dot(cross(d[0], d[1]), d[2]);
+        const float scale = length(d[0]) * length(d[1]) * length(d[2]);
+        const bool bounded = std::abs(det) > 1e-5f * scale && std::isfinite(det);
+        for (int k = 0; k < 3; ++k) {
+            const Vec3f c = cross(d[k], d[(k + 1) % 3]);
+            const float l = length(c);
+            n[i][k] = bounded && l > 0.f ? c * ((det > 0.f ? 1.f : -1.f) / l) : Vec3f(0.f);
+        }
+    }
+}
+
+namespace {
+// Keeps of [lo, hi] (shorter than pi) the angles phi with A cos(phi) + B sin(phi) >= -m, or the
+// hull of them where they are two pieces; false when none are left.
+bool keep_above(float A, float B, float m, float& lo, float& hi) {
+    const float R = std::sqrt(A * A + B * B);
+    if (!(R > m)) return hi > lo;  // every angle
+    // R cos(phi - psi) >= -m: phi within h of psi, h in (pi/2, pi]; the arc left out,
+    // (psi + h, psi + 2 pi - h), is shorter than pi, so at most one turn of it meets [lo, hi].
+    const float psi = std::atan2(B, A), h = std::acos(std::max(-1.f, -m / R));
+    for (int k = -2; k <= 1; ++k) {
+        const float e0 = psi + h + 2.f * kPi * float(k), e1 = psi - h + 2.f * kPi * float(k + 1);
+        if (e1 <= lo || e0 >= hi) continue;       // misses it
+        if (e0 <= lo && e1 >= hi) return false;   // covers it
+        if (e0 <= lo) lo = e1;                    // cuts its lower end
+        else if (e1 >= hi) hi = e0;               // its upper end
+        // else inside it: two pieces, their hull kept
+    }
+    return hi > lo;
+}
+}  // namespace
+
 bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
-                             const BoundsCone* cone) {
+                             const BoundsCone* cone, const LightTriangles* lights) {
     const Vec3f e = v1 - v0;
     len_ = length(e);
     if (!(len_ > 0.f) || !std::isfinite(len_)) return false;
@@ -996,6 +1036,27 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
                 if (lo > phi1_) lo -= 2.f * kPi, hi -= 2.f * kPi;
                 cone0_ = std::max(lo, phi0_);
                 cone1_ = std::min(hi, phi1_);
+            }
+        }
+        // Of that part, where the directions pass within the margin of a light triangle: the
+        // hull over the triangles of each one's part (each a superset of where the directions
+        // meet it, widened by the margin; see LightTriangles).
+        if (lights && lights->count > 0 && cone1_ > cone0_) {
+            float lo = cone1_, hi = cone0_;
+            for (int i = 0; i < lights->count; ++i) {
+                float l = cone0_, u = cone1_;
+                bool left = true;
+                for (int k = 0; k < 3 && left; ++k)
+                    left = keep_above(dot(lights->n[i][k], a), dot(lights->n[i][k], b), lights->margin, l, u);
+                if (!left) continue;
+                lo = std::min(lo, l);
+                hi = std::max(hi, u);
+            }
+            if (hi > lo) {
+                cone0_ = lo;
+                cone1_ = hi;
+            } else {
+                cone0_ = cone1_ = 0.f;
             }
         }
         // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it.

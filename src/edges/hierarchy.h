@@ -276,11 +276,31 @@ private:
     Stats stats_;
 };
 
+// The area lights' triangles seen from a shading point p, for the light strategy's point on an
+// edge: each triangle as the three planes through p and its sides, their unit normals facing it
+// (the directions from p through the triangle are those with n . w >= 0 for all three). A
+// direction within an angle `margin` of a triangle has n . w >= -margin for all three: so the
+// part of an edge's arc of directions where that holds for some triangle holds every direction
+// within `margin` of a light, whichever way (across the edge or along it) a direction sampled
+// there is moved. Both faces of a triangle count (the planes do not depend on its winding); a
+// triangle behind p bounds the directions towards it only.
+struct LightTriangles {
+    static constexpr int kMax = 8;  // more triangles: the light cone alone
+    int count = 0;
+    float margin = 0.f;
+    Vec3f n[kMax][3];  // zero: no bound from that side (p in the triangle's plane, a degenerate one)
+    // From the triangles' corners (count <= kMax) seen from p.
+    void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
+};
+
 class EdgePointSampler {
 public:
     // The edge (v0, v1) seen from p. False when it is degenerate seen from p (p on its line, or
-    // a zero-length edge).
-    bool setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe, const BoundsCone* cone);
+    // a zero-length edge). With `lights` (as seen from the same p, and with a cone), strategy
+    // Lights keeps to the part of the edge inside the cone that is also within the lights'
+    // margin of some light triangle (the hull of those parts over the triangles).
+    bool setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe, const BoundsCone* cone,
+               const LightTriangles* lights = nullptr);
     // A parameter t in [0, 1] (x = v0 + t (v1 - v0)) by strategy `s`; false if the strategy
     // cannot sample this edge (Lights: no part of it inside the cone).
     bool sample(EdgeHierarchy::Strategy s, float u, float& t) const;
@@ -313,7 +333,9 @@ private:
     float dphi_dt(float t) const;
     float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;
     float phi0_ = 0.f, phi1_ = 0.f;
-    float cone0_ = 0.f, cone1_ = 0.f;  // the part inside the light cone; empty when cone1 <= cone0
+    // The part strategy Lights samples: inside the light cone (and near a light triangle, with
+    // LightTriangles); empty when cone1 <= cone0.
+    float cone0_ = 0.f, cone1_ = 0.f;
     Table all_;                        // over the whole edge [phi0, phi1]
     Table lights_;                     // over the part inside the cone, where lights_uniform_ < 1
     float lights_uniform_ = 1.f;

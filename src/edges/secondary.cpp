@@ -89,6 +89,17 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         has_lights_ = true;
     });
     if (!has_lights_) return;
+    // Few light triangles (no mesh sampled by solid angle): kept to bound the light strategy's
+    // point on an edge (LightTriangles).
+    bool few = scene.lights.size() <= size_t(LightTriangles::kMax);
+    for (const Scene::EmissiveTriangle& l : scene.lights) few = few && l.prim >= 0;
+    if (few) {
+        for (const Scene::EmissiveTriangle& l : scene.lights) {
+            const Mesh& m = scene.meshes[size_t(l.mesh)];
+            for (int k = 0; k < 3; ++k) light_corners_[light_count_][k] = m.vertex(m.indices[3 * l.prim + k]);
+            ++light_count_;
+        }
+    }
     lights_center_ = (lo + hi) * 0.5f;
     each_light_vertex([&](const Vec3f& v) { lights_radius_ = std::max(lights_radius_, length(v - lights_center_)); });
 }
@@ -147,6 +158,13 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         cone.cos_half = std::cos(cone.half);
         q.cone = &cone;
     }
+    // The light triangles seen from p, with the cone's margin: the directions the light strategy
+    // takes towards them (EdgePointSampler). Every direction where either side of an edge can
+    // meet a light's emission (a side moves its ray off by less than the margin) lies in their
+    // part, so strategy Lights alone (c_lights = 1 below) stays unbiased. Set up at the first
+    // edge sampled.
+    LightTriangles tris;
+    const LightTriangles* lights = nullptr;
     // One descent per vertex: strategy All, or Lights with probability c_lights. One-sample
     // multiple importance sampling: the balance heuristic on the mixture of the two joint
     // densities. A descent may split (up to EdgeHierarchy::kMaxChoices edges); the densities are
@@ -184,9 +202,13 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         const Edge& e = edges[choice.edge];
         const Mesh& m = scene_.meshes[size_t(e.mesh)];
         const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
+        if (!lights && q.cone && light_count_ > 0) {
+            tris.set(sp.p, light_corners_, light_count_, 4.f * kTouchStep);
+            lights = &tris;
+        }
         EdgePointSampler points;
         float t;
-        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone) || !points.sample(s, ut, t)) continue;
+        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, lights) || !points.sample(s, ut, t)) continue;
         const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
                     joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
         const float mixture = c_all * joint_all + c_lights * joint_lights;

@@ -16,7 +16,8 @@
 // multiple importance sampling (balance heuristic on the joint density of the edge and the point
 // on it). The point on the edge is sampled by angle (EdgePointSampler): weighted by a bound of
 // the BSDF lobe, or inside the light cone uniformly (mixed with the lobe bound there for a
-// glossy lobe).
+// glossy lobe), and where the scene has at most LightTriangles::kMax light triangles, only
+// where the directions pass within a small margin of one of them.
 // opt.edge_sampling == Uniform: one edge by length over all edges and a point uniform by length
 // instead (the baseline).
 #pragma once
@@ -127,6 +128,9 @@ private:
     bool has_lights_ = false;
     Vec3f lights_center_;  // a bounding sphere of the area lights
     float lights_radius_ = 0.f;
+    // The light triangles' corners where there are few (none otherwise): LightTriangles.
+    Vec3f light_corners_[LightTriangles::kMax][3];
+    int light_count_ = 0;
     std::vector<float> survival_;  // per survival_class(); empty: 1 everywhere
 };
 

@@ -558,6 +558,145 @@ TEST(EdgePointSampler, LightStrategyFollowsANarrowLobeInsideTheCone) {
     }
 }
 
+// Whether the ray from p along w (unit) meets triangle (a, b, c), from either face.
+bool meets(const Vec3f& p, const Vec3f& w, const Vec3f& a, const Vec3f& b, const Vec3f& c) {
+    const Vec3f e1 = b - a, e2 = c - a, s = cross(w, e2);
+    const float det = dot(e1, s);
+    if (std::abs(det) < 1e-12f) return false;
+    const Vec3f o = p - a;
+    const float u = dot(o, s) / det;
+    const Vec3f q = cross(o, e1);
+    const float v = dot(w, q) / det, d = dot(e2, q) / det;
+    return u >= 0.f && v >= 0.f && u + v <= 1.f && d > 0.f;
+}
+
+// Strategy Lights kept to the light triangles (LightTriangles): a square light (two triangles)
+// whose bounding cone's circle reaches well past its corner. An edge whose plane through p
+// cuts the square near that corner: the part sampled lies strictly inside the cone's part,
+// the density integrates to one over it and is zero outside it, the samples' histogram
+// matches it, and every direction within the margin of a light triangle (either face) has a
+// positive density. A light behind p: nothing to sample; p in a light's plane: the cone's part.
+TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
+    const float margin = 4e-4f;
+    const Vec3f p(0.f, 0.f, 0.f);
+    const Vec3f sq[4] = {Vec3f(-0.15f, 3, -0.15f), Vec3f(0.15f, 3, -0.15f), Vec3f(0.15f, 3, 0.15f), Vec3f(-0.15f, 3, 0.15f)};
+    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
+    BoundsCone cone = cone_towards(p, Vec3f(0, 3, 0), 0.15f * std::sqrt(2.f));
+    cone.half += margin;
+    cone.cos_half = std::cos(cone.half);
+    LightTriangles lights;
+    lights.set(p, tris, 2, margin);
+    // The plane through p and the edge meets the lights' plane on x + z = 0.2.
+    const Vec3f v0(-1.f, 1.5f, 1.1f), v1(1.f, 1.5f, -0.9f);
+    for (float ks : {0.f, 0.8f}) {
+        const Vec3f n(0, 1, 0), wo = normalize(Vec3f(-0.1f, 1.f, -0.1f));
+        const LobeBound lobe = LobeBound::make(n, wo, 0.5f, ks, 0.1f);
+        EdgePointSampler coned, kept;
+        ASSERT_TRUE(coned.setup(p, v0, v1, lobe, &cone));
+        ASSERT_TRUE(kept.setup(p, v0, v1, lobe, &cone, &lights));
+        const auto L = EdgeHierarchy::Lights;
+        const int grid = 400000;
+        float c0 = 2.f, c1 = -1.f, k0 = 2.f, k1 = -1.f;
+        double integral = 0;
+        std::vector<float> d(grid);
+        for (int i = 0; i < grid; ++i) {
+            const float t = (float(i) + 0.5f) / float(grid);
+            d[size_t(i)] = kept.pdf(L, t);
+            ASSERT_TRUE(std::isfinite(d[size_t(i)]) && d[size_t(i)] >= 0.f);
+            integral += double(d[size_t(i)]) / grid;
+            if (coned.pdf(L, t) > 0.f) c0 = std::min(c0, t), c1 = std::max(c1, t);
+            if (d[size_t(i)] > 0.f) k0 = std::min(k0, t), k1 = std::max(k1, t);
+        }
+        ASSERT_LT(k0, k1);
+        EXPECT_GE(k0, c0);
+        EXPECT_LE(k1, c1);
+        EXPECT_LT(k1 - k0, 0.6f * (c1 - c0)) << "cone part [" << c0 << ", " << c1 << "], kept [" << k0 << ", " << k1 << "]";
+        EXPECT_NEAR(integral, 1.0, 2e-3) << "ks " << ks;
+        // Every direction within the margin of a light triangle (three moved copies of each
+        // direction, across the edge's plane and along it) lies where the density is positive;
+        // and some directions inside the cone meet no light.
+        const Vec3f across = normalize(cross(v0 - p, v1 - p)), along = normalize(v1 - v0);
+        int hits = 0;
+        for (int i = 0; i < grid; i += 4) {
+            const float t = (float(i) + 0.5f) / float(grid);
+            const Vec3f w = normalize(v0 + (v1 - v0) * t - p);
+            for (const Vec3f& m : {Vec3f(0.f), across * (0.95f * margin), across * (-0.95f * margin), along * (0.95f * margin)}) {
+                const Vec3f wm = normalize(w + m);
+                if (!meets(p, wm, tris[0][0], tris[0][1], tris[0][2]) && !meets(p, wm, tris[1][0], tris[1][1], tris[1][2]))
+                    continue;
+                ++hits;
+                ASSERT_GT(d[size_t(i)], 0.f) << "t " << t;
+            }
+        }
+        EXPECT_GT(hits, 1000);
+        // The samples' histogram over [k0, k1] against the density's integral bin by bin.
+        const int bins = 20, samples = 200000;
+        std::vector<double> want(bins, 0.0);
+        for (int i = 0; i < grid; ++i) {
+            const float t = (float(i) + 0.5f) / float(grid);
+            if (d[size_t(i)] > 0.f) want[size_t(std::min(bins - 1, int((t - k0) / (k1 - k0) * bins)))] += double(d[size_t(i)]) / grid;
+        }
+        std::vector<int> got(bins, 0);
+        Rng rng(17, 0);
+        for (int i = 0; i < samples; ++i) {
+            float t;
+            ASSERT_TRUE(kept.sample(L, rng.next_float(), t));
+            ASSERT_TRUE(t >= k0 - 1e-5f && t <= k1 + 1e-5f) << t;
+            EXPECT_GT(kept.pdf(L, t), 0.f);
+            ++got[size_t(std::clamp(int((t - k0) / (k1 - k0) * bins), 0, bins - 1))];
+        }
+        for (int b = 0; b < bins; ++b) {
+            const double f = double(got[size_t(b)]) / samples, sigma = std::sqrt(want[size_t(b)] * (1 - want[size_t(b)]) / samples);
+            EXPECT_NEAR(f, want[size_t(b)], 5 * sigma + 1e-3) << "ks " << ks << ", bin " << b;
+        }
+        // Strategy All is not changed.
+        for (float t : {0.1f, 0.5f, 0.55f, 0.9f}) EXPECT_EQ(kept.pdf(EdgeHierarchy::All, t), coned.pdf(EdgeHierarchy::All, t));
+    }
+    const LobeBound diffuse = LobeBound::make(Vec3f(0, 1, 0), Vec3f(0, 1, 0), 0.5f, 0.f, 0.5f);
+    // A plane through p and the edge that passes beside the square, inside the cone's circle
+    // (z = 0.18 in the lights' plane; the square ends at 0.15, the circle at 0.21): nothing to
+    // sample.
+    {
+        EdgePointSampler coned, kept;
+        const Vec3f a0(-1.f, 1.5f, 0.09f), a1(1.f, 1.5f, 0.09f);
+        ASSERT_TRUE(coned.setup(p, a0, a1, diffuse, &cone));
+        ASSERT_TRUE(kept.setup(p, a0, a1, diffuse, &cone, &lights));
+        float t;
+        EXPECT_TRUE(coned.sample(EdgeHierarchy::Lights, 0.5f, t));  // the cone's circle reaches it
+        EXPECT_FALSE(kept.sample(EdgeHierarchy::Lights, 0.5f, t));
+        for (int i = 0; i < 1000; ++i) EXPECT_EQ(kept.pdf(EdgeHierarchy::Lights, (float(i) + 0.5f) / 1000.f), 0.f);
+    }
+    // The same square behind p (at y = -3): its planes bound the directions towards it only.
+    {
+        Vec3f behind[2][3];
+        for (int i = 0; i < 2; ++i)
+            for (int k = 0; k < 3; ++k) behind[i][k] = Vec3f(tris[i][k].x, -3.f, tris[i][k].z);
+        LightTriangles back;
+        back.set(p, behind, 2, margin);
+        EdgePointSampler ps;
+        ASSERT_TRUE(ps.setup(p, v0, v1, diffuse, &cone, &back));  // the cone (wrongly) up: no part left
+        float t;
+        EXPECT_FALSE(ps.sample(EdgeHierarchy::Lights, 0.5f, t));
+    }
+    // p in the lights' plane (a square at y = 0 beside p): no bound from it, the cone's part.
+    {
+        Vec3f level[2][3];
+        for (int i = 0; i < 2; ++i)
+            for (int k = 0; k < 3; ++k) level[i][k] = Vec3f(tris[i][k].x, 0.f, tris[i][k].z + 3.f);
+        LightTriangles flat;
+        flat.set(p, level, 2, margin);
+        const BoundsCone side = cone_towards(p, Vec3f(0, 0, 3), 0.25f);
+        const Vec3f a0(-1.f, 0.1f, 1.5f), a1(1.f, -0.1f, 1.5f);
+        EdgePointSampler coned, kept;
+        ASSERT_TRUE(coned.setup(p, a0, a1, diffuse, &side));
+        ASSERT_TRUE(kept.setup(p, a0, a1, diffuse, &side, &flat));
+        for (int i = 0; i < 100; ++i) {
+            const float t = (float(i) + 0.5f) / 100.f;
+            EXPECT_EQ(kept.pdf(EdgeHierarchy::Lights, t), coned.pdf(EdgeHierarchy::Lights, t));
+        }
+    }
+}
+
 TEST(EdgePointSampler, DegenerateEdgesGiveNoSample) {
     const LobeBound lobe = LobeBound::make(Vec3f(0, 1, 0), Vec3f(0, 1, 0), 0.5f, 0.5f, 0.2f);
     EdgePointSampler ps;
