@@ -437,7 +437,9 @@ TEST(LobeBound, GlossyShareIsTheLobeAtTheConesNearestDirection) {
         const float share = glossy.glossy_share(cone);
         EXPECT_NEAR(share, glossy.eval(nearest) / glossy.eval(r), 1e-3f) << "angle " << angle;
         EXPECT_LE(share, last);
-        if (beyond > 0.f) EXPECT_LT(share, 1.f);
+        if (beyond > 0.f) {
+            EXPECT_LT(share, 1.f);
+        }
         last = share;
     }
     EXPECT_LT(last, 0.01f);  // 0.8 rad away (0.75 beyond the cone): far outside a lobe of alpha 0.08
@@ -496,8 +498,46 @@ TEST(EdgePointSampler, DensityIntegratesToOneAndInverseMatches) {
     EXPECT_EQ(ps.pdf(EdgeHierarchy::Lights, 0.5f), 0.f);
 }
 
-// Degenerate configurations: a zero-length edge, the point on the edge's line, on the edge
-// itself, at an end: no sample, never a NaN.
+// The density of `ps` under strategy s at the midpoints of `grid` equal bins of [0, 1], each
+// finite and non-negative; `integral`: their mean (the density's integral by the midpoint rule).
+std::vector<float> tabulate_density(const EdgePointSampler& ps, EdgeHierarchy::Strategy s, int grid, double& integral) {
+    std::vector<float> d(static_cast<size_t>(grid));
+    integral = 0;
+    for (int i = 0; i < grid; ++i) {
+        d[size_t(i)] = ps.pdf(s, (float(i) + 0.5f) / float(grid));
+        EXPECT_TRUE(std::isfinite(d[size_t(i)]) && d[size_t(i)] >= 0.f) << "bin " << i;
+        integral += double(d[size_t(i)]) / grid;
+    }
+    return d;
+}
+
+// The samples of `ps` under strategy s (200k, stream `seed`) against its density d, tabulated
+// at the midpoints of a uniform grid over [0, 1] and positive on [t0, t1] only: every sample in
+// [t0, t1] where the density is positive, and their histogram over it (20 bins) matching the
+// density's integral over each bin.
+void expect_samples_follow_density(const EdgePointSampler& ps, EdgeHierarchy::Strategy s, const std::vector<float>& d,
+                                   float t0, float t1, uint64_t seed) {
+    const int bins = 20, samples = 200000, grid = int(d.size());
+    std::vector<double> want(bins, 0.0);
+    for (int i = 0; i < grid; ++i) {
+        const float t = (float(i) + 0.5f) / float(grid);
+        if (d[size_t(i)] > 0.f) want[size_t(std::min(bins - 1, int((t - t0) / (t1 - t0) * bins)))] += double(d[size_t(i)]) / grid;
+    }
+    std::vector<int> got(bins, 0);
+    Rng rng(seed, 0);
+    for (int i = 0; i < samples; ++i) {
+        float t;
+        ASSERT_TRUE(ps.sample(s, rng.next_float(), t));
+        ASSERT_TRUE(t >= t0 - 1e-5f && t <= t1 + 1e-5f) << t;
+        EXPECT_GT(ps.pdf(s, t), 0.f);
+        ++got[size_t(std::clamp(int((t - t0) / (t1 - t0) * bins), 0, bins - 1))];
+    }
+    for (int b = 0; b < bins; ++b) {
+        const double f = double(got[size_t(b)]) / samples, sigma = std::sqrt(want[size_t(b)] * (1 - want[size_t(b)]) / samples);
+        EXPECT_NEAR(f, want[size_t(b)], 5 * sigma + 1e-3) << "bin " << b;
+    }
+}
+
 // Strategy Lights with a glossy lobe narrower than the light cone: the density over the part of
 // the edge inside the cone mixes uniform by length with the lobe bound there. It integrates to
 // one, is zero outside that part, follows the lobe (far from uniform), and the samples'
@@ -517,12 +557,9 @@ TEST(EdgePointSampler, LightStrategyFollowsANarrowLobeInsideTheCone) {
         const int grid = 400000;
         float t0 = 2.f, t1 = -1.f, lo = 1e30f, hi = 0.f;
         double integral = 0;
-        std::vector<float> d(grid);
+        const std::vector<float> d = tabulate_density(ps, L, grid, integral);
         for (int i = 0; i < grid; ++i) {
             const float t = (float(i) + 0.5f) / float(grid);
-            d[size_t(i)] = ps.pdf(L, t);
-            ASSERT_TRUE(std::isfinite(d[size_t(i)]) && d[size_t(i)] >= 0.f);
-            integral += double(d[size_t(i)]) / grid;
             if (d[size_t(i)] > 0.f) {
                 t0 = std::min(t0, t);
                 t1 = std::max(t1, t);
@@ -535,25 +572,9 @@ TEST(EdgePointSampler, LightStrategyFollowsANarrowLobeInsideTheCone) {
         EXPECT_LT(t1, 0.99f);
         EXPECT_NEAR(integral, 1.0, 2e-3) << "alpha " << alpha;
         EXPECT_GT(hi, (alpha < 0.05f ? 4.f : 1.5f) * lo) << "alpha " << alpha;  // not uniform
-        // Histogram of samples over [t0, t1] in bins, against the density's integral over each.
-        const int bins = 20, samples = 200000;
-        std::vector<double> want(bins, 0.0);
-        for (int i = 0; i < grid; ++i) {
-            const float t = (float(i) + 0.5f) / float(grid);
-            if (d[size_t(i)] > 0.f) want[size_t(std::min(bins - 1, int((t - t0) / (t1 - t0) * bins)))] += double(d[size_t(i)]) / grid;
-        }
-        std::vector<int> got(bins, 0);
-        Rng rng(11, 0);
-        for (int i = 0; i < samples; ++i) {
-            float t;
-            ASSERT_TRUE(ps.sample(L, rng.next_float(), t));
-            ASSERT_TRUE(t >= t0 - 1e-5f && t <= t1 + 1e-5f) << t;
-            EXPECT_GT(ps.pdf(L, t), 0.f);
-            ++got[size_t(std::clamp(int((t - t0) / (t1 - t0) * bins), 0, bins - 1))];
-        }
-        for (int b = 0; b < bins; ++b) {
-            const double f = double(got[size_t(b)]) / samples, sigma = std::sqrt(want[size_t(b)] * (1 - want[size_t(b)]) / samples);
-            EXPECT_NEAR(f, want[size_t(b)], 5 * sigma + 1e-3) << "alpha " << alpha << ", bin " << b;
+        {
+            SCOPED_TRACE(alpha);
+            expect_samples_follow_density(ps, L, d, t0, t1, 11);
         }
     }
 }
@@ -598,12 +619,9 @@ TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
         const int grid = 400000;
         float c0 = 2.f, c1 = -1.f, k0 = 2.f, k1 = -1.f;
         double integral = 0;
-        std::vector<float> d(grid);
+        const std::vector<float> d = tabulate_density(kept, L, grid, integral);
         for (int i = 0; i < grid; ++i) {
             const float t = (float(i) + 0.5f) / float(grid);
-            d[size_t(i)] = kept.pdf(L, t);
-            ASSERT_TRUE(std::isfinite(d[size_t(i)]) && d[size_t(i)] >= 0.f);
-            integral += double(d[size_t(i)]) / grid;
             if (coned.pdf(L, t) > 0.f) c0 = std::min(c0, t), c1 = std::max(c1, t);
             if (d[size_t(i)] > 0.f) k0 = std::min(k0, t), k1 = std::max(k1, t);
         }
@@ -629,25 +647,9 @@ TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
             }
         }
         EXPECT_GT(hits, 1000);
-        // The samples' histogram over [k0, k1] against the density's integral bin by bin.
-        const int bins = 20, samples = 200000;
-        std::vector<double> want(bins, 0.0);
-        for (int i = 0; i < grid; ++i) {
-            const float t = (float(i) + 0.5f) / float(grid);
-            if (d[size_t(i)] > 0.f) want[size_t(std::min(bins - 1, int((t - k0) / (k1 - k0) * bins)))] += double(d[size_t(i)]) / grid;
-        }
-        std::vector<int> got(bins, 0);
-        Rng rng(17, 0);
-        for (int i = 0; i < samples; ++i) {
-            float t;
-            ASSERT_TRUE(kept.sample(L, rng.next_float(), t));
-            ASSERT_TRUE(t >= k0 - 1e-5f && t <= k1 + 1e-5f) << t;
-            EXPECT_GT(kept.pdf(L, t), 0.f);
-            ++got[size_t(std::clamp(int((t - k0) / (k1 - k0) * bins), 0, bins - 1))];
-        }
-        for (int b = 0; b < bins; ++b) {
-            const double f = double(got[size_t(b)]) / samples, sigma = std::sqrt(want[size_t(b)] * (1 - want[size_t(b)]) / samples);
-            EXPECT_NEAR(f, want[size_t(b)], 5 * sigma + 1e-3) << "ks " << ks << ", bin " << b;
+        {
+            SCOPED_TRACE(ks);
+            expect_samples_follow_density(kept, L, d, k0, k1, 17);
         }
         // Strategy All is not changed.
         for (float t : {0.1f, 0.5f, 0.55f, 0.9f}) EXPECT_EQ(kept.pdf(EdgeHierarchy::All, t), coned.pdf(EdgeHierarchy::All, t));
@@ -697,6 +699,8 @@ TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
     }
 }
 
+// Degenerate configurations: a zero-length edge, the point on the edge's line, on the edge
+// itself, at an end: no sample, never a NaN.
 TEST(EdgePointSampler, DegenerateEdgesGiveNoSample) {
     const LobeBound lobe = LobeBound::make(Vec3f(0, 1, 0), Vec3f(0, 1, 0), 0.5f, 0.5f, 0.2f);
     EdgePointSampler ps;
