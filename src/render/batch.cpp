@@ -1,10 +1,12 @@
 #include "render/batch.h"
 
-#include <embree3/rtcore.h>
+#include "render/embree_lanes.h"
 
 namespace edgepath {
 
 namespace {
+
+static_assert(kLanes == lanes_of<RTCRay16>(), "the batches trace RTCRay16 packets");
 
 // Embree's packets, each with its lane mask.
 struct alignas(64) RayHitPacket {
@@ -15,40 +17,6 @@ struct alignas(64) RayPacket {
     RTCRay16 r;
     alignas(64) int valid[kLanes];
 };
-
-inline void set_lane(RTCRay16& r, int i, const Ray& ray) {
-    r.org_x[i] = ray.origin.x;
-    r.org_y[i] = ray.origin.y;
-    r.org_z[i] = ray.origin.z;
-    r.dir_x[i] = ray.dir.x;
-    r.dir_y[i] = ray.dir.y;
-    r.dir_z[i] = ray.dir.z;
-    r.tnear[i] = ray.tmin;
-    r.tfar[i] = ray.tmax;
-    r.mask[i] = 0xFFFFFFFFu;
-    r.flags[i] = 0;
-    r.time[i] = 0.f;
-    r.id[i] = unsigned(i);
-}
-
-// Lanes [0, n) on; the others off, each a copy of lane 0 (a valid ray, should Embree read it).
-inline void close_packet(RTCRay16& r, int* valid, int n) {
-    for (int i = 0; i < kLanes; ++i) valid[i] = i < n ? -1 : 0;
-    for (int i = n; i < kLanes; ++i) {
-        r.org_x[i] = r.org_x[0];
-        r.org_y[i] = r.org_y[0];
-        r.org_z[i] = r.org_z[0];
-        r.dir_x[i] = r.dir_x[0];
-        r.dir_y[i] = r.dir_y[0];
-        r.dir_z[i] = r.dir_z[0];
-        r.tnear[i] = r.tnear[0];
-        r.tfar[i] = r.tfar[0];
-        r.mask[i] = 0xFFFFFFFFu;
-        r.flags[i] = 0;
-        r.time[i] = 0.f;
-        r.id[i] = unsigned(i);
-    }
-}
 
 }  // namespace
 
@@ -141,11 +109,11 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     ps.pdf = bs.pdf;
                     ps.delta = bs.delta;
                     ps.next = nnext;
-                    set_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+                    set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
                     ++nnext;
                 },
                 [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
-                    set_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
                     shadow_value[size_t(nshadow)] = value;
                     ++nshadow;
                 });
@@ -158,18 +126,11 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             RayHitPacket& pk = next[p];
             const int m = std::min(kLanes, nnext - p * kLanes);
             close_packet(pk.rh.ray, pk.valid, m);
-            for (int i = 0; i < kLanes; ++i) {
-                pk.rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
-                pk.rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
-            }
+            clear_hits(pk.rh);
             rtcIntersect16(pk.valid, rtc, &ctx, &pk.rh);
-            for (int i = 0; i < m; ++i) {
-                if (pk.rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) continue;
-                Hit h;
-                h.mesh = int(pk.rh.hit.geomID[i]);
-                h.prim = int64_t(pk.rh.hit.primID[i]);
-                scene.prefetch(h);
-            }
+            Hit h;
+            for (int i = 0; i < m; ++i)
+                if (lane_hit(pk.rh, i, h)) scene.prefetch(h);
         }
         for (int p = 0; p * kLanes < nshadow; ++p) {
             RayPacket& pk = shadow[size_t(p)];
@@ -194,16 +155,11 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             const Vec3f dir(pk.rh.ray.dir_x[lane], pk.rh.ray.dir_y[lane], pk.rh.ray.dir_z[lane]);
             Vec3f Le;
             float w;
-            if (pk.rh.hit.geomID[lane] == RTC_INVALID_GEOMETRY_ID) {
+            Hit hit;
+            if (!lane_hit(pk.rh, lane, hit)) {
                 if (escaped_light(scene, settings, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
                 continue;
             }
-            Hit hit;
-            hit.mesh = int(pk.rh.hit.geomID[lane]);
-            hit.prim = int64_t(pk.rh.hit.primID[lane]);
-            hit.b1 = pk.rh.hit.u[lane];
-            hit.b2 = pk.rh.hit.v[lane];
-            hit.t = pk.rh.ray.tfar[lane];
             // A path's last vertex matters only for light it sees there.
             if (last && !(continuation_counts(settings, ps.delta) && scene.meshes[size_t(hit.mesh)].is_emitter()))
                 continue;

@@ -1,0 +1,69 @@
+// Lanes of Embree's ray packets (RTCRayHit8, RTCRayHit16, RTCRay16), as the camera's packets
+// (render/packet.cpp) and the forward pass's batches (render/batch.cpp) fill and read them.
+#pragma once
+#include <embree3/rtcore.h>
+
+#include "math/ray.h"
+#include "scene/scene.h"
+
+namespace edgepath {
+
+// The number of lanes of a packet type.
+template <class RayN>
+constexpr int lanes_of() {
+    return int(sizeof(RayN::org_x) / sizeof(RayN::org_x[0]));
+}
+
+// Lane i of packet r: the ray `ray`.
+template <class RayN>
+inline void set_ray_lane(RayN& r, int i, const Ray& ray) {
+    r.org_x[i] = ray.origin.x;
+    r.org_y[i] = ray.origin.y;
+    r.org_z[i] = ray.origin.z;
+    r.dir_x[i] = ray.dir.x;
+    r.dir_y[i] = ray.dir.y;
+    r.dir_z[i] = ray.dir.z;
+    r.tnear[i] = ray.tmin;
+    r.tfar[i] = ray.tmax;
+    r.mask[i] = 0xFFFFFFFFu;
+    r.flags[i] = 0;
+    r.time[i] = 0.f;
+    r.id[i] = unsigned(i);
+}
+
+// Lanes [0, n) of r on in `valid`; the others off, each a copy of lane 0 (a valid ray, should
+// Embree read it).
+template <class RayN>
+inline void close_packet(RayN& r, int* valid, int n) {
+    constexpr int lanes = lanes_of<RayN>();
+    for (int i = 0; i < lanes; ++i) valid[i] = i < n ? -1 : 0;
+    Ray first;
+    first.origin = Vec3f(r.org_x[0], r.org_y[0], r.org_z[0]);
+    first.dir = Vec3f(r.dir_x[0], r.dir_y[0], r.dir_z[0]);
+    first.tmin = r.tnear[0];
+    first.tmax = r.tfar[0];
+    for (int i = n; i < lanes; ++i) set_ray_lane(r, i, first);
+}
+
+// Every lane of rh's hits: none yet.
+template <class RayHitN>
+inline void clear_hits(RayHitN& rh) {
+    for (int i = 0; i < lanes_of<decltype(rh.ray)>(); ++i) {
+        rh.hit.geomID[i] = RTC_INVALID_GEOMETRY_ID;
+        rh.hit.instID[0][i] = RTC_INVALID_GEOMETRY_ID;
+    }
+}
+
+// Whether lane i of a traced packet met a surface, and then (into h) what it met.
+template <class RayHitN>
+inline bool lane_hit(const RayHitN& rh, int i, Hit& h) {
+    if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return false;
+    h.mesh = int(rh.hit.geomID[i]);
+    h.prim = int64_t(rh.hit.primID[i]);
+    h.b1 = rh.hit.u[i];
+    h.b2 = rh.hit.v[i];
+    h.t = rh.ray.tfar[i];
+    return true;
+}
+
+}  // namespace edgepath
