@@ -30,29 +30,7 @@ struct RayTally {
 }  // namespace
 
 RenderStats render(const Scene& scene, const RenderOptions& opt, float* image) {
-    check_options(opt);
-    RayTally tally;
-    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
-        RayCounters c;
-        double sum[3] = {0, 0, 0};
-        PathBatch paths(scene, opt);
-        CameraSample samples[kBatchSize];
-        Vec3f L[kBatchSize];
-        for_each_camera_batch(scene, opt, x0, y0, x1, y1, samples, kBatchSize, [&](CameraSample* cs, int n) {
-            paths.trace(cs, n, L, c);
-            for (int i = 0; i < n; ++i) {
-                for (int k = 0; k < 3; ++k) sum[k] += L[i][k];
-                if (cs[i].s + 1 < opt.spp) continue;
-                float* out = image + (int64_t(cs[i].y) * scene.out_width + cs[i].x) * 3;
-                for (int k = 0; k < 3; ++k) {
-                    out[k] = float(sum[k] / opt.spp);
-                    sum[k] = 0.0;
-                }
-            }
-        });
-        tally.add(c);
-    });
-    return tally.stats();
+    return render_channels(scene, opt, ChannelLayout::radiance(), image, nullptr);
 }
 
 RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout, float* values,

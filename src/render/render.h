@@ -11,7 +11,8 @@ namespace edgepath {
 class Scene;
 
 // Renders into `image`, (image_height, image_width, 3) float32, row 0 at the top, linear.
-// Deterministic for a given seed whatever the thread count.
+// Deterministic for a given seed whatever the thread count. (render_channels with the radiance
+// channel alone.)
 RenderStats render(const Scene& scene, const RenderOptions& options, float* image);
 
 // Output channels (render/channels.h, docs/conventions.md): renders the layout's continuous
