@@ -184,17 +184,20 @@ def test_ctrl_c_stops_long_core_calls(call):
     second, and the interpreter renders again afterwards."""
     # SIGINT at its default in the child: a shell's background job inherits it ignored, and Python
     # then installs no KeyboardInterrupt handler (the signal would be lost, the test hang).
+    # Unbuffered: readline takes a byte at a time, so what follows its line stays in the pipe for
+    # communicate (which reads the pipe itself: anything a buffered readline had taken past its
+    # line would be lost to it).
     child = subprocess.Popen([sys.executable, "-c", INTERRUPT_CHILD, call], stdout=subprocess.PIPE,
-                             stderr=subprocess.PIPE, text=True,
+                             stderr=subprocess.PIPE, bufsize=0,
                              preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     try:
-        assert child.stdout.readline().strip() == "ready"
+        assert child.stdout.readline().decode().strip() == "ready"
         time.sleep(0.5)  # inside the core call
         start = time.monotonic()
         child.send_signal(signal.SIGINT)
-        line = child.stdout.readline().strip()
+        line = child.stdout.readline().decode().strip()
         latency = time.monotonic() - start
-        out, err = child.communicate(timeout=60)
+        out, err = (b.decode() for b in child.communicate(timeout=60))
     finally:
         if child.poll() is None:
             child.kill()
