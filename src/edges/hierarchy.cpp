@@ -1012,26 +1012,24 @@ void LightTriangles::set(const Vec3f& p_, const Vec3f (*corners)[3], int count_,
             const Vec3f c = cross(d[k], d[(k + 1) % 3]);
             const float l = length(c);
             n[i][k] = bounded && l > 0.f ? c * ((det > 0.f ? 1.f : -1.f) / l) : Vec3f(0.f);
+            abs_n[i][k] = Vec3f(std::abs(n[i][k].x), std::abs(n[i][k].y), std::abs(n[i][k].z));
         }
     }
 }
 
 bool LightTriangles::outside(const Vec3f& lo, const Vec3f& hi) const {
     if (count <= 0) return false;
-    // Over the box, n . (x - p) is at most n . (c - p) + |n| . half, and |x - p| at most
-    // |c - p| + |half|. A plane leaves the box out where the first plus the margin times the
-    // second is below zero, by more than the rounding of these sums (and of the leaves' clips,
-    // computed in float from the same planes).
+    // Over the box, n . (x - p) is at most n . (c - p) + |n| . half, and |x - p| at most the
+    // sum of |c - p| and |half| in the 1-norm (no square roots; the margin is small). A plane
+    // leaves the box out where the first plus the margin times the second is below zero, by
+    // more than the rounding of these sums (and of the leaves' clips, computed in float from the
+    // same planes).
     const Vec3f c = (lo + hi) * 0.5f - p, half = (hi - lo) * 0.5f;
-    const float far = length(c) + length(half);
-    const float slack = 1e-5f * far;
+    const float far = std::abs(c.x) + std::abs(c.y) + std::abs(c.z) + half.x + half.y + half.z;
+    const float reach = (margin + 1e-5f) * far;
     for (int i = 0; i < count; ++i) {
         bool out = false;
-        for (int k = 0; k < 3 && !out; ++k) {
-            const Vec3f& nk = n[i][k];
-            const float top = dot(nk, c) + std::abs(nk.x) * half.x + std::abs(nk.y) * half.y + std::abs(nk.z) * half.z;
-            out = top + margin * far + slack < 0.f;
-        }
+        for (int k = 0; k < 3 && !out; ++k) out = dot(n[i][k], c) + dot(abs_n[i][k], half) + reach < 0.f;
         if (!out) return false;
     }
     return true;

@@ -106,7 +106,8 @@ struct LightTriangles {
     int count = 0;
     float margin = 0.f;
     Vec3f n[kMax][3];  // zero: no bound from that side (p in the triangle's plane, a degenerate one)
-    Vec3f p;           // the point they are seen from
+    Vec3f abs_n[kMax][3];  // their components' absolute values (outside())
+    Vec3f p;               // the point they are seen from
     // From the triangles' corners (count <= kMax) seen from p.
     void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
     // Whether the box [lo, hi] lies wholly outside every triangle's widened wedge: for each
