@@ -93,19 +93,19 @@ struct LobeBound {
     double integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h = nullptr) const;
 };
 
-// The area lights' triangles seen from a shading point p, for the light strategy's point on an
-// edge: each triangle as the three planes through p and its sides, their unit normals facing it
-// (the directions from p through the triangle are those with n . w >= 0 for all three). A
-// direction within an angle `margin` of a triangle has n . w >= -margin for all three: so the
-// part of an edge's arc of directions where that holds for some triangle holds every direction
-// within `margin` of a light, whichever way (across the edge or along it) a direction sampled
-// there is moved. Both faces of a triangle count (the planes do not depend on its winding); a
-// triangle behind p bounds the directions towards it only.
+// The area lights' triangles seen from a shading point p, for the light strategy's choice of
+// edge and point on it: each triangle as the three planes through p and its sides, their unit
+// normals facing it (the directions from p through the triangle are those with n . w >= 0 for
+// all three). A direction within an angle `margin` of a triangle has n . w >= -margin for all
+// three: so the part of an edge's arc of directions where that holds for some triangle holds
+// every direction within `margin` of a light, whichever way (across the edge or along it) a
+// direction sampled there is moved. Both faces of a triangle count (the planes do not depend on
+// its winding); a triangle behind p bounds the directions towards it only.
 struct LightTriangles {
     static constexpr int kMax = 8;  // more triangles: the light cone alone
     int count = 0;
     float margin = 0.f;
-    Vec3f n[kMax][3];  // zero: no bound from that side (p in the triangle's plane, a degenerate one)
+    Vec3f n[kMax][3];      // zero: no bound from that side (p in the triangle's plane, a degenerate one)
     Vec3f abs_n[kMax][3];  // their components' absolute values (outside())
     Vec3f p;               // the point they are seen from
     // From the triangles' corners (count <= kMax) seen from p.
