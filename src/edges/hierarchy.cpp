@@ -582,8 +582,17 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     if (!(dc2 > r2)) {
         // p inside the bounding sphere: every direction; the lobe's peak. (importance() scores
         // such a node by its children instead, a few levels down: their bounds are tighter.)
+        // Strategy Lights: nothing where the point sampler has no part of the edge to take, or
+        // where the box lies outside every light triangle's wedge.
         out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
-        out.value[1] = q.cone ? out.value[0] : 0.f;
+        if (q.cone) {
+            float lo, hi;
+            EdgeArc arc;
+            const bool none = leaf ? !(arc.set(q.p, n.a, n.b) && arc.lights_part(*q.cone, q.lights, lo, hi) &&
+                                       arc.param(hi) > arc.param(lo))
+                                   : q.lights && q.lights->outside(n.lo, n.hi);
+            out.value[1] = none ? 0.f : out.value[0];
+        }
         out.inside = !leaf;
         return;
     }
@@ -622,12 +631,12 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     }
     // The lobe over the node's directions: for a leaf, along its edge's own arc (closed form);
     // for a node, over the cone around its sphere.
+    double leaf_h = 0.0;
     if (leaf) {
         // The edge's term is about the lobe's integral over the arc it subtends, over the
         // distance h to its line (the rate at which the arc sweeps as the edge moves).
-        double h = 0.0;
-        const double integral = q.lobe.integral(q.p, n.a, n.b, &h);
-        out.value[0] = weight * float(integral / std::max(h, 1e-3 * double(n.length)));
+        const double integral = q.lobe.integral(q.p, n.a, n.b, &leaf_h);
+        out.value[0] = weight * float(integral / std::max(leaf_h, 1e-3 * double(n.length)));
     } else {
         // The largest cosine between a lobe axis and the node's directions; for silhouettes,
         // also no more than that to the band of directions a silhouette can have: a direction w
@@ -671,8 +680,26 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         const BoundsCone& c = *q.cone;
         const float cos_g = dot(dir, c.axis);
         const bool wraps = c.cos_half <= -cos_b;  // beta + the cone's half angle >= pi
-        if (wraps) {
+        if (leaf) {
+            // A leaf: the same integral over the part of its arc the point sampler takes
+            // (EdgeArc::lights_part: inside the cone, near a light triangle), zero where that is
+            // empty (or where the cones are apart).
+            float lo, hi;
+            EdgeArc arc;
+            if ((wraps || cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) && !(q.lights && q.lights->outside(n.lo, n.hi)) &&
+                arc.set(q.p, n.a, n.b) && arc.lights_part(c, q.lights, lo, hi)) {
+                const float t0 = arc.param(lo), t1 = arc.param(hi);
+                if (t1 > t0) {
+                    const Vec3f e = n.b - n.a;
+                    const double part = t0 <= 0.f && t1 >= 1.f ? -1.0 : q.lobe.integral(q.p, n.a + e * t0, n.a + e * t1);
+                    out.value[1] = part < 0.0 ? out.value[0]
+                                              : weight * float(part / std::max(leaf_h, 1e-3 * double(n.length)));
+                    if (!std::isfinite(out.value[1])) out.value[1] = 0.f;
+                }
+            }
+        } else if (wraps) {
             out.value[1] = out.value[0];
+            if (q.lights && q.lights->outside(n.lo, n.hi)) out.value[1] = 0.f;
         } else if (cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) {
             const float beta = std::asin(sin_b), gamma = std::acos(std::clamp(cos_g, -1.f, 1.f));
             const float small = std::min(beta, c.half);
@@ -682,7 +709,12 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
             out.value[1] = out.value[0] * share;
             // A narrow cone meets few of a large node's edges, and which of them are
             // silhouettes inside it the node's own bounds cannot tell: its children's can.
-            out.narrow = !leaf && c.cos_half > kNarrowCone && beta > c.half;
+            out.narrow = c.cos_half > kNarrowCone && beta > c.half;
+            // None of them where the box lies outside every light triangle's widened wedge.
+            if (q.lights && q.lights->outside(n.lo, n.hi)) {
+                out.value[1] = 0.f;
+                out.narrow = false;
+            }
         }
     }
 }
@@ -964,11 +996,12 @@ float EdgePointSampler::Table::value(float phi) const {
     return g[k] + (g[k + 1] - g[k]) * x;
 }
 
-void LightTriangles::set(const Vec3f& p, const Vec3f (*corners)[3], int count_, float margin_) {
+void LightTriangles::set(const Vec3f& p_, const Vec3f (*corners)[3], int count_, float margin_) {
     count = std::min(count_, kMax);
     margin = margin_;
+    p = p_;
     for (int i = 0; i < count; ++i) {
-        const Vec3f d[3] = {corners[i][0] - p, corners[i][1] - p, corners[i][2] - p};
+        const Vec3f d[3] = {corners[i][0] - p_, corners[i][1] - p_, corners[i][2] - p_};
         // The sign of det(d0, d1, d2) turns each side's plane to face the opposite corner (the
         // same sign for all three). Where p lies in (or within 1e-5 rad of) the triangle's plane
         // that sign is not to be trusted: no bound from this triangle.
@@ -979,8 +1012,27 @@ void LightTriangles::set(const Vec3f& p, const Vec3f (*corners)[3], int count_, 
             const Vec3f c = cross(d[k], d[(k + 1) % 3]);
             const float l = length(c);
             n[i][k] = bounded && l > 0.f ? c * ((det > 0.f ? 1.f : -1.f) / l) : Vec3f(0.f);
+            abs_n[i][k] = Vec3f(std::abs(n[i][k].x), std::abs(n[i][k].y), std::abs(n[i][k].z));
         }
     }
+}
+
+bool LightTriangles::outside(const Vec3f& lo, const Vec3f& hi) const {
+    if (count <= 0) return false;
+    // Over the box, n . (x - p) is at most n . (c - p) + |n| . half, and |x - p| at most the
+    // sum of |c - p| and |half| in the 1-norm (no square roots; the margin is small). A plane
+    // leaves the box out where the first plus the margin times the second is below zero, by
+    // more than the rounding of these sums (and of the leaves' clips, computed in float from the
+    // same planes).
+    const Vec3f c = (lo + hi) * 0.5f - p, half = (hi - lo) * 0.5f;
+    const float far = std::abs(c.x) + std::abs(c.y) + std::abs(c.z) + half.x + half.y + half.z;
+    const float reach = (margin + 1e-5f) * far;
+    for (int i = 0; i < count; ++i) {
+        bool out = false;
+        for (int k = 0; k < 3 && !out; ++k) out = dot(n[i][k], c) + dot(abs_n[i][k], half) + reach < 0.f;
+        if (!out) return false;
+    }
+    return true;
 }
 
 namespace {
@@ -1004,77 +1056,96 @@ bool keep_above(float A, float B, float m, float& lo, float& hi) {
 }
 }  // namespace
 
+bool EdgeArc::set(const Vec3f& p, const Vec3f& v0, const Vec3f& v1) {
+    const Vec3f e = v1 - v0;
+    len = length(e);
+    if (!(len > 0.f) || !std::isfinite(len)) return false;
+    b = e / len;
+    s_foot = dot(p - v0, b);
+    const Vec3f hv = v0 + b * s_foot - p;
+    h = length(hv);
+    if (!(h > 1e-7f * (len + length(v0 - p)))) return false;  // p on the edge's line
+    a = hv / h;
+    phi0 = std::atan(-s_foot / h);
+    phi1 = std::atan((len - s_foot) / h);
+    return phi1 - phi0 > 1e-7f;
+}
+
+bool EdgeArc::lights_part(const BoundsCone& cone, const LightTriangles* lights, float& lo_out, float& hi_out) const {
+    // The part inside the light cone: w(phi) . axis = R cos(phi - psi) >= cos_half.
+    float c0 = 0.f, c1 = 0.f;
+    if (cone.cos_half <= 0.f) {  // a hemisphere or more: the whole edge
+        c0 = phi0;
+        c1 = phi1;
+    } else {
+        const float A = dot(a, cone.axis), B = dot(b, cone.axis), R = std::sqrt(A * A + B * B);
+        if (R > cone.cos_half) {
+            const float psi = std::atan2(B, A), half = std::acos(std::min(1.f, cone.cos_half / R));
+            float lo = psi - half, hi = psi + half;
+            if (hi < phi0) lo += 2.f * kPi, hi += 2.f * kPi;
+            if (lo > phi1) lo -= 2.f * kPi, hi -= 2.f * kPi;
+            c0 = std::max(lo, phi0);
+            c1 = std::min(hi, phi1);
+        }
+    }
+    // Of that part, where the directions pass within the margin of a light triangle: the hull
+    // over the triangles of each one's part (each a superset of where the directions meet it,
+    // widened by the margin; see LightTriangles).
+    if (lights && lights->count > 0 && c1 > c0) {
+        // A plane that keeps both ends of [c0, c1] keeps all of it (what it leaves out is an
+        // arc shorter than pi: inside the interval, the hull of the two pieces is the whole),
+        // and so does a triangle all of whose planes do: then the hull over the triangles is
+        // the whole too. Tested on the ends' directions, before any angle is solved for.
+        const Vec3f w0 = a * std::cos(c0) + b * std::sin(c0), w1 = a * std::cos(c1) + b * std::sin(c1);
+        const float m = lights->margin;
+        float lo = c1, hi = c0;
+        for (int i = 0; i < lights->count; ++i) {
+            float l = c0, u = c1;
+            bool left = true, whole = true;
+            for (int k = 0; k < 3 && left; ++k) {
+                const Vec3f& nk = lights->n[i][k];
+                if (whole && dot(nk, w0) >= -m && dot(nk, w1) >= -m) continue;
+                left = keep_above(dot(nk, a), dot(nk, b), m, l, u);
+                whole = whole && l == c0 && u == c1;
+            }
+            if (!left) continue;
+            lo = std::min(lo, l);
+            hi = std::max(hi, u);
+            if (whole) break;
+        }
+        c0 = lo;
+        c1 = hi;
+    }
+    if (!(c1 > c0)) {
+        lo_out = hi_out = 0.f;
+        return false;
+    }
+    lo_out = c0;
+    hi_out = c1;
+    return true;
+}
+
 bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
                              const BoundsCone* cone, const LightTriangles* lights) {
-    const Vec3f e = v1 - v0;
-    len_ = length(e);
-    if (!(len_ > 0.f) || !std::isfinite(len_)) return false;
-    const Vec3f b = e / len_;
-    s_foot_ = dot(p - v0, b);
-    const Vec3f hv = v0 + b * s_foot_ - p;
-    h_ = length(hv);
-    if (!(h_ > 1e-7f * (len_ + length(v0 - p)))) return false;  // p on the edge's line
-    const Vec3f a = hv / h_;
-    phi0_ = std::atan(-s_foot_ / h_);
-    phi1_ = std::atan((len_ - s_foot_) / h_);
-    if (!(phi1_ - phi0_ > 1e-7f)) return false;
+    if (!arc_.set(p, v0, v1)) return false;
     // The lobe bound along the edge, in angle, and its integral.
-    all_.build(a, b, lobe, phi0_, phi1_);
-    // The part inside the light cone: w(phi) . axis = R cos(phi - psi) >= cos_half.
+    all_.build(arc_.a, arc_.b, lobe, arc_.phi0, arc_.phi1);
+    // The part strategy Lights takes (EdgeArc::lights_part).
     cone0_ = cone1_ = 0.f;
     lights_uniform_ = 1.f;
-    if (cone) {
-        if (cone->cos_half <= 0.f) {  // a hemisphere or more: the whole edge
-            cone0_ = phi0_;
-            cone1_ = phi1_;
-        } else {
-            const float A = dot(a, cone->axis), B = dot(b, cone->axis), R = std::sqrt(A * A + B * B);
-            if (R > cone->cos_half) {
-                const float psi = std::atan2(B, A), half = std::acos(std::min(1.f, cone->cos_half / R));
-                float lo = psi - half, hi = psi + half;
-                if (hi < phi0_) lo += 2.f * kPi, hi += 2.f * kPi;
-                if (lo > phi1_) lo -= 2.f * kPi, hi -= 2.f * kPi;
-                cone0_ = std::max(lo, phi0_);
-                cone1_ = std::min(hi, phi1_);
-            }
-        }
-        // Of that part, where the directions pass within the margin of a light triangle: the
-        // hull over the triangles of each one's part (each a superset of where the directions
-        // meet it, widened by the margin; see LightTriangles).
-        if (lights && lights->count > 0 && cone1_ > cone0_) {
-            float lo = cone1_, hi = cone0_;
-            for (int i = 0; i < lights->count; ++i) {
-                float l = cone0_, u = cone1_;
-                bool left = true;
-                for (int k = 0; k < 3 && left; ++k)
-                    left = keep_above(dot(lights->n[i][k], a), dot(lights->n[i][k], b), lights->margin, l, u);
-                if (!left) continue;
-                lo = std::min(lo, l);
-                hi = std::max(hi, u);
-            }
-            if (hi > lo) {
-                cone0_ = lo;
-                cone1_ = hi;
-            } else {
-                cone0_ = cone1_ = 0.f;
-            }
-        }
+    if (cone && arc_.lights_part(*cone, lights, cone0_, cone1_) && lobe.specular > 0.f) {
         // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it.
-        if (cone1_ > cone0_ && lobe.specular > 0.f) {
-            lights_.build(a, b, lobe, cone0_, cone1_);
-            if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
-        }
+        lights_.build(arc_.a, arc_.b, lobe, cone0_, cone1_);
+        if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
     }
     return true;
 }
 
-float EdgePointSampler::angle(float t) const { return std::atan((t * len_ - s_foot_) / h_); }
-float EdgePointSampler::param(float phi) const {
-    return std::clamp((s_foot_ + h_ * std::tan(phi)) / len_, 0.f, 1.f);
-}
+float EdgePointSampler::angle(float t) const { return arc_.angle(t); }
+float EdgePointSampler::param(float phi) const { return arc_.param(phi); }
 float EdgePointSampler::dphi_dt(float t) const {
-    const float along = t * len_ - s_foot_;
-    return len_ * h_ / (h_ * h_ + along * along);
+    const float along = t * arc_.len - arc_.s_foot;
+    return arc_.len * arc_.h / (arc_.h * arc_.h + along * along);
 }
 
 bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {

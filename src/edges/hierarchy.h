@@ -20,23 +20,30 @@
 // A crease counts in full where it is a silhouette, by the angle between its faces where p sees
 // both from one side (a shading jump), not at all where p is behind both faces of a one-sided
 // material. Two strategies share one descent's arithmetic: over all edges, and restricted
-// to the cone of directions towards the lights (the edges that cast shadows; box-cone test), so
-// the probability of the chosen edge under both comes out of one traversal, for multiple
-// importance sampling. A node's share of a narrow light cone (smaller than the node) is scored
-// by its children a few levels down.
+// to the cone of directions towards the lights (the edges that cast shadows), so the
+// probability of the chosen edge under both comes out of one traversal, for multiple importance
+// sampling. Under the light strategy a node is scored by its share of the cone (box-cone test;
+// a node's share of a narrow cone, smaller than the node, by its children a few levels down),
+// and with few light triangles (Query::lights) zero where its box lies outside every triangle's
+// widened wedge; a leaf by the lobe bound's integral over the part of its arc the point sampler
+// takes (EdgeArc::lights_part: inside the cone and near a light triangle), zero where that part
+// is empty, so that no descent ends on an edge it cannot sample.
 //
 // EdgePointSampler: the point on a chosen edge. Strategy All: a mixture of uniform by length
 // and a density in the angle phi the edge subtends at the point (directions w(phi) in the plane
 // through the point and the edge) proportional to the lobe bound (tabulated, piecewise linear,
 // its cumulative distribution inverted by Newton's method with a bisection safeguard). Strategy
 // Lights: over the part of the edge inside the light cone (found in closed form:
-// w(phi) . axis = R cos(phi - psi) >= cos(half angle)), uniform by length, or where the lobe
+// w(phi) . axis = R cos(phi - psi) >= cos(half angle)) and, with LightTriangles, within their
+// margin of some light triangle (EdgeArc::lights_part), uniform by length, or where the lobe
 // bound has a glossy part a mixture of uniform by length (a tenth, as strategy All) and the lobe bound
 // tabulated over that part alone (a lobe narrower than the light's cone: the highlight).
 //
 // Built in O(n log n) (parallel median splits), kept in the scene across calls and views
 // (Scene::edge_hierarchy), refit when only vertices move.
 #pragma once
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <vector>
 #include "math/vec.h"
@@ -86,6 +93,48 @@ struct LobeBound {
     double integral(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, double* h = nullptr) const;
 };
 
+// The area lights' triangles seen from a shading point p, for the light strategy's choice of
+// edge and point on it: each triangle as the three planes through p and its sides, their unit
+// normals facing it (the directions from p through the triangle are those with n . w >= 0 for
+// all three). A direction within an angle `margin` of a triangle has n . w >= -margin for all
+// three: so the part of an edge's arc of directions where that holds for some triangle holds
+// every direction within `margin` of a light, whichever way (across the edge or along it) a
+// direction sampled there is moved. Both faces of a triangle count (the planes do not depend on
+// its winding); a triangle behind p bounds the directions towards it only.
+struct LightTriangles {
+    static constexpr int kMax = 8;  // more triangles: the light cone alone
+    int count = 0;
+    float margin = 0.f;
+    Vec3f n[kMax][3];      // zero: no bound from that side (p in the triangle's plane, a degenerate one)
+    Vec3f abs_n[kMax][3];  // their components' absolute values (outside())
+    Vec3f p;               // the point they are seen from
+    // From the triangles' corners (count <= kMax) seen from p.
+    void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
+    // Whether the box [lo, hi] lies wholly outside every triangle's widened wedge: for each
+    // triangle one of its planes has n . (x - p) < -margin |x - p| at every x in the box (with
+    // slack for rounding), so no direction from p to a point of the box comes within the margin
+    // of a light triangle. False (not known) without triangles.
+    bool outside(const Vec3f& lo, const Vec3f& hi) const;
+};
+
+// The arc of directions from a point p to an edge (v0, v1): w(phi) = a cos(phi) + b sin(phi),
+// phi in [phi0, phi1] (less than pi apart), b along the edge, a towards the foot of the
+// perpendicular from p, h the distance to the edge's line; x(phi) = v0 + b (s_foot + h tan(phi)).
+struct EdgeArc {
+    Vec3f a, b;
+    float s_foot = 0.f, h = 0.f, len = 0.f, phi0 = 0.f, phi1 = 0.f;
+    // False when the edge is degenerate seen from p (p on its line, a zero-length edge).
+    bool set(const Vec3f& p, const Vec3f& v0, const Vec3f& v1);
+    // The part of the arc strategy Lights takes, [lo, hi]: inside `cone`, and with `lights` (seen
+    // from the same p) within their margin of some light triangle (the hull over the triangles
+    // of each one's part). False when it is empty. The point sampler's part and a leaf's Lights
+    // importance (EdgeHierarchy) both come from here.
+    bool lights_part(const BoundsCone& cone, const LightTriangles* lights, float& lo, float& hi) const;
+    // The parameter t in [0, 1] of the angle phi, and back.
+    float param(float phi) const { return std::clamp((s_foot + h * std::tan(phi)) / len, 0.f, 1.f); }
+    float angle(float t) const { return std::atan((t * len - s_foot) / h); }
+};
+
 class EdgeHierarchy {
 public:
     // Builds over the edges of `scene` listed in `edges` (indices into scene.edges()). The first
@@ -130,6 +179,10 @@ public:
         Vec3f p;                           // the shading point
         LobeBound lobe;
         const BoundsCone* cone = nullptr;  // the lights; nullptr: no second strategy
+        // With the cone, the light triangles seen from p (or nullptr: the cone alone). Strategy
+        // Lights then scores a leaf by the part of its edge the point sampler takes (empty: zero)
+        // and a node by its box against the triangles' widened wedges (outside all: zero).
+        const LightTriangles* lights = nullptr;
         Memo* memo = nullptr;              // optional
         // Only light arriving straight from emitters counts (the vertex's last bounce): a crease
         // of a mesh that does not emit, seen with both faces on one side, has the same (no)
@@ -276,23 +329,6 @@ private:
     Stats stats_;
 };
 
-// The area lights' triangles seen from a shading point p, for the light strategy's point on an
-// edge: each triangle as the three planes through p and its sides, their unit normals facing it
-// (the directions from p through the triangle are those with n . w >= 0 for all three). A
-// direction within an angle `margin` of a triangle has n . w >= -margin for all three: so the
-// part of an edge's arc of directions where that holds for some triangle holds every direction
-// within `margin` of a light, whichever way (across the edge or along it) a direction sampled
-// there is moved. Both faces of a triangle count (the planes do not depend on its winding); a
-// triangle behind p bounds the directions towards it only.
-struct LightTriangles {
-    static constexpr int kMax = 8;  // more triangles: the light cone alone
-    int count = 0;
-    float margin = 0.f;
-    Vec3f n[kMax][3];  // zero: no bound from that side (p in the triangle's plane, a degenerate one)
-    // From the triangles' corners (count <= kMax) seen from p.
-    void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
-};
-
 class EdgePointSampler {
 public:
     // The edge (v0, v1) seen from p. False when it is degenerate seen from p (p on its line, or
@@ -331,8 +367,7 @@ private:
         float value(float phi) const;
     };
     float dphi_dt(float t) const;
-    float s_foot_ = 0.f, h_ = 0.f, len_ = 0.f;
-    float phi0_ = 0.f, phi1_ = 0.f;
+    EdgeArc arc_;
     // The part strategy Lights samples: inside the light cone (and near a light triangle, with
     // LightTriangles); empty when cone1 <= cone0.
     float cone0_ = 0.f, cone1_ = 0.f;

@@ -159,12 +159,18 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         q.cone = &cone;
     }
     // The light triangles seen from p, with the cone's margin: the directions the light strategy
-    // takes towards them (EdgePointSampler). Every direction where either side of an edge can
-    // meet a light's emission (a side moves its ray off by less than the margin) lies in their
-    // part, so strategy Lights alone (c_lights = 1 below) stays unbiased. Set up at the first
-    // edge sampled.
+    // takes towards them, for the edges it picks (a leaf's importance: the part of its edge
+    // within the margin of a triangle; a node's: zero for a box outside every triangle's widened
+    // wedge) and the point on each (EdgePointSampler, the same part). Every direction where
+    // either side of an edge can meet a light's emission (a side moves its ray off by less than
+    // the margin) lies in their part, so strategy Lights alone (c_lights = 1 below) stays
+    // unbiased: an edge it cannot pick, or a part of one it cannot sample, has no light within
+    // the margin behind it.
     LightTriangles tris;
-    const LightTriangles* lights = nullptr;
+    if (q.cone && light_count_ > 0) {
+        tris.set(sp.p, light_corners_, light_count_, 4.f * kTouchStep);
+        q.lights = &tris;
+    }
     // One descent per vertex: strategy All, or Lights with probability c_lights. One-sample
     // multiple importance sampling: the balance heuristic on the mixture of the two joint
     // densities. A descent may split (up to EdgeHierarchy::kMaxChoices edges); the densities are
@@ -202,13 +208,9 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         const Edge& e = edges[choice.edge];
         const Mesh& m = scene_.meshes[size_t(e.mesh)];
         const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
-        if (!lights && q.cone && light_count_ > 0) {
-            tris.set(sp.p, light_corners_, light_count_, 4.f * kTouchStep);
-            lights = &tris;
-        }
         EdgePointSampler points;
         float t;
-        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, lights) || !points.sample(s, ut, t)) continue;
+        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, q.lights) || !points.sample(s, ut, t)) continue;
         const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
                     joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
         const float mixture = c_all * joint_all + c_lights * joint_lights;

@@ -11,8 +11,10 @@
 //
 // Edges are importance-sampled by the edge hierarchy (edges/hierarchy.h): one descent per vertex,
 // over all edges or, when the scene has area lights, restricted to the cone towards them (the
-// edges that cast shadows), the strategy picked at random (the light strategy by the BSDF's
-// diffuse share and its glossy lobe's share of the light cone) and the two combined by one-sample
+// edges that cast shadows; with at most LightTriangles::kMax light triangles, to the edges and
+// the nodes' boxes that come within a small margin of one of them), the strategy picked at
+// random (the light strategy by the BSDF's diffuse share and its glossy lobe's share of the
+// light cone) and the two combined by one-sample
 // multiple importance sampling (balance heuristic on the joint density of the edge and the point
 // on it). The point on the edge is sampled by angle (EdgePointSampler): weighted by a bound of
 // the BSDF lobe, or inside the light cone uniformly (mixed with the lobe bound there for a

@@ -73,9 +73,11 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
     const EdgeHierarchy h = hierarchy_of_all(scene);
     const size_t edges = scene.edges().size();
     const Vec3f p(0.3f, 0.01f, 0.4f);
-    // A wide cone and a narrow one (cos half angle above 0.95: the light strategy splits).
-    const BoundsCone wide = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.3f),
-                     narrow = cone_towards(p, Vec3f(0.5f, 3.f, 0.6f), 0.05f);
+    // A wide cone and a narrow one (cos half angle above 0.95: the light strategy splits), both
+    // around the direction to the sphere's lower pole, where 16 of its edges meet (strategy
+    // Lights scores a leaf by the part of its edge inside the cone: the cone must hold edges).
+    const BoundsCone wide = cone_towards(p, Vec3f(-0.99f, 2.11f, -1.31f), 0.3f),
+                     narrow = cone_towards(p, Vec3f(-0.99f, 2.11f, -1.31f), 0.05f);
     ASSERT_GT(narrow.cos_half, 0.95f);
     int split_seen = 0;
     for (int variant = 0; variant < 4; ++variant) {
@@ -85,6 +87,10 @@ TEST(EdgeHierarchy, PdfMatchesEmpiricalFrequency) {
         q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(-1, 1, 0)), glossy ? 0.1f : 0.5f, glossy ? 0.5f : 0.f,
                                  0.1f);
         q.cone = variant & 2 ? &narrow : &wide;
+        // One query throughout: its nodes' bounds kept across the calls (as a render keeps them
+        // across a vertex's descents; MemoGivesTheSameSamples checks that this changes nothing).
+        EdgeHierarchy::Memo memo;
+        q.memo = &memo;
         for (int s = 0; s < 2; ++s) {
             const auto strategy = EdgeHierarchy::Strategy(s);
             double sum = 0;
@@ -697,6 +703,120 @@ TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
             EXPECT_EQ(kept.pdf(EdgeHierarchy::Lights, t), coned.pdf(EdgeHierarchy::Lights, t));
         }
     }
+}
+
+// The descent's strategy Lights kept to the light triangles (Query::lights): a square light
+// (two triangles) over the sphere, box and floor, seen from points on the floor. For every edge:
+// where the part of it the point sampler would take (EdgeArc::lights_part) is empty, the
+// strategy's expected count is zero; where it is not (and the edge can contribute at all), it is
+// positive, so no node's pruning loses an edge that can cast a shadow. Some edges the cone alone
+// would give a count lose it. sample() reports pdf()'s counts, and the empirical frequencies of
+// its choices match them. And a box LightTriangles::outside() leaves out holds no segment with
+// a direction within the margin of a triangle.
+TEST(EdgeHierarchy, LightStrategyKeepsToTheLightTriangles) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    const EdgeHierarchy h = hierarchy_of_all(scene);
+    const float margin = 4e-4f;
+    const Vec3f sq[4] = {Vec3f(-0.2f, 3, -0.5f), Vec3f(0.8f, 3, -0.5f), Vec3f(0.8f, 3, 0.5f), Vec3f(-0.2f, 3, 0.5f)};
+    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
+    Rng rng(5, 3);
+    int zeroed = 0, kept = 0, checked = 0, sampled = 0;
+    for (int i = 0; i < 60; ++i) {
+        const Vec3f p(4.f * rng.next_float() - 2.f, 0.01f, 4.f * rng.next_float() - 2.f);
+        BoundsCone cone = cone_towards(p, Vec3f(0.3f, 3, 0), 0.5f * std::sqrt(2.f));
+        cone.half += margin;
+        cone.cos_half = std::cos(cone.half);
+        LightTriangles lights;
+        lights.set(p, tris, 2, margin);
+        EdgeHierarchy::Query coned, q;
+        coned.p = p;
+        const bool glossy = i % 2 == 1;
+        coned.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, rng.next_float() - 0.5f)),
+                                     0.5f, glossy ? 0.8f : 0.f, 0.1f);
+        coned.cone = &cone;
+        q = coned;
+        q.lights = &lights;
+        EdgeHierarchy::Memo memo;  // kept across the calls of this query (not across queries)
+        q.memo = &memo;
+        for (size_t e = 0; e < scene.edges().size(); ++e) {
+            const Edge& edge = scene.edges()[e];
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            EdgeArc arc;
+            float lo, hi;
+            const bool part = arc.set(p, m.vertex(edge.v0), m.vertex(edge.v1)) && arc.lights_part(cone, &lights, lo, hi) &&
+                              arc.param(hi) > arc.param(lo);
+            const EdgeHierarchy::Choice c = h.pdf(q, int32_t(e)), cc = h.pdf(coned, int32_t(e));
+            EXPECT_EQ(c.prob[0], cc.prob[0]);  // strategy All is not changed
+            if (!part) {
+                EXPECT_EQ(c.prob[1], 0.f) << "query " << i << " edge " << e;
+                zeroed += cc.prob[1] > 0.f;
+            } else if (c.prob[0] > 0.f) {
+                EXPECT_GT(c.prob[1], 0.f) << "query " << i << " edge " << e;
+                ++kept;
+            }
+            ++checked;
+        }
+        // The frequencies of strategy Lights' choices (the first queries where it picks some).
+        if (sampled >= 3) continue;
+        double sum = 0;
+        for (size_t e = 0; e < scene.edges().size(); ++e) sum += h.pdf(q, int32_t(e)).prob[1];
+        if (!(sum > 0.1)) continue;
+        ++sampled;
+        const int n = 20000;
+        std::map<int32_t, int> counts;
+        long picked = 0;
+        Rng draws(9, uint64_t(i));
+        for (int k = 0; k < n; ++k) {
+            EdgeHierarchy::Choice cs[EdgeHierarchy::kMaxChoices];
+            const int got = h.sample(q, EdgeHierarchy::Lights, draws.next_float(), cs);
+            for (int j = 0; j < got; ++j) {
+                const EdgeHierarchy::Choice ref = h.pdf(q, cs[j].edge);
+                ASSERT_NEAR(cs[j].prob[0], ref.prob[0], 1e-5f * ref.prob[0] + 1e-12f);
+                ASSERT_NEAR(cs[j].prob[1], ref.prob[1], 1e-5f * ref.prob[1] + 1e-12f);
+                ++counts[cs[j].edge];
+            }
+            picked += got;
+        }
+        EXPECT_NEAR(double(picked), n * sum, 5 * std::sqrt(double(n)) * EdgeHierarchy::kMaxChoices / 2 + 1);
+        for (const auto& [e, c] : counts) {
+            const double pe = h.pdf(q, e).prob[1], sigma = std::sqrt(n * pe * (1 - std::min(pe, 1.0))) + 1;
+            EXPECT_NEAR(c, n * pe, 5 * sigma) << "edge " << e << " query " << i;
+        }
+    }
+    EXPECT_GT(checked, 10000);
+    EXPECT_GT(kept, 100);  // 163
+    EXPECT_GT(zeroed, 50);  // edges in the cone that meet no light triangle (110)
+    EXPECT_EQ(sampled, 3);
+    // Boxes left out hold no segment that comes within the margin of a triangle: random boxes
+    // around the light's wedge seen from the origin, random segments inside each.
+    const Vec3f p(0.f, 0.f, 0.f);
+    LightTriangles lights;
+    lights.set(p, tris, 2, margin);
+    const BoundsCone everywhere;
+    int out = 0, in = 0;
+    for (int i = 0; i < 4000; ++i) {
+        const Vec3f c(2.5f * rng.next_float() - 1.f, 0.5f + 2.f * rng.next_float(), 1.6f * rng.next_float() - 0.8f);
+        const Vec3f half = Vec3f(rng.next_float(), rng.next_float(), rng.next_float()) * 0.2f;
+        const bool left_out = lights.outside(c - half, c + half);
+        (left_out ? out : in)++;
+        if (!left_out) continue;
+        for (int k = 0; k < 20; ++k) {
+            auto inside = [&] {
+                return c + Vec3f((2.f * rng.next_float() - 1.f) * half.x, (2.f * rng.next_float() - 1.f) * half.y,
+                                 (2.f * rng.next_float() - 1.f) * half.z);
+            };
+            EdgeArc arc;
+            float lo, hi;
+            if (!arc.set(p, inside(), inside())) continue;
+            ASSERT_FALSE(arc.lights_part(everywhere, &lights, lo, hi)) << "box " << i;
+        }
+    }
+    EXPECT_GT(out, 300);
+    EXPECT_GT(in, 300);
+    // A box around a segment that crosses the light's wedge is never left out.
+    EXPECT_FALSE(lights.outside(Vec3f(0.3f, 1.4f, -0.2f), Vec3f(0.3f, 1.6f, 0.2f)));
+    EXPECT_TRUE(lights.outside(Vec3f(-1.f, 1.4f, -0.2f), Vec3f(-0.8f, 1.6f, 0.2f)));
 }
 
 // Degenerate configurations: a zero-length edge, the point on the edge's line, on the edge
