@@ -20,9 +20,10 @@ Scenes: a Cornell box (welded walls, boxes and a sphere, 32k triangles, one area
 100k-triangle bumpy sphere standing in for a scan, on a floor under an area light and a
 constant sky. Forward: time at equal spp and at equal noise (each renderer's per-pixel variance
 from two images of other seeds, times its time). Gradients: a welded cube casting a shadow from
-a small area light, and the same cube over a glossy floor (a GGX roughplastic: the light's
-highlight cut by the cube's edge, the cube's reflection, the shadow); the derivative image of
-the cube's translation along x (Mitsuba: ``prb_projective``, forward mode; edgepath:
+a small area light, the same cube over a glossy floor (a GGX roughplastic: the light's
+highlight cut by the cube's edge, the cube's reflection, the shadow), and a faceted sphere of
+50k triangles in view with its shadow; the derivative image of the occluder's translation
+along x (Mitsuba: ``prb_projective``, forward mode; edgepath:
 ``derivative_image``) at about equal CPU time, against edgepath's image at many more samples
 (the two renderers' image sums are printed beside it: they agree within noise).
 """
@@ -196,12 +197,13 @@ def make_scan(folder, size, spp, max_depth):
     return xml, triangles
 
 
-def make_shadow(folder, size, spp, max_depth, floor_bsdf=None):
-    """A welded cube floating over a floor, a small area light above: seen from above, the
-    cube out of view, only its shadow in the image (and, on a glossy floor, its reflection)."""
+def make_shadow(folder, size, spp, max_depth, floor_bsdf=None, occluder=None):
+    """A welded cube (or `occluder`) floating over a floor, a small area light above: seen from
+    above, the cube out of view, only its shadow in the image (and, on a glossy floor, its
+    reflection)."""
     shapes = []
     for name, (v, f), bsdf, radiance in [
-            ("cube", box([-0.4, 0.8, -0.4], [0.4, 1.6, 0.4]), diffuse("0.5, 0.5, 0.5"), None),
+            ("cube", occluder or box([-0.4, 0.8, -0.4], [0.4, 1.6, 0.4]), diffuse("0.5, 0.5, 0.5"), None),
             ("floor", grid([-5, 0, -5], [0, 0, 10], [10, 0, 0], 1), floor_bsdf or diffuse("0.7, 0.7, 0.7"), None),
             ("light", grid([-0.15, 3.5, -0.15], [0.3, 0, 0], [0, 0, 0.3], 1), diffuse("0, 0, 0"), "300, 300, 300")]:
         path = os.path.join(folder, f"shadow_{name}.ply")
@@ -221,6 +223,13 @@ def make_glossy(folder, size, spp, max_depth):
     sees the light's highlight in the floor with the cube's top edge cutting into it, the
     cube's lit top face reflected beside it, and the shadow."""
     return make_shadow(folder, size, spp, max_depth, floor_bsdf=GLOSSY_FLOOR)
+
+
+def make_faceted_shadow(folder, size, spp, max_depth):
+    """A detailed occluder: a welded, flat-shaded sphere of 50k triangles in view, over the
+    floor, and its shadow. From a floor point most of its edges lie inside the light's cone but
+    cast no shadow there (the light strategy's edges are those near the light's triangles)."""
+    return make_shadow(folder, size, spp, max_depth, occluder=sphere([1.5, 1.0, 0], 0.45, 125, 200))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -423,6 +432,8 @@ def main(argv=None):
             gradient_at_equal_time(mi, dr, ep, args, folder, "Shadow of a welded cube", make_shadow, 1)
             gradient_at_equal_time(mi, dr, ep, args, folder, "The cube over a glossy floor (its shadow, its "
                                    "reflection, the light's highlight cut by it)", make_glossy, 2)
+            gradient_at_equal_time(mi, dr, ep, args, folder, "A faceted sphere of 50k triangles and its shadow",
+                                   make_faceted_shadow, 1)
     return 0
 
 
