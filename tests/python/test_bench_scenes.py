@@ -65,6 +65,17 @@ def test_scenes_load_welded(tmp_path):
     loaded = write(tmp_path, xml)
     assert loaded.shapes["shape0"].indices.shape[0] > 99000  # the same sphere() as above, bumped
 
+    # The faceted sphere: welded and closed, and wholly in view (Mitsuba's projective sampling
+    # would need film samples past the border otherwise): the image's border pixels see only
+    # the floor, its mask of the sphere's pixels is not empty.
+    loaded = write(tmp_path, mc.make_faceted_shadow(str(tmp_path), 32, 1, 2))
+    ball = loaded.shapes["shape0"]
+    assert ball.indices.shape[0] > 49000 and closed_and_welded(ball)
+    mesh_id = ep.render_channels(loaded.scene, ["mesh_id"], spp=1)["mesh_id"][..., 0]
+    assert (mesh_id == 0).any()
+    border = torch.cat([mesh_id[0], mesh_id[-1], mesh_id[:, 0], mesh_id[:, -1]])
+    assert (border == 1).all()
+
 
 def test_rays_per_sample(tmp_path):
     # The counts the forward table prints beside the times: one camera ray per sample; at most
