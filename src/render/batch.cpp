@@ -50,6 +50,8 @@ struct PathBatch::Impl {
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
     bool plain_lights = false;  // the scene's lights are all of the kinds shade_lanes handles
+    // Per material: diffuse (MaterialKind::Standard with a constant black specular).
+    std::vector<char> plain_material;
     ShadeLanes<kBatchSize> lanes;
     int plain[kBatchSize];
     int nplain_ = 0;
@@ -62,6 +64,9 @@ struct PathBatch::Impl {
                 !m.emission.is_constant())
                 plain_lights = false;
         }
+        for (const Material& m : scene.materials)
+            plain_material.push_back(m.kind == MaterialKind::Standard && m.specular.is_constant() &&
+                                     is_black(Vec3f::load(m.specular.data)));
         // At most one on the area lights, one on the environment and one a point light for
         // each path.
         const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
@@ -70,12 +75,12 @@ struct PathBatch::Impl {
     }
 
     void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
-    // Puts live path j, at a plain vertex of material bp, into the lanes (its random numbers
+    // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
     // drawn in shade_vertex's order, its light picked and its environment sample taken).
-    void gather_plain(int j, const BsdfParams& bp, Rng& rng);
+    void gather_plain(int j, const Material& m, Rng& rng);
 };
 
-void PathBatch::Impl::gather_plain(int j, const BsdfParams& bp, Rng& rng) {
+void PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const int k = nplain_++;
     plain[k] = j;
     const PathState& ps = paths[live[j]];
@@ -97,9 +102,13 @@ void PathBatch::Impl::gather_plain(int j, const BsdfParams& bp, Rng& rng) {
     put3(l.ns, ps.sp.ns);
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
-    put3(l.diffuse, bp.diffuse);
-    l.two_sided[k] = mask(bp.two_sided);
-    l.reflects[k] = mask(!(luminance(bp.diffuse) + luminance(bp.specular) <= 0.f));
+    // Scene::bsdf_params' diffuse reflectance; the specular is black.
+    Vec3f diffuse = eval_texture3(mat.diffuse, ps.sp.uv);
+    const Mesh& mesh = scene.meshes[size_t(ps.sp.mesh)];
+    if (mesh.colors) diffuse = diffuse * mesh.color(ps.sp.prim, ps.sp.b1, ps.sp.b2);
+    put3(l.diffuse, diffuse);
+    l.two_sided[k] = mask(mat.two_sided);
+    l.reflects[k] = mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
 
     const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
     float ue1 = ul1, ue2 = ul2;
@@ -134,13 +143,16 @@ void PathBatch::Impl::gather_plain(int j, const BsdfParams& bp, Rng& rng) {
         l.two_sided_emission[k] = mask(m.two_sided_emission);
     }
     l.light_on[k] = mask(light);
-    LightSample ls;
-    const bool env = settings.use_nee && scene.sample_env(ue1, ue2, ls);
-    l.env_on[k] = mask(env);
-    if (env) {
-        put3(l.env_dir, ls.dir);
-        put3(l.env_radiance, ls.radiance);
-        l.env_pdf[k] = ls.pdf;
+    l.env_on[k] = mask(false);
+    if (settings.use_nee && scene.env_sampled) {
+        LightSample ls;
+        const bool env = scene.sample_env(ue1, ue2, ls);
+        l.env_on[k] = mask(env);
+        if (env) {
+            put3(l.env_dir, ls.dir);
+            put3(l.env_radiance, ls.radiance);
+            l.env_pdf[k] = ls.pdf;
+        }
     }
 }
 
@@ -188,12 +200,10 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         nplain_ = 0;
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
-            if (plain_lights) {
-                const BsdfParams bp = scene.bsdf_params(ps.sp);
-                if (bp.kind == MaterialKind::Standard && is_black(bp.specular)) {
-                    gather_plain(j, bp, samples[live[j]].rng);
-                    continue;
-                }
+            const int material = scene.meshes[size_t(ps.sp.mesh)].material;
+            if (plain_lights && plain_material[size_t(material)]) {
+                gather_plain(j, scene.materials[size_t(material)], samples[live[j]].rng);
+                continue;
             }
             ps.goes_on = false;
             ps.shadow_begin = nshadow;

@@ -682,9 +682,10 @@ TEST(Render, BatchedPathsMatchTracePath) {
 // environment, without point lights (the scenes of most renders), four paths at a time in
 // vectors (render/shade_lanes.h), and the other vertices one by one: each path's radiance is
 // still trace_path's bit for bit, with both kinds in one batch (a glossy box among diffuse
-// surfaces), a one-sided diffuse quad seen from behind, a two-sided one, a black one, a lamp
-// emitting on one side and one on both, with and without an environment, for each sampling
-// strategy and path lengths from 0 to many bounces.
+// surfaces), a sphere with shading normals and vertex colours, a textured floor, a one-sided
+// diffuse quad seen from behind, a two-sided one, a black one, a lamp emitting on one side and
+// one on both, with and without an environment, for each sampling strategy and path lengths
+// from 0 to many bounces.
 TEST(Render, BatchedPlainPathsMatchTracePath) {
     MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
     MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
@@ -698,6 +699,12 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     ConstTex le({6.f, 6.f, 6.f}), le2({1.f, 2.f, 3.f});
     std::vector<float> sky(4 * 8 * 3);
     for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    std::vector<float> tint(size_t(ball.num_vertices()) * 3), checker(3 * 3 * 3);
+    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
+    for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
+    TextureDesc floor_tex;
+    floor_tex.data = checker.data();
+    floor_tex.height = floor_tex.width = floor_tex.channels = 3;
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     d.materials.push_back(material(kd, black, r));     // 0: diffuse
@@ -705,8 +712,11 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.materials[1].two_sided = true;
     d.materials.push_back(material(black, black, r));  // 2: black (the lamps', the soot's)
     d.materials.push_back(material(kd, ks, r));        // 3: glossy: shaded one by one
-    d.meshes.push_back(floor.desc(0));
+    d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
+    d.materials[4].diffuse = floor_tex;
+    d.meshes.push_back(floor.desc(4));
     d.meshes.push_back(ball.desc(0));
+    d.meshes[1].colors = tint.data();
     d.meshes.push_back(back_wall.desc(0));
     d.meshes.push_back(screen.desc(1));
     d.meshes.push_back(soot.desc(2));
