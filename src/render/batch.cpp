@@ -49,7 +49,6 @@ struct PathBatch::Impl {
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
-    bool plain_lights = false;  // the scene's lights are all of the kinds shade_lanes handles
     // Per material: diffuse (MaterialKind::Standard with a constant black specular).
     std::vector<char> plain_material;
     ShadeLanes<kBatchSize> lanes;
@@ -57,13 +56,6 @@ struct PathBatch::Impl {
     int nplain_ = 0;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
-        plain_lights = scene.point_lights.empty();
-        for (const Scene::EmissiveTriangle& lt : scene.lights) {
-            const Mesh& m = scene.meshes[size_t(lt.mesh)];
-            if (lt.prim < 0 || m.solid_angle || m.spherical_by_mesh || m.spherical_triangle || m.spot ||
-                !m.emission.is_constant())
-                plain_lights = false;
-        }
         for (const Material& m : scene.materials)
             plain_material.push_back(m.kind == MaterialKind::Standard && m.specular.is_constant() &&
                                      is_black(Vec3f::load(m.specular.data)));
@@ -77,10 +69,13 @@ struct PathBatch::Impl {
     void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
     // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
     // drawn in shade_vertex's order, its light picked and its environment sample taken).
-    void gather_plain(int j, const Material& m, Rng& rng);
+    // False, with nothing drawn, for a light sample the vectors cannot take (an infinite
+    // distance to the light): shade_vertex then shades the vertex.
+    bool gather_plain(int j, const Material& m, Rng& rng);
 };
 
-void PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
+bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
+    const Rng start = rng;
     const int k = nplain_++;
     plain[k] = j;
     const PathState& ps = paths[live[j]];
@@ -121,28 +116,49 @@ void PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();
 
-    // Scene::sample_area_light for a triangle picked by power, sampled by area.
-    bool light = settings.use_nee && scene.light_distribution.valid();
-    if (light) {
+    // Scene::sample_area_light: a triangle picked by power and sampled by area, with a
+    // constant emission and no spot, is sampled in the vectors; any other light here, its
+    // sample handed to them whole.
+    l.light_on[k] = mask(false);
+    l.light_given[k] = mask(false);
+    if (settings.use_nee && scene.light_distribution.valid()) {
         float u = std::min(ul0, 0.99999994f);
         const int li = scene.light_distribution.sample(u);
         const Scene::EmissiveTriangle& lt = scene.lights[size_t(li)];
         const Mesh& m = scene.meshes[size_t(lt.mesh)];
-        const Vec2f b = square_to_triangle(ul1, ul2);
-        l.b1[k] = b.x;
-        l.b2[k] = b.y;
-        const TriangleData& td = m.triangle_data[lt.prim];
-        put3(l.v0, td.v0);
-        put3(l.v1, td.v1);
-        put3(l.v2, td.v2);
-        put3(l.light_ng, td.ng);
-        l.edge[k] = td.largest_edge;
-        l.pmf[k] = float(double(scene.light_distribution.pmf(li)));
-        l.area[k] = scene.light_triangle_area(m, lt.prim);
-        put3(l.emission, Vec3f::load(m.emission.data));
-        l.two_sided_emission[k] = mask(m.two_sided_emission);
+        if (lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant()) {
+            const Vec2f b = square_to_triangle(ul1, ul2);
+            l.b1[k] = b.x;
+            l.b2[k] = b.y;
+            const TriangleData& td = m.triangle_data[lt.prim];
+            put3(l.v0, td.v0);
+            put3(l.v1, td.v1);
+            put3(l.v2, td.v2);
+            put3(l.light_ng, td.ng);
+            l.edge[k] = td.largest_edge;
+            l.pmf[k] = float(double(scene.light_distribution.pmf(li)));
+            l.area[k] = scene.light_triangle_area(m, lt.prim);
+            put3(l.emission, Vec3f::load(m.emission.data));
+            l.two_sided_emission[k] = mask(m.two_sided_emission);
+            l.light_on[k] = mask(true);
+        } else {
+            LightSample ls;
+            if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
+                if (!std::isfinite(ls.dist)) {  // shadow_ray would not aim at a point
+                    rng = start;
+                    --nplain_;
+                    return false;
+                }
+                put3(l.given_dir, ls.dir);
+                l.given_pdf[k] = ls.pdf;
+                put3(l.given_radiance, ls.radiance);
+                put3(l.given_p, ls.p);
+                put3(l.given_p_error, ls.p_error);
+                put3(l.given_ng, ls.ng);
+                l.light_on[k] = l.light_given[k] = mask(true);
+            }
+        }
     }
-    l.light_on[k] = mask(light);
     l.env_on[k] = mask(false);
     if (settings.use_nee && scene.env_sampled) {
         LightSample ls;
@@ -154,6 +170,7 @@ void PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
             l.env_pdf[k] = ls.pdf;
         }
     }
+    return true;
 }
 
 PathBatch::PathBatch(const Scene& scene, const RenderOptions& opt) : impl_(new Impl(scene, opt)) {}
@@ -201,10 +218,8 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
             const int material = scene.meshes[size_t(ps.sp.mesh)].material;
-            if (plain_lights && plain_material[size_t(material)]) {
-                gather_plain(j, scene.materials[size_t(material)], samples[live[j]].rng);
+            if (plain_material[size_t(material)] && gather_plain(j, scene.materials[size_t(material)], samples[live[j]].rng))
                 continue;
-            }
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
             shade_vertex(
@@ -269,6 +284,21 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     ++nshadow;
                 }
                 counters.shadow += uint64_t(nshadow - ps.shadow_begin);
+                // The point lights, path by path (shade_vertex's own code).
+                if (!scene.point_lights.empty()) {
+                    const Frame frame(ps.sp.ns);
+                    BsdfParams bp;
+                    bp.diffuse = get3(l.diffuse, k);
+                    bp.specular = Vec3f(0.f);
+                    bp.two_sided = on(l.two_sided, k);
+                    bp.kind = MaterialKind::Standard;
+                    point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
+                                        [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*, float) {
+                                            set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, shadow_ray);
+                                            shadow_value[size_t(nshadow)] = value;
+                                            ++nshadow;
+                                        });
+                }
                 ps.shadow_end = nshadow;
             }
         }

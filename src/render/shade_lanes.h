@@ -1,15 +1,16 @@
 // shade_vertex (render/path.h) for the plain case, four paths at a time: a diffuse material
-// (MaterialKind::Standard with a black specular: the Lambertian lobe alone), lit by area lights
-// sampled by area (triangles picked by power, constant emission, no spot) and the
-// environment, without point lights. PathBatch (render/batch.cpp) gathers such vertices into
-// the arrays of ShadeLanes (one entry a path: structure of arrays), with the random numbers and
-// what needs a table or a branch per path (the light picked, its triangle, the disk point of
-// the cosine-weighted sample, the environment's sample) computed beforehand path by path; then
-// shade_lanes does the arithmetic over all of them in SSE2 vectors: the bent shading normal,
-// the frame, the BSDF sample, its ray, the light sample's point, both light samples' values,
-// MIS weights and shadow rays. Every lane performs scalar shade_vertex's floating-point
-// operations in its order (math/simd4.h), so the samples are the same bit for bit
-// (Render.BatchedPathsMatchTracePath).
+// (MaterialKind::Standard with a black specular: the Lambertian lobe alone). PathBatch
+// (render/batch.cpp) gathers such vertices into the arrays of ShadeLanes (one entry a path:
+// structure of arrays), with the random numbers and what needs a table or a branch per path
+// computed beforehand path by path: the light picked and, for a triangle sampled by area with
+// a constant emission and no spot, its vertices (any other light's sample is taken there by
+// Scene::sample_area_light and handed over whole), the numbers of the cosine-weighted sample,
+// the environment's sample. Then shade_lanes does the arithmetic over all of them in SSE2
+// vectors: the disk point (its cosine and sine per path), the bent shading normal, the frame,
+// the BSDF sample, its ray, the light sample's point, both light samples' values, MIS weights
+// and shadow rays. (The point lights are left to the gathering code, path by path.) Every lane
+// performs scalar shade_vertex's floating-point operations in its order (math/simd4.h), so the
+// samples are the same bit for bit (Render.BatchedPlainPathsMatchTracePath).
 #pragma once
 #include <cmath>
 #include <limits>
@@ -37,6 +38,10 @@ struct ShadeLanes {
     // area, its emission (constant) and whether it emits on both sides.
     alignas(16) float light_on[N], b1[N], b2[N], v0[3][N], v1[3][N], v2[3][N], light_ng[3][N], edge[N];
     alignas(16) float pmf[N], area[N], emission[3][N], two_sided_emission[N];
+    // Or (mask light_given) a light sample taken by Scene::sample_area_light: its direction,
+    // density, radiance, and its point with the point's error bound and normal.
+    alignas(16) float light_given[N], given_dir[3][N], given_pdf[N], given_radiance[3][N];
+    alignas(16) float given_p[3][N], given_p_error[3][N], given_ng[3][N];
     // The environment's sample (mask env_on): its direction, value and density.
     alignas(16) float env_on[N], env_dir[3][N], env_radiance[3][N], env_pdf[N];
 
@@ -178,16 +183,19 @@ inline void shade_lanes(ShadeLanes<N>& L, int n, bool mis) {
             return beta * f * radiance * (w / lpdf);
         };
 
-        // The area light's sample (Scene::sample_light_triangle, by area) and its shadow ray
-        // (spawn_ray_to).
+        // The area light's sample (Scene::sample_light_triangle, by area, or the one given)
+        // and its shadow ray (spawn_ray_to).
         {
-            M4 on = M4::load(L.light_on + k);
+            const M4 light_on = M4::load(L.light_on + k), given = M4::load(L.light_given + k);
+            M4 on = light_on;
             const F4 b1 = F4::load(L.b1 + k), b2 = F4::load(L.b2 + k), b0 = one - b1 - b2;
-            const V4 v0 = load3(L.v0, k), v1 = load3(L.v1, k), v2 = load3(L.v2, k), qng = load3(L.light_ng, k);
-            const V4 q = v0 * b0 + v1 * b1 + v2 * b2;
+            const V4 v0 = load3(L.v0, k), v1 = load3(L.v1, k), v2 = load3(L.v2, k);
+            const V4 qng = select(given, load3(L.given_ng, k), load3(L.light_ng, k));
+            const V4 q = select(given, load3(L.given_p, k), v0 * b0 + v1 * b1 + v2 * b2);
             auto abs3 = [](const V4& v) { return V4(abs(v.x), abs(v.y), abs(v.z)); };
-            const V4 q_error = (abs3(v0 * b0) + abs3(v1 * b1) + abs3(v2 * b2)) * F4(rounding_gamma(7)) +
-                               V4(F4::load(L.edge + k) * F4(rounding_gamma(4)));
+            const V4 q_error = select(given, load3(L.given_p_error, k),
+                                      (abs3(v0 * b0) + abs3(v1 * b1) + abs3(v2 * b2)) * F4(rounding_gamma(7)) +
+                                          V4(F4::load(L.edge + k) * F4(rounding_gamma(4))));
             V4 to = q - p;
             const F4 dist2 = dot(to, to);
             on = on & (dist2 > zero);
@@ -198,10 +206,15 @@ inline void shade_lanes(ShadeLanes<N>& L, int n, bool mis) {
             // Scene::emitted: the side of the face normal only, unless two-sided.
             const M4 front = !(dot(qng, -to) <= zero);
             on = on & (M4::load(L.two_sided_emission + k) | front);
-            const V4 radiance = load3(L.emission, k) * one;
+            V4 radiance = load3(L.emission, k) * one;
             on = on & !is_black(radiance);
-            const F4 lpdf = F4::load(L.pmf + k) / F4::load(L.area + k) * dist2 / cos_l;
+            F4 lpdf = F4::load(L.pmf + k) / F4::load(L.area + k) * dist2 / cos_l;
             on = on & (lpdf > zero) & is_finite(lpdf);
+            // The given samples: their own (gathered only where sample_area_light succeeded).
+            on = select(given, light_on, on);
+            to = select(given, load3(L.given_dir, k), to);
+            lpdf = select(given, F4::load(L.given_pdf + k), lpdf);
+            radiance = select(given, load3(L.given_radiance, k), radiance);
             const V4 value = next_event(to, lpdf, radiance, on);
             on.store(L.light_on + k);
             store3(L.light_value, k, value);

@@ -678,14 +678,15 @@ TEST(Render, BatchedPathsMatchTracePath) {
     EXPECT_GT(outside, 0);
 }
 
-// The batches shade the vertices of a diffuse material lit by area-sampled lights and the
-// environment, without point lights (the scenes of most renders), four paths at a time in
-// vectors (render/shade_lanes.h), and the other vertices one by one: each path's radiance is
-// still trace_path's bit for bit, with both kinds in one batch (a glossy box among diffuse
-// surfaces), a sphere with shading normals and vertex colours, a textured floor, a one-sided
-// diffuse quad seen from behind, a two-sided one, a black one, a lamp emitting on one side and
-// one on both, with and without an environment, for each sampling strategy and path lengths
-// from 0 to many bounces.
+// The batches shade the vertices of a diffuse material four paths at a time in vectors
+// (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
+// trace_path's bit for bit, with both kinds in one batch (a glossy box among diffuse surfaces),
+// a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
+// seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
+// (sampled by area in the vectors), with and without an environment, then with the lights whose
+// samples are taken path by path beside them (a sphere light sampled by solid angle, a quad by
+// spherical triangles, a spot-profiled panel with textured emission; a point light and a spot
+// point light), for each sampling strategy and path lengths from 0 to many bounces.
 TEST(Render, BatchedPlainPathsMatchTracePath) {
     MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
     MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
@@ -726,13 +727,50 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.meshes[6].emission = le.desc();
     d.meshes[7].emission = le2.desc();
     d.meshes[7].two_sided_emission = true;
+    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
+    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
+    MeshData spot_panel = make_quad(Vec3f(0.5f, 1.6f, 1.f), Vec3f(0.6f, 0, 0), Vec3f(0, 0, 0.6f));
+    std::vector<float> glow(2 * 2 * 3);
+    for (size_t i = 0; i < glow.size(); ++i) glow[i] = 1.f + float(i % 5);
+    TextureDesc glow_tex;
+    glow_tex.data = glow.data();
+    glow_tex.height = glow_tex.width = 2;
+    glow_tex.channels = 3;
+    PointLightDesc bulb, spot;
+    bulb.position[0] = -1.2f;
+    bulb.position[1] = 1.f;
+    bulb.position[2] = 1.5f;
+    spot.position[0] = 0.3f;
+    spot.position[1] = 1.5f;
+    spot.position[2] = 0.5f;
+    spot.intensity[0] = 3.f;
+    spot.spot = true;
+    spot.spot_profile[1] = -1.f;
+    spot.spot_profile[2] = 0.f;
+    spot.spot_profile[3] = 0.5f;
+    spot.spot_profile[4] = 0.3f;
     RenderOptions opt;
     opt.spp = 3;
     opt.seed = 11;
     int compared = 0;
-    for (bool env : {false, true}) {
+    for (int variant = 0; variant < 3; ++variant) {
+        const bool env = variant > 0;
         d.has_envmap = env;
         if (env) d.envmap.values = {sky.data(), 4, 8, 3};
+        if (variant == 2) {
+            d.meshes.push_back(bulb_mesh.desc(2));
+            d.meshes.back().emission = le2.desc();
+            d.meshes.back().sample_solid_angle = true;
+            d.meshes.push_back(tri_lamp.desc(2));
+            d.meshes.back().emission = le.desc();
+            d.meshes.back().sample_spherical_triangle = true;
+            d.meshes.push_back(spot_panel.desc(2));
+            d.meshes.back().emission = glow_tex;
+            d.meshes.back().spot = true;
+            d.meshes.back().spot_profile[1] = -1.f;
+            d.meshes.back().spot_profile[2] = 0.f;
+            d.point_lights = {bulb, spot};
+        }
         auto scene = build_scene(d);
         const int W = image_width(*scene), H = image_height(*scene);
         for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
@@ -752,7 +790,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
                         }
                         for (int k = 0; k < 3; ++k) reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
                     }
-                const std::string what = "environment " + std::to_string(env) + ", sampling " +
+                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
                                          std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
                 double total = 0;
                 for (float v : reference) total += v;
@@ -771,7 +809,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
                 }
             }
     }
-    EXPECT_EQ(compared, 2 * 2 * (4 + 3 + 3));
+    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
