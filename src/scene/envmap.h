@@ -163,8 +163,10 @@ struct Envmap {
 
     bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out) const {
         if (!dist.valid()) return false;
-        int r, c;
-        dist.sample(u1, u2, r, c);
+        int r = 0, c = 0;
+        // A constant map has one cell, which a number in [0, 1) picks leaving the number as it
+        // is (its cdf is 0 then 1): the distribution's search skipped, the same result.
+        if (!(constant() && u1 >= 0.f && u1 < 1.f && u2 >= 0.f && u2 < 1.f)) dist.sample(u1, u2, r, c);
         // Cell c lies between columns c and c + 1: u from (c + 0.5) / W to (c + 1.5) / W.
         float x = (float(c) + 0.5f + u2) / float(cols), y = (float(r) + u1) / float(rows);
         float theta = y * kPi, phi = x * 2.f * kPi;

@@ -414,8 +414,17 @@ TEST(Envmap, ConstantMapLookup) {
         EXPECT_EQ(env.pdf(w), pdf);
         Vec3f ws;
         float spdf;
-        ASSERT_TRUE(env.sample(rng.next_float(), rng.next_float(), ws, spdf));
+        const float u1 = rng.next_float(), u2 = rng.next_float();
+        ASSERT_TRUE(env.sample(u1, u2, ws, spdf));
         EXPECT_EQ(env.eval(ws).x, value.x);
+        // Its one cell, without the distribution's search: the same numbers as with it.
+        float v1 = u1, v2 = u2;
+        int row = -1, col = -1;
+        env.dist.sample(v1, v2, row, col);
+        EXPECT_EQ(row, 0);
+        EXPECT_EQ(col, 0);
+        EXPECT_EQ(v1, u1);
+        EXPECT_EQ(v2, u2);
         if (std::abs(env.to_local(ws).y) < 0.99f) EXPECT_NEAR(env.pdf(ws), spdf, 2e-3f * spdf);
     }
 }
