@@ -184,8 +184,8 @@ inline void shade_lanes(ShadeLanes<N>& L, int n, bool mis) {
         };
 
         // The area light's sample (Scene::sample_light_triangle, by area, or the one given)
-        // and its shadow ray (spawn_ray_to).
-        {
+        // and its shadow ray (spawn_ray_to), where any of the four has one.
+        if (M4::load(L.light_on + k).bits() != 0) {
             const M4 light_on = M4::load(L.light_on + k), given = M4::load(L.light_given + k);
             M4 on = light_on;
             const F4 b1 = F4::load(L.b1 + k), b2 = F4::load(L.b2 + k), b0 = one - b1 - b2;
@@ -227,8 +227,8 @@ inline void shade_lanes(ShadeLanes<N>& L, int n, bool mis) {
             (len * F4(1.f - kShadowEpsilon)).store(L.light_tmax + k);
         }
 
-        // The environment's sample and its shadow ray (spawn_ray).
-        {
+        // The environment's sample and its shadow ray (spawn_ray), where any of the four has one.
+        if (M4::load(L.env_on + k).bits() != 0) {
             M4 on = M4::load(L.env_on + k);
             const V4 ldir = load3(L.env_dir, k);
             const V4 value = next_event(ldir, F4::load(L.env_pdf + k), load3(L.env_radiance, k), on);
