@@ -4,15 +4,24 @@
 // instructions do (IEEE single precision, round to nearest), so a lane's result is the scalar
 // code's bit for bit as long as the same operations run in the same order; the comparisons and
 // selections below follow C++'s semantics (NaN compares false; std::max's choice on ties).
+// Elsewhere (a processor without SSE2) the same types hold four floats that each operation
+// runs through one by one, with the same results.
 #pragma once
-#include <emmintrin.h>
-
+#include <cmath>
 #include <cstdint>
+#include <cstring>
 #include <limits>
 
+#include "math/ray.h"
 #include "math/vec.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace edgepath {
+
+#if defined(__SSE2__)
 
 struct F4 {
     __m128 v;
@@ -78,6 +87,74 @@ inline F4 next_float_up(F4 x) {
     return select(finite_or_neg, F4(_mm_castsi128_ps(r)), x);
 }
 inline F4 next_float_down(F4 x) { return -next_float_up(-x); }
+
+#else  // no SSE2: lane by lane
+
+struct F4 {
+    float v[4];
+    F4() = default;
+    F4(float s) : v{s, s, s, s} {}
+    static F4 load(const float* p) {
+        F4 r;
+        std::memcpy(r.v, p, sizeof r.v);
+        return r;
+    }
+    void store(float* p) const { std::memcpy(p, v, sizeof v); }
+};
+
+struct M4 {
+    uint32_t v[4];  // all bits set where true
+    static M4 load(const float* p) {
+        M4 r;
+        std::memcpy(r.v, p, sizeof r.v);
+        return r;
+    }
+    void store(float* p) const { std::memcpy(p, v, sizeof v); }
+    int bits() const { return int((v[0] >> 31) | ((v[1] >> 31) << 1) | ((v[2] >> 31) << 2) | ((v[3] >> 31) << 3)); }
+};
+
+template <class Op>
+inline F4 lanes_of(Op op) {
+    F4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = op(i);
+    return r;
+}
+template <class Op>
+inline M4 mask_of(Op op) {
+    M4 r;
+    for (int i = 0; i < 4; ++i) r.v[i] = op(i) ? ~0u : 0u;
+    return r;
+}
+
+inline F4 operator+(F4 a, F4 b) { return lanes_of([&](int i) { return a.v[i] + b.v[i]; }); }
+inline F4 operator-(F4 a, F4 b) { return lanes_of([&](int i) { return a.v[i] - b.v[i]; }); }
+inline F4 operator*(F4 a, F4 b) { return lanes_of([&](int i) { return a.v[i] * b.v[i]; }); }
+inline F4 operator/(F4 a, F4 b) { return lanes_of([&](int i) { return a.v[i] / b.v[i]; }); }
+inline F4 operator-(F4 a) { return lanes_of([&](int i) { return -a.v[i]; }); }
+inline F4 sqrt(F4 a) { return lanes_of([&](int i) { return std::sqrt(a.v[i]); }); }
+inline F4 abs(F4 a) { return lanes_of([&](int i) { return std::fabs(a.v[i]); }); }
+inline F4 sign_of(F4 a) { return lanes_of([&](int i) { return std::copysign(1.f, a.v[i]); }); }
+
+inline M4 operator<(F4 a, F4 b) { return mask_of([&](int i) { return a.v[i] < b.v[i]; }); }
+inline M4 operator<=(F4 a, F4 b) { return mask_of([&](int i) { return a.v[i] <= b.v[i]; }); }
+inline M4 operator>(F4 a, F4 b) { return mask_of([&](int i) { return a.v[i] > b.v[i]; }); }
+inline M4 operator>=(F4 a, F4 b) { return mask_of([&](int i) { return a.v[i] >= b.v[i]; }); }
+inline M4 operator==(F4 a, F4 b) { return mask_of([&](int i) { return a.v[i] == b.v[i]; }); }
+inline M4 not_greater(F4 a, F4 b) { return mask_of([&](int i) { return !(a.v[i] > b.v[i]); }); }
+inline M4 operator&(M4 a, M4 b) { return mask_of([&](int i) { return (a.v[i] & b.v[i]) != 0; }); }
+inline M4 operator|(M4 a, M4 b) { return mask_of([&](int i) { return (a.v[i] | b.v[i]) != 0; }); }
+inline M4 operator!(M4 a) { return mask_of([&](int i) { return a.v[i] == 0; }); }
+inline M4 and_not(M4 a, M4 b) { return mask_of([&](int i) { return a.v[i] != 0 && b.v[i] == 0; }); }
+
+inline F4 select(M4 m, F4 a, F4 b) { return lanes_of([&](int i) { return m.v[i] ? a.v[i] : b.v[i]; }); }
+inline M4 select(M4 m, M4 a, M4 b) { return mask_of([&](int i) { return (m.v[i] ? a.v[i] : b.v[i]) != 0; }); }
+inline F4 max_std(F4 a, F4 b) { return lanes_of([&](int i) { return std::max(a.v[i], b.v[i]); }); }
+inline F4 min_std(F4 a, F4 b) { return lanes_of([&](int i) { return std::min(a.v[i], b.v[i]); }); }
+inline M4 is_finite(F4 a) { return mask_of([&](int i) { return std::isfinite(a.v[i]); }); }
+inline F4 next_float_up(F4 x) { return lanes_of([&](int i) { return edgepath::next_float_up(x.v[i]); }); }
+inline F4 next_float_down(F4 x) { return lanes_of([&](int i) { return edgepath::next_float_down(x.v[i]); }); }
+
+#endif
 
 // Three lanes' vectors.
 struct V4 {
