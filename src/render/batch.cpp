@@ -1,6 +1,10 @@
 #include "render/batch.h"
 
+#include <cstring>
+#include <limits>
+
 #include "render/embree_lanes.h"
+#include "render/shade_lanes.h"
 
 namespace edgepath {
 
@@ -44,8 +48,17 @@ struct PathBatch::Impl {
     std::vector<Vec3f> shadow_value;
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
+    // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
+    // Per material: diffuse (MaterialKind::Standard with a constant black specular).
+    std::vector<char> plain_material;
+    ShadeLanes<kBatchSize> lanes;
+    int plain[kBatchSize];
+    int nplain_ = 0;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
+        for (const Material& m : scene.materials)
+            plain_material.push_back(m.kind == MaterialKind::Standard && m.specular.is_constant() &&
+                                     is_black(Vec3f::load(m.specular.data)));
         // At most one on the area lights, one on the environment and one a point light for
         // each path.
         const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
@@ -54,7 +67,111 @@ struct PathBatch::Impl {
     }
 
     void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
+    // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
+    // drawn in shade_vertex's order, its light picked and its environment sample taken).
+    // False, with nothing drawn, for a light sample the vectors cannot take (an infinite
+    // distance to the light): shade_vertex then shades the vertex.
+    bool gather_plain(int j, const Material& m, Rng& rng);
 };
+
+bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
+    const Rng start = rng;
+    const int k = nplain_++;
+    plain[k] = j;
+    const PathState& ps = paths[live[j]];
+    ShadeLanes<kBatchSize>& l = lanes;
+    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
+        a[0][k] = v.x;
+        a[1][k] = v.y;
+        a[2][k] = v.z;
+    };
+    auto mask = [](bool b) {
+        float f;
+        const uint32_t bits = b ? ~0u : 0u;
+        std::memcpy(&f, &bits, sizeof f);
+        return f;
+    };
+    put3(l.p, ps.sp.p);
+    put3(l.p_error, ps.sp.p_error);
+    put3(l.ng, ps.sp.ng);
+    put3(l.ns, ps.sp.ns);
+    put3(l.dir, ps.dir);
+    put3(l.beta, ps.beta);
+    // Scene::bsdf_params' diffuse reflectance; the specular is black.
+    Vec3f diffuse = eval_texture3(mat.diffuse, ps.sp.uv);
+    const Mesh& mesh = scene.meshes[size_t(ps.sp.mesh)];
+    if (mesh.colors) diffuse = diffuse * mesh.color(ps.sp.prim, ps.sp.b1, ps.sp.b2);
+    put3(l.diffuse, diffuse);
+    l.two_sided[k] = mask(mat.two_sided);
+    l.reflects[k] = mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+
+    const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
+    float ue1 = ul1, ue2 = ul2;
+    if (settings.both_lights) {
+        ue1 = rng.next_float();
+        ue2 = rng.next_float();
+    }
+    rng.next_float();  // the lobe's choice: the diffuse lobe is the only one
+    const float ub1 = rng.next_float();
+    l.disk[0][k] = ub1;
+    l.disk[1][k] = rng.next_float();
+
+    // Scene::sample_area_light: a triangle picked by power and sampled by area, with a
+    // constant emission and no spot, is sampled in the vectors; any other light here, its
+    // sample handed to them whole.
+    l.light_on[k] = mask(false);
+    l.light_given[k] = mask(false);
+    if (settings.use_nee && scene.light_distribution.valid()) {
+        float u = std::min(ul0, 0.99999994f);
+        const int li = scene.light_distribution.sample(u);
+        const Scene::EmissiveTriangle& lt = scene.lights[size_t(li)];
+        const Mesh& m = scene.meshes[size_t(lt.mesh)];
+        if (lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant()) {
+            const Vec2f b = square_to_triangle(ul1, ul2);
+            l.b1[k] = b.x;
+            l.b2[k] = b.y;
+            const TriangleData& td = m.triangle_data[lt.prim];
+            put3(l.v0, td.v0);
+            put3(l.v1, td.v1);
+            put3(l.v2, td.v2);
+            put3(l.light_ng, td.ng);
+            l.edge[k] = td.largest_edge;
+            l.pmf[k] = float(double(scene.light_distribution.pmf(li)));
+            l.area[k] = scene.light_triangle_area(m, lt.prim);
+            put3(l.emission, Vec3f::load(m.emission.data));
+            l.two_sided_emission[k] = mask(m.two_sided_emission);
+            l.light_on[k] = mask(true);
+        } else {
+            LightSample ls;
+            if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
+                if (!std::isfinite(ls.dist)) {  // shadow_ray would not aim at a point
+                    rng = start;
+                    --nplain_;
+                    return false;
+                }
+                put3(l.given_dir, ls.dir);
+                l.given_pdf[k] = ls.pdf;
+                put3(l.given_radiance, ls.radiance);
+                put3(l.given_p, ls.p);
+                put3(l.given_p_error, ls.p_error);
+                put3(l.given_ng, ls.ng);
+                l.light_on[k] = l.light_given[k] = mask(true);
+            }
+        }
+    }
+    l.env_on[k] = mask(false);
+    if (settings.use_nee && scene.env_sampled) {
+        LightSample ls;
+        const bool env = scene.sample_env(ue1, ue2, ls);
+        l.env_on[k] = mask(env);
+        if (env) {
+            put3(l.env_dir, ls.dir);
+            put3(l.env_radiance, ls.radiance);
+            l.env_pdf[k] = ls.pdf;
+        }
+    }
+    return true;
+}
 
 PathBatch::PathBatch(const Scene& scene, const RenderOptions& opt) : impl_(new Impl(scene, opt)) {}
 PathBatch::~PathBatch() = default;
@@ -97,8 +214,12 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
         // what each would add.
         int nshadow = 0, nnext = 0;
+        nplain_ = 0;
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
+            const int material = scene.meshes[size_t(ps.sp.mesh)].material;
+            if (plain_material[size_t(material)] && gather_plain(j, scene.materials[size_t(material)], samples[live[j]].rng))
+                continue;
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
             shade_vertex(
@@ -118,6 +239,68 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     ++nshadow;
                 });
             ps.shadow_end = nshadow;
+        }
+        // The plain vertices, four at a time; then their rays into the packets.
+        if (nplain_ > 0) {
+            ShadeLanes<kBatchSize>& l = lanes;
+            shade_lanes(l, nplain_, settings.mis);
+            auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
+            auto on = [](const float* m, int k) {
+                uint32_t bits;
+                std::memcpy(&bits, m + k, sizeof bits);
+                return bits != 0;
+            };
+            for (int k = 0; k < nplain_; ++k) {
+                PathState& ps = paths[live[plain[k]]];
+                ps.sp.ns = get3(l.ns, k);
+                ps.goes_on = on(l.goes_on, k);
+                ps.shadow_begin = nshadow;
+                Ray r;
+                if (ps.goes_on) {
+                    ++counters.bounce;
+                    ps.next_beta = get3(l.next_beta, k);
+                    ps.pdf = l.next_pdf[k];
+                    ps.delta = false;
+                    ps.next = nnext;
+                    r.origin = get3(l.next_origin, k);
+                    r.dir = get3(l.next_dir, k);
+                    set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+                    ++nnext;
+                }
+                if (on(l.light_on, k)) {
+                    r.origin = get3(l.light_origin, k);
+                    r.dir = get3(l.light_dir, k);
+                    r.tmax = l.light_tmax[k];
+                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+                    shadow_value[size_t(nshadow)] = get3(l.light_value, k);
+                    ++nshadow;
+                }
+                if (on(l.env_on, k)) {
+                    r.origin = get3(l.env_origin, k);
+                    r.dir = get3(l.env_dir, k);
+                    r.tmax = std::numeric_limits<float>::infinity();
+                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+                    shadow_value[size_t(nshadow)] = get3(l.env_value, k);
+                    ++nshadow;
+                }
+                counters.shadow += uint64_t(nshadow - ps.shadow_begin);
+                // The point lights, path by path (shade_vertex's own code).
+                if (!scene.point_lights.empty()) {
+                    const Frame frame(ps.sp.ns);
+                    BsdfParams bp;
+                    bp.diffuse = get3(l.diffuse, k);
+                    bp.specular = Vec3f(0.f);
+                    bp.two_sided = on(l.two_sided, k);
+                    bp.kind = MaterialKind::Standard;
+                    point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
+                                        [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*, float) {
+                                            set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, shadow_ray);
+                                            shadow_value[size_t(nshadow)] = value;
+                                            ++nshadow;
+                                        });
+                }
+                ps.shadow_end = nshadow;
+            }
         }
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;

@@ -153,6 +153,24 @@ inline bool met_emission(const Scene& scene, const PathSettings& ps, int mesh, c
 // The light sample a shadow ray of shade_vertex tests.
 enum class ShadowKind { Area, Env, Point };
 
+// Point lights, each at every vertex that is not smooth, whatever the sampling strategy: no
+// other way finds them. Their contribution f I s(-w) / r^2 has no random numbers. For each that
+// can light sp, calls on_shadow as shade_vertex does (below); bp, frame and wo are sp's.
+template <class OnShadow>
+inline void point_light_samples(const Scene& scene, const SurfacePoint& sp, const BsdfParams& bp, const Frame& frame,
+                                const Vec3f& wo, const Vec3f& beta, RayCounters& counters, OnShadow&& on_shadow) {
+    for (const PointLightDesc& pl : scene.point_lights) {
+        Vec3f wl;
+        float dist2;
+        Ray shadow;
+        if (!point_light_ray(sp, pl, wl, dist2, shadow)) continue;
+        const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
+        ++counters.shadow;
+        on_shadow(ShadowKind::Point, shadow,
+                  beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2), nullptr, 0.f);
+    }
+}
+
 // The scattering at a path's vertex sp, reached by a ray along `dir` with throughput `beta`, as
 // trace_path and PathBatch (render/batch.h) both do it: bends sp's shading normal, draws the
 // vertex's random numbers from `rng`, samples the BSDF and, if the path goes on, calls
@@ -201,20 +219,7 @@ inline bool shade_vertex(const Scene& scene, const PathSettings& ps, SurfacePoin
     LightSample ls;
     if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ShadowKind::Area, ls);
     if (nee_here && scene.sample_env(ue1, ue2, ls)) next_event(ShadowKind::Env, ls);
-    // Point lights, each at every vertex, whatever the sampling strategy: no other way finds
-    // them. Their contribution f I s(-w) / r^2 has no random numbers.
-    if (!delta)
-        for (const PointLightDesc& pl : scene.point_lights) {
-            Vec3f wl;
-            float dist2;
-            Ray shadow;
-            if (!point_light_ray(sp, pl, wl, dist2, shadow)) continue;
-            const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
-            ++counters.shadow;
-            on_shadow(ShadowKind::Point, shadow,
-                      beta * bsdf_eval(bp, wo, frame.to_local(wl)) * Vec3f::load(pl.intensity) * (s / dist2), nullptr,
-                      0.f);
-        }
+    if (!delta) point_light_samples(scene, sp, bp, frame, wo, beta, counters, on_shadow);
     return delta;
 }
 

@@ -59,9 +59,19 @@ struct Envmap {
         float x = u * float(cols) - 0.5f;
         x -= float(cols) * std::floor(x / float(cols));
         if (x >= float(cols)) x = 0.f;  // rounding of tiny negative x
-        float v = std::acos(std::clamp(d.y, -1.f, 1.f)) * kInvPi;
-        return {x, v * float(rows)};
+        return {x, row_position(d)};
     }
+    // Its y alone, from the local direction d.
+    float row_position(const Vec3f& d) const {
+        float v = std::acos(std::clamp(d.y, -1.f, 1.f)) * kInvPi;
+        return v * float(rows);
+    }
+
+    // One texel (a constant environment, as Mitsuba's `constant` emitter): the same value in
+    // every direction. Its lookups skip the direction's longitude (an arc tangent), which only
+    // weighs the texel against itself (the bilinear weights add up to 1, up to rounding), and
+    // its density depends on the latitude alone.
+    bool constant() const { return tex.width == 1 && tex.height == 1; }
 
     // The four texels of a lookup, their weights, and the derivatives of the weights with
     // respect to the local direction (for unit directions).
@@ -115,9 +125,15 @@ struct Envmap {
         f.weight[3] = tx * ty;
     }
 
-    Vec3f eval(const Vec3f& world_dir) const { return eval_at(position(world_dir)); }
+    Vec3f eval(const Vec3f& world_dir) const {
+        return constant() ? texel(0) * scale : eval_at(position(world_dir));
+    }
     // The value towards world_dir and the density sample() gives it, from one position lookup.
     Vec3f eval(const Vec3f& world_dir, float& pdf_out) const {
+        if (constant()) {
+            pdf_out = pdf_at(Vec2f(0.f, row_position(to_local(world_dir))));
+            return texel(0) * scale;
+        }
         const Vec2f p = position(world_dir);
         pdf_out = pdf_at(p);
         return eval_at(p);
@@ -133,7 +149,10 @@ struct Envmap {
     }
     Vec3f texel(int64_t index) const { return Vec3f::load(tex.data + index * tex.channels); }
 
-    float pdf(const Vec3f& world_dir) const { return dist.valid() ? pdf_at(position(world_dir)) : 0.f; }
+    float pdf(const Vec3f& world_dir) const {
+        if (!dist.valid()) return 0.f;
+        return pdf_at(constant() ? Vec2f(0.f, row_position(to_local(world_dir))) : position(world_dir));
+    }
     float pdf_at(const Vec2f& p) const {
         if (!dist.valid()) return 0.f;
         int c = std::min(int(p.x), cols - 1), r = std::min(int(p.y), rows - 1);
@@ -144,8 +163,10 @@ struct Envmap {
 
     bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out) const {
         if (!dist.valid()) return false;
-        int r, c;
-        dist.sample(u1, u2, r, c);
+        int r = 0, c = 0;
+        // A constant map has one cell, which a number in [0, 1) picks leaving the number as it
+        // is (its cdf is 0 then 1): the distribution's search skipped, the same result.
+        if (!(constant() && u1 >= 0.f && u1 < 1.f && u2 >= 0.f && u2 < 1.f)) dist.sample(u1, u2, r, c);
         // Cell c lies between columns c and c + 1: u from (c + 0.5) / W to (c + 1.5) / W.
         float x = (float(c) + 0.5f + u2) / float(cols), y = (float(r) + u1) / float(rows);
         float theta = y * kPi, phi = x * 2.f * kPi;

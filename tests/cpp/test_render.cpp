@@ -678,6 +678,140 @@ TEST(Render, BatchedPathsMatchTracePath) {
     EXPECT_GT(outside, 0);
 }
 
+// The batches shade the vertices of a diffuse material four paths at a time in vectors
+// (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
+// trace_path's bit for bit, with both kinds in one batch (a glossy box among diffuse surfaces),
+// a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
+// seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
+// (sampled by area in the vectors), with and without an environment, then with the lights whose
+// samples are taken path by path beside them (a sphere light sampled by solid angle, a quad by
+// spherical triangles, a spot-profiled panel with textured emission; a point light and a spot
+// point light), for each sampling strategy and path lengths from 0 to many bounces.
+TEST(Render, BatchedPlainPathsMatchTracePath) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
+    MeshData back_wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(1.5f, 0, -1.f), Vec3f(0, 2.5f, 0));  // seen from behind
+    MeshData screen = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
+    MeshData soot = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
+    MeshData glossy = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    MeshData panel = make_quad(Vec3f(-2.f, 0.2f, 1.2f), Vec3f(0, 0.6f, 0), Vec3f(0, 0, 0.6f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), ks({0.2f, 0.2f, 0.2f}), r({0.3f}), black({0, 0, 0});
+    ConstTex le({6.f, 6.f, 6.f}), le2({1.f, 2.f, 3.f});
+    std::vector<float> sky(4 * 8 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    std::vector<float> tint(size_t(ball.num_vertices()) * 3), checker(3 * 3 * 3);
+    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
+    for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
+    TextureDesc floor_tex;
+    floor_tex.data = checker.data();
+    floor_tex.height = floor_tex.width = floor_tex.channels = 3;
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
+    d.materials.push_back(material(kd, black, r));     // 0: diffuse
+    d.materials.push_back(material(red, black, r));    // 1: diffuse, two-sided
+    d.materials[1].two_sided = true;
+    d.materials.push_back(material(black, black, r));  // 2: black (the lamps', the soot's)
+    d.materials.push_back(material(kd, ks, r));        // 3: glossy: shaded one by one
+    d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
+    d.materials[4].diffuse = floor_tex;
+    d.meshes.push_back(floor.desc(4));
+    d.meshes.push_back(ball.desc(0));
+    d.meshes[1].colors = tint.data();
+    d.meshes.push_back(back_wall.desc(0));
+    d.meshes.push_back(screen.desc(1));
+    d.meshes.push_back(soot.desc(2));
+    d.meshes.push_back(glossy.desc(3));
+    d.meshes.push_back(lamp.desc(2));
+    d.meshes.push_back(panel.desc(2));
+    d.meshes[6].emission = le.desc();
+    d.meshes[7].emission = le2.desc();
+    d.meshes[7].two_sided_emission = true;
+    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
+    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
+    MeshData spot_panel = make_quad(Vec3f(0.5f, 1.6f, 1.f), Vec3f(0.6f, 0, 0), Vec3f(0, 0, 0.6f));
+    std::vector<float> glow(2 * 2 * 3);
+    for (size_t i = 0; i < glow.size(); ++i) glow[i] = 1.f + float(i % 5);
+    TextureDesc glow_tex;
+    glow_tex.data = glow.data();
+    glow_tex.height = glow_tex.width = 2;
+    glow_tex.channels = 3;
+    PointLightDesc bulb, spot;
+    bulb.position[0] = -1.2f;
+    bulb.position[1] = 1.f;
+    bulb.position[2] = 1.5f;
+    spot.position[0] = 0.3f;
+    spot.position[1] = 1.5f;
+    spot.position[2] = 0.5f;
+    spot.intensity[0] = 3.f;
+    spot.spot = true;
+    spot.spot_profile[1] = -1.f;
+    spot.spot_profile[2] = 0.f;
+    spot.spot_profile[3] = 0.5f;
+    spot.spot_profile[4] = 0.3f;
+    RenderOptions opt;
+    opt.spp = 3;
+    opt.seed = 11;
+    int compared = 0;
+    for (int variant = 0; variant < 3; ++variant) {
+        const bool env = variant > 0;
+        d.has_envmap = env;
+        if (env) d.envmap.values = {sky.data(), 4, 8, 3};
+        if (variant == 2) {
+            d.meshes.push_back(bulb_mesh.desc(2));
+            d.meshes.back().emission = le2.desc();
+            d.meshes.back().sample_solid_angle = true;
+            d.meshes.push_back(tri_lamp.desc(2));
+            d.meshes.back().emission = le.desc();
+            d.meshes.back().sample_spherical_triangle = true;
+            d.meshes.push_back(spot_panel.desc(2));
+            d.meshes.back().emission = glow_tex;
+            d.meshes.back().spot = true;
+            d.meshes.back().spot_profile[1] = -1.f;
+            d.meshes.back().spot_profile[2] = 0.f;
+            d.point_lights = {bulb, spot};
+        }
+        auto scene = build_scene(d);
+        const int W = image_width(*scene), H = image_height(*scene);
+        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
+            for (int bounces : {0, 1, 3, 40}) {
+                if (sampling != LightSampling::MIS && bounces == 40) continue;
+                opt.sampling = sampling;
+                opt.max_bounces = bounces;
+                std::vector<float> reference(size_t(W) * H * 3);
+                RayCounters counters;
+                for (int y = 0; y < H; ++y)
+                    for (int x = 0; x < W; ++x) {
+                        double sum[3] = {0, 0, 0};
+                        for (int s = 0; s < opt.spp; ++s) {
+                            CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
+                            const Vec3f L = trace_path(*scene, opt, cs.ray, cs.rng, counters);
+                            for (int k = 0; k < 3; ++k) sum[k] += L[k];
+                        }
+                        for (int k = 0; k < 3; ++k) reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
+                    }
+                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
+                                         std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
+                double total = 0;
+                for (float v : reference) total += v;
+                EXPECT_GT(total, 0.0) << what;
+                for (int threads : {1, 2}) {
+                    opt.num_threads = threads;
+                    std::vector<float> image(reference.size());
+                    const RenderStats st = render(*scene, opt, image.data());
+                    int differing = 0;
+                    for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
+                    EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
+                    EXPECT_EQ(st.camera_rays, counters.camera) << what;
+                    EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
+                    EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
+                    ++compared;
+                }
+            }
+    }
+    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+}
+
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
 // is the one light_pdf gives the same point (MIS needs both to agree), and the irradiance it
 // estimates at a few points equals the area sampling's estimate of the same mesh (measured:

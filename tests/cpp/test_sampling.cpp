@@ -380,6 +380,55 @@ TEST(Envmap, MitsubaLookupConvention) {
     EXPECT_NEAR(env.eval(dir(6.5 / W, 1 - 1e-6)).x, 406.f, 1e-2f);  // last row
 }
 
+// A constant (1x1) map, looked up without the direction's longitude: its value is its texel
+// times the scale in every direction, within rounding of the bilinear lookup of the texel
+// against itself, and its density is the general lookup's bit for bit (it depends on the
+// latitude alone), with and without the value, rotated; its samples' value and density agree.
+TEST(Envmap, ConstantMapLookup) {
+    const float texel[3] = {0.2f, 0.25f, 0.3f};
+    EnvmapDesc d;
+    d.values.data = texel;
+    d.values.height = d.values.width = 1;
+    d.values.channels = 3;
+    d.scale = 1.7f;
+    const float c = std::cos(0.4f), s = std::sin(0.4f);
+    const float R[9] = {c, 0, s, 0, 1, 0, -s, 0, c};
+    std::copy(R, R + 9, d.to_world);
+    Envmap env;
+    env.build(d);
+    ASSERT_TRUE(env.constant());
+    const Vec3f value = Vec3f::load(texel) * d.scale;
+    Rng rng(3, 9);
+    for (int i = 0; i < 2000; ++i) {
+        const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
+        const Vec3f L = env.eval(w);
+        float pdf = -1.f;
+        const Vec3f L2 = env.eval(w, pdf);
+        for (int k = 0; k < 3; ++k) {
+            EXPECT_EQ(L[k], value[k]);
+            EXPECT_EQ(L2[k], value[k]);
+            // The general lookup: the same texel, weights adding up to 1 up to rounding.
+            EXPECT_NEAR(env.eval_at(env.position(w))[k], value[k], 2e-7f * value[k]);
+        }
+        EXPECT_EQ(pdf, env.pdf_at(env.position(w)));
+        EXPECT_EQ(env.pdf(w), pdf);
+        Vec3f ws;
+        float spdf;
+        const float u1 = rng.next_float(), u2 = rng.next_float();
+        ASSERT_TRUE(env.sample(u1, u2, ws, spdf));
+        EXPECT_EQ(env.eval(ws).x, value.x);
+        // Its one cell, without the distribution's search: the same numbers as with it.
+        float v1 = u1, v2 = u2;
+        int row = -1, col = -1;
+        env.dist.sample(v1, v2, row, col);
+        EXPECT_EQ(row, 0);
+        EXPECT_EQ(col, 0);
+        EXPECT_EQ(v1, u1);
+        EXPECT_EQ(v2, u2);
+        if (std::abs(env.to_local(ws).y) < 0.99f) EXPECT_NEAR(env.pdf(ws), spdf, 2e-3f * spdf);
+    }
+}
+
 TEST(Envmap, FootprintDerivativeMatchesFiniteDifferences) {
     const int W = 7, H = 6;
     std::vector<float> data(W * H * 3);
