@@ -1,6 +1,7 @@
 // Piecewise-constant distributions in one and two dimensions.
 #pragma once
 #include <algorithm>
+#include <cmath>
 #include <vector>
 
 namespace edgepath {
@@ -15,6 +16,7 @@ public:
         cdf_.assign(n_ + 1, 0.0);
         for (int i = 0; i < n_; ++i) cdf_[i + 1] = cdf_[i] + std::max(0.0, weights[i]);
         total_ = cdf_[n_];
+        count_ = n_ <= 8 && std::isfinite(total_);
         pmf_.assign(n_, 0.f);
         if (total_ > 0)
             for (int i = 0; i < n_; ++i) {
@@ -45,9 +47,17 @@ public:
             // The last bin with cdf <= u, as the binary search below finds it: from the guide
             // table's entry for u's slice, forwards (and backwards, where rounding put u's
             // slice a step beyond u).
-            i = guide_[size_t(std::min(int(uu * double(n_)), n_ - 1))];
-            while (i > 0 && cdf_[i] > uu) --i;
-            while (i + 1 < n_ && cdf_[i + 1] <= uu) ++i;
+            if (count_) {
+                // A few bins (a light of a quad or two): the cdf being monotone and cdf_[0] = 0
+                // <= u, that bin is the number of cdf_[1..n-1] at or below u, counted without
+                // branches (a walk's data-dependent branches mispredict about once a call).
+                i = 0;
+                for (int k = 1; k < n_; ++k) i += int(cdf_[k] <= uu);
+            } else {
+                i = guide_[size_t(std::min(int(uu * double(n_)), n_ - 1))];
+                while (i > 0 && cdf_[i] > uu) --i;
+                while (i + 1 < n_ && cdf_[i + 1] <= uu) ++i;
+            }
         } else {
             i = int(std::upper_bound(cdf_.begin(), cdf_.end(), uu) - cdf_.begin()) - 1;
             i = std::clamp(i, 0, n_ - 1);
@@ -59,6 +69,7 @@ public:
     }
 
 private:
+    bool count_ = false;  // few bins and a finite cdf: sample() counts rather than walks
     int n_ = 0;
     double total_ = 0;
     std::vector<double> cdf_;

@@ -314,6 +314,48 @@ TEST(Distribution, GuideTableAgreesWithBinarySearch) {
     }
 }
 
+// A distribution of a few bins (a light of one or a few quads) counts the cdf entries at or
+// below u rather than walking from the guide table: the same bin as a binary search, and the
+// same position inside it, for weights with empty bins and plateaus and u at the bins' borders.
+TEST(Distribution, FewBinsAgreeWithBinarySearch) {
+    Rng rng(9, 3);
+    for (int trial = 0; trial < 400; ++trial) {
+        const int n = 1 + trial % 10;  // 1 to 8 counted, 9 and 10 walked
+        std::vector<double> w(static_cast<size_t>(n), 0.0);
+        for (int i = 0; i < n; ++i) {
+            const float r = rng.next_float();
+            w[size_t(i)] = r < 0.3f ? 0.0 : (r < 0.4f ? 1e7 : double(rng.next_float()));
+        }
+        if (trial % 7 == 0) w[size_t(n - 1)] = 0.0;
+        if (std::all_of(w.begin(), w.end(), [](double x) { return x == 0.0; })) w[0] = 1.0;
+        const Distribution1D d(w);
+        std::vector<double> cdf(size_t(n) + 1, 0.0);
+        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] = cdf[size_t(i)] + w[size_t(i)];
+        const double total = cdf[size_t(n)];
+        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] /= total;
+        cdf[size_t(n)] = 1.0;
+        std::vector<float> us = {0.f, 0.99999994f};
+        for (int k = 0; k < 200; ++k) us.push_back(rng.next_float());
+        for (int i = 0; i <= n; ++i) {
+            const float c = float(cdf[size_t(i)]);
+            for (float u : {c, std::nextafter(c, 0.f), std::nextafter(c, 1.f)})
+                if (u >= 0.f && u < 1.f) us.push_back(u);
+        }
+        for (float u0 : us) {
+            const double uu = u0;
+            int want = int(std::upper_bound(cdf.begin(), cdf.end(), uu) - cdf.begin()) - 1;
+            want = std::clamp(want, 0, n - 1);
+            while (d.pmf(want) == 0.f && want > 0) --want;
+            const double width = cdf[size_t(want) + 1] - cdf[size_t(want)];
+            const float want_u =
+                width > 0 ? float(std::clamp((uu - cdf[size_t(want)]) / width, 0.0, 0.99999994)) : 0.f;
+            float u = u0;
+            ASSERT_EQ(d.sample(u), want) << "n " << n << " u " << u0;
+            ASSERT_EQ(u, want_u) << "n " << n << " u " << u0;
+        }
+    }
+}
+
 TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
     const int W = 12, H = 7;
     std::vector<float> data(W * H * 3);
