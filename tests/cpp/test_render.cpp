@@ -547,6 +547,47 @@ TEST(Render, PacketsMatchSingleRays) {
     }
 }
 
+// trace_path's image of `scene`: each pixel the mean of trace_path over its camera samples,
+// traced one at a time with their own streams (black outside a fisheye's image circle; counted
+// in `outside`). `counters` gets its rays.
+std::vector<float> trace_path_image(const Scene& scene, const RenderOptions& opt, RayCounters& counters,
+                                    int* outside = nullptr) {
+    const int W = image_width(scene), H = image_height(scene);
+    std::vector<float> image(size_t(W) * H * 3);
+    for (int y = 0; y < H; ++y)
+        for (int x = 0; x < W; ++x) {
+            double sum[3] = {0, 0, 0};
+            for (int s = 0; s < opt.spp; ++s) {
+                CameraSample cs = camera_sample(scene, opt.seed, x, y, s);
+                if (outside) *outside += cs.outside;
+                const Vec3f L = cs.outside ? Vec3f(0.f) : trace_path(scene, opt, cs.ray, cs.rng, counters);
+                for (int k = 0; k < 3; ++k) sum[k] += L[k];
+            }
+            for (int k = 0; k < 3; ++k) image[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
+        }
+    return image;
+}
+
+// render() on 1 and 2 threads: `reference` bit for bit, with the same rays (`counters`).
+// Returns the number of renders compared.
+int expect_render_matches(const Scene& scene, RenderOptions opt, const std::vector<float>& reference,
+                          const RayCounters& counters, const std::string& what) {
+    int compared = 0;
+    for (int threads : {1, 2}) {
+        opt.num_threads = threads;
+        std::vector<float> image(reference.size());
+        const RenderStats st = render(scene, opt, image.data());
+        int differing = 0;
+        for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
+        EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
+        EXPECT_EQ(st.camera_rays, counters.camera) << what;
+        EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
+        EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
+        ++compared;
+    }
+    return compared;
+}
+
 // The forward pass advances its paths in batches, bounce by bounce, their shadow and
 // continuation rays traced in Embree packets (render/batch.h). Each path's radiance is still
 // trace_path's, bit for bit: the image equals, pixel by pixel, the mean of trace_path over the
@@ -628,21 +669,8 @@ TEST(Render, BatchedPathsMatchTracePath) {
                     opt.sampling = sampling;
                     opt.hide_emitters = hide;
                     opt.max_bounces = bounces;
-                    std::vector<float> reference(size_t(W) * H * 3);
                     RayCounters counters;
-                    for (int y = 0; y < H; ++y)
-                        for (int x = 0; x < W; ++x) {
-                            double sum[3] = {0, 0, 0};
-                            for (int s = 0; s < opt.spp; ++s) {
-                                CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
-                                outside += cs.outside;
-                                const Vec3f L =
-                                    cs.outside ? Vec3f(0.f) : trace_path(*scene, opt, cs.ray, cs.rng, counters);
-                                for (int k = 0; k < 3; ++k) sum[k] += L[k];
-                            }
-                            for (int k = 0; k < 3; ++k)
-                                reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
-                        }
+                    const std::vector<float> reference = trace_path_image(*scene, opt, counters, &outside);
                     const std::string what = "camera " + std::to_string(int(type)) + ", sampling " +
                                              std::to_string(int(sampling)) + ", hide " + std::to_string(hide) + ", " +
                                              std::to_string(bounces) + " bounces";
@@ -652,19 +680,7 @@ TEST(Render, BatchedPathsMatchTracePath) {
                         EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
                     else
                         EXPECT_GT(total, 0.0) << what;
-                    for (int threads : {1, 2}) {
-                        opt.num_threads = threads;
-                        std::vector<float> image(reference.size());
-                        const RenderStats st = render(*scene, opt, image.data());
-                        int differing = 0;
-                        for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
-                        EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
-                        // The same rays as trace_path's.
-                        EXPECT_EQ(st.camera_rays, counters.camera) << what;
-                        EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
-                        EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
-                        ++compared;
-                    }
+                    compared += expect_render_matches(*scene, opt, reference, counters, what);
                     const ChannelLayout layout({Channel::Depth, Channel::Radiance});
                     std::vector<float> values(size_t(W) * H * 4);
                     render_channels(*scene, opt, layout, values.data(), nullptr);
@@ -772,41 +788,19 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
             d.point_lights = {bulb, spot};
         }
         auto scene = build_scene(d);
-        const int W = image_width(*scene), H = image_height(*scene);
         for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
             for (int bounces : {0, 1, 3, 40}) {
                 if (sampling != LightSampling::MIS && bounces == 40) continue;
                 opt.sampling = sampling;
                 opt.max_bounces = bounces;
-                std::vector<float> reference(size_t(W) * H * 3);
                 RayCounters counters;
-                for (int y = 0; y < H; ++y)
-                    for (int x = 0; x < W; ++x) {
-                        double sum[3] = {0, 0, 0};
-                        for (int s = 0; s < opt.spp; ++s) {
-                            CameraSample cs = camera_sample(*scene, opt.seed, x, y, s);
-                            const Vec3f L = trace_path(*scene, opt, cs.ray, cs.rng, counters);
-                            for (int k = 0; k < 3; ++k) sum[k] += L[k];
-                        }
-                        for (int k = 0; k < 3; ++k) reference[(size_t(y) * W + x) * 3 + k] = float(sum[k] / opt.spp);
-                    }
+                const std::vector<float> reference = trace_path_image(*scene, opt, counters);
                 const std::string what = "variant " + std::to_string(variant) + ", sampling " +
                                          std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
                 double total = 0;
                 for (float v : reference) total += v;
                 EXPECT_GT(total, 0.0) << what;
-                for (int threads : {1, 2}) {
-                    opt.num_threads = threads;
-                    std::vector<float> image(reference.size());
-                    const RenderStats st = render(*scene, opt, image.data());
-                    int differing = 0;
-                    for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
-                    EXPECT_EQ(differing, 0) << what << ", " << threads << " threads";
-                    EXPECT_EQ(st.camera_rays, counters.camera) << what;
-                    EXPECT_EQ(st.shadow_rays, counters.shadow) << what;
-                    EXPECT_EQ(st.bounce_rays, counters.bounce) << what;
-                    ++compared;
-                }
+                compared += expect_render_matches(*scene, opt, reference, counters, what);
             }
     }
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));

@@ -277,6 +277,39 @@ TEST(Distribution, SamplesFollowWeights) {
     }
 }
 
+// Distribution1D's cdf as build() computes it, for weights w.
+std::vector<double> distribution_cdf(const std::vector<double>& w) {
+    const size_t n = w.size();
+    std::vector<double> cdf(n + 1, 0.0);
+    for (size_t i = 0; i < n; ++i) cdf[i + 1] = cdf[i] + w[i];
+    const double total = cdf[n];
+    for (size_t i = 0; i < n; ++i) cdf[i + 1] /= total;
+    cdf[n] = 1.0;
+    return cdf;
+}
+
+// Numbers to sample with: `extra`, `count` from rng, and each cdf entry's float with its two
+// neighbours (those in [0, 1)).
+std::vector<float> border_numbers(const std::vector<double>& cdf, Rng& rng, int count, std::vector<float> extra = {}) {
+    std::vector<float> us = std::move(extra);
+    for (int k = 0; k < count; ++k) us.push_back(rng.next_float());
+    for (double entry : cdf) {
+        const float c = float(entry);
+        for (float u : {c, std::nextafter(c, 0.f), std::nextafter(c, 1.f)})
+            if (u >= 0.f && u < 1.f) us.push_back(u);
+    }
+    return us;
+}
+
+// The bin a binary search over cdf picks for u (an empty bin's pick moved down to the nearest
+// non-empty one below, as Distribution1D does).
+int binary_search_bin(const std::vector<double>& cdf, const Distribution1D& d, double u) {
+    const int n = int(cdf.size()) - 1;
+    int bin = std::clamp(int(std::upper_bound(cdf.begin(), cdf.end(), u) - cdf.begin()) - 1, 0, n - 1);
+    while (d.pmf(bin) == 0.f && bin > 0) --bin;
+    return bin;
+}
+
 // The guide table picks the bin a binary search over the same cdf picks, for skewed weights
 // (one bin holding almost everything, runs of empty bins) and for u at the bins' borders.
 TEST(Distribution, GuideTableAgreesWithBinarySearch) {
@@ -290,26 +323,10 @@ TEST(Distribution, GuideTableAgreesWithBinarySearch) {
         }
         if (trial % 2 == 0) w[size_t(n / 2)] = 1e9;
         const Distribution1D d(w);
-        // The cdf as build() computes it.
-        std::vector<double> cdf(size_t(n) + 1, 0.0);
-        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] = cdf[size_t(i)] + w[size_t(i)];
-        const double total = cdf[size_t(n)];
-        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] /= total;
-        cdf[size_t(n)] = 1.0;
-        std::vector<float> us;
-        for (int k = 0; k < 2000; ++k) us.push_back(rng.next_float());
-        for (int i = 0; i <= n; ++i) {
-            const float c = float(cdf[size_t(i)]);
-            for (float u : {c, std::nextafter(c, 0.f), std::nextafter(c, 1.f)})
-                if (u >= 0.f && u < 1.f) us.push_back(u);
-        }
-        for (float u0 : us) {
-            const double uu = u0;
-            int want = int(std::upper_bound(cdf.begin(), cdf.end(), uu) - cdf.begin()) - 1;
-            want = std::clamp(want, 0, n - 1);
-            while (d.pmf(want) == 0.f && want > 0) --want;
+        const std::vector<double> cdf = distribution_cdf(w);
+        for (float u0 : border_numbers(cdf, rng, 2000)) {
             float u = u0;
-            ASSERT_EQ(d.sample(u), want) << "n " << n << " u " << u0;
+            ASSERT_EQ(d.sample(u), binary_search_bin(cdf, d, u0)) << "n " << n << " u " << u0;
         }
     }
 }
@@ -329,23 +346,10 @@ TEST(Distribution, FewBinsAgreeWithBinarySearch) {
         if (trial % 7 == 0) w[size_t(n - 1)] = 0.0;
         if (std::all_of(w.begin(), w.end(), [](double x) { return x == 0.0; })) w[0] = 1.0;
         const Distribution1D d(w);
-        std::vector<double> cdf(size_t(n) + 1, 0.0);
-        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] = cdf[size_t(i)] + w[size_t(i)];
-        const double total = cdf[size_t(n)];
-        for (int i = 0; i < n; ++i) cdf[size_t(i) + 1] /= total;
-        cdf[size_t(n)] = 1.0;
-        std::vector<float> us = {0.f, 0.99999994f};
-        for (int k = 0; k < 200; ++k) us.push_back(rng.next_float());
-        for (int i = 0; i <= n; ++i) {
-            const float c = float(cdf[size_t(i)]);
-            for (float u : {c, std::nextafter(c, 0.f), std::nextafter(c, 1.f)})
-                if (u >= 0.f && u < 1.f) us.push_back(u);
-        }
-        for (float u0 : us) {
+        const std::vector<double> cdf = distribution_cdf(w);
+        for (float u0 : border_numbers(cdf, rng, 200, {0.f, 0.99999994f})) {
             const double uu = u0;
-            int want = int(std::upper_bound(cdf.begin(), cdf.end(), uu) - cdf.begin()) - 1;
-            want = std::clamp(want, 0, n - 1);
-            while (d.pmf(want) == 0.f && want > 0) --want;
+            const int want = binary_search_bin(cdf, d, uu);
             const double width = cdf[size_t(want) + 1] - cdf[size_t(want)];
             const float want_u =
                 width > 0 ? float(std::clamp((uu - cdf[size_t(want)]) / width, 0.0, 0.99999994)) : 0.f;
