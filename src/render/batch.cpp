@@ -1,6 +1,5 @@
 #include "render/batch.h"
 
-#include <cstring>
 #include <limits>
 
 #include "render/embree_lanes.h"
@@ -85,12 +84,6 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         a[1][k] = v.y;
         a[2][k] = v.z;
     };
-    auto mask = [](bool b) {
-        float f;
-        const uint32_t bits = b ? ~0u : 0u;
-        std::memcpy(&f, &bits, sizeof f);
-        return f;
-    };
     put3(l.p, ps.sp.p);
     put3(l.p_error, ps.sp.p_error);
     put3(l.ng, ps.sp.ng);
@@ -98,12 +91,10 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
     // Scene::bsdf_params' diffuse reflectance; the specular is black.
-    Vec3f diffuse = eval_texture3(mat.diffuse, ps.sp.uv);
-    const Mesh& mesh = scene.meshes[size_t(ps.sp.mesh)];
-    if (mesh.colors) diffuse = diffuse * mesh.color(ps.sp.prim, ps.sp.b1, ps.sp.b2);
+    const Vec3f diffuse = scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
-    l.two_sided[k] = mask(mat.two_sided);
-    l.reflects[k] = mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+    l.two_sided[k] = lane_mask(mat.two_sided);
+    l.reflects[k] = lane_mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
 
     const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
     float ue1 = ul1, ue2 = ul2;
@@ -119,8 +110,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     // Scene::sample_area_light: a triangle picked by power and sampled by area, with a
     // constant emission and no spot, is sampled in the vectors; any other light here, its
     // sample handed to them whole.
-    l.light_on[k] = mask(false);
-    l.light_given[k] = mask(false);
+    l.light_on[k] = lane_mask(false);
+    l.light_given[k] = lane_mask(false);
     if (settings.use_nee && scene.light_distribution.valid()) {
         float u = std::min(ul0, 0.99999994f);
         const int li = scene.light_distribution.sample(u);
@@ -139,8 +130,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
             l.pmf[k] = float(double(scene.light_distribution.pmf(li)));
             l.area[k] = scene.light_triangle_area(m, lt.prim);
             put3(l.emission, Vec3f::load(m.emission.data));
-            l.two_sided_emission[k] = mask(m.two_sided_emission);
-            l.light_on[k] = mask(true);
+            l.two_sided_emission[k] = lane_mask(m.two_sided_emission);
+            l.light_on[k] = lane_mask(true);
         } else {
             LightSample ls;
             if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
@@ -155,15 +146,15 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
                 put3(l.given_p, ls.p);
                 put3(l.given_p_error, ls.p_error);
                 put3(l.given_ng, ls.ng);
-                l.light_on[k] = l.light_given[k] = mask(true);
+                l.light_on[k] = l.light_given[k] = lane_mask(true);
             }
         }
     }
-    l.env_on[k] = mask(false);
+    l.env_on[k] = lane_mask(false);
     if (settings.use_nee && scene.env_sampled) {
         LightSample ls;
         const bool env = scene.sample_env(ue1, ue2, ls);
-        l.env_on[k] = mask(env);
+        l.env_on[k] = lane_mask(env);
         if (env) {
             put3(l.env_dir, ls.dir);
             put3(l.env_radiance, ls.radiance);
@@ -215,6 +206,22 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // what each would add.
         int nshadow = 0, nnext = 0;
         nplain_ = 0;
+        // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
+        // the bounce's packets.
+        auto add_next = [&](PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
+            ps.goes_on = true;
+            ps.next_beta = next_beta;
+            ps.pdf = pdf;
+            ps.delta = delta;
+            ps.next = nnext;
+            set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+            ++nnext;
+        };
+        auto add_shadow = [&](const Ray& r, const Vec3f& value) {
+            set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+            shadow_value[size_t(nshadow)] = value;
+            ++nshadow;
+        };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
             const int material = scene.meshes[size_t(ps.sp.mesh)].material;
@@ -225,19 +232,9 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             shade_vertex(
                 scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
                 [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
-                    ps.goes_on = true;
-                    ps.next_beta = next_beta;
-                    ps.pdf = bs.pdf;
-                    ps.delta = bs.delta;
-                    ps.next = nnext;
-                    set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
-                    ++nnext;
+                    add_next(ps, r, next_beta, bs.pdf, bs.delta);
                 },
-                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
-                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-                    shadow_value[size_t(nshadow)] = value;
-                    ++nshadow;
-                });
+                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
             ps.shadow_end = nshadow;
         }
         // The plain vertices, four at a time; then their rays into the packets.
@@ -245,43 +242,29 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             ShadeLanes<kBatchSize>& l = lanes;
             shade_lanes(l, nplain_, settings.mis);
             auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
-            auto on = [](const float* m, int k) {
-                uint32_t bits;
-                std::memcpy(&bits, m + k, sizeof bits);
-                return bits != 0;
-            };
             for (int k = 0; k < nplain_; ++k) {
                 PathState& ps = paths[live[plain[k]]];
                 ps.sp.ns = get3(l.ns, k);
-                ps.goes_on = on(l.goes_on, k);
+                ps.goes_on = false;
                 ps.shadow_begin = nshadow;
                 Ray r;
-                if (ps.goes_on) {
+                if (lane_set(l.goes_on, k)) {
                     ++counters.bounce;
-                    ps.next_beta = get3(l.next_beta, k);
-                    ps.pdf = l.next_pdf[k];
-                    ps.delta = false;
-                    ps.next = nnext;
                     r.origin = get3(l.next_origin, k);
                     r.dir = get3(l.next_dir, k);
-                    set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
-                    ++nnext;
+                    add_next(ps, r, get3(l.next_beta, k), l.next_pdf[k], false);
                 }
-                if (on(l.light_on, k)) {
+                if (lane_set(l.light_on, k)) {
                     r.origin = get3(l.light_origin, k);
                     r.dir = get3(l.light_dir, k);
                     r.tmax = l.light_tmax[k];
-                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-                    shadow_value[size_t(nshadow)] = get3(l.light_value, k);
-                    ++nshadow;
+                    add_shadow(r, get3(l.light_value, k));
                 }
-                if (on(l.env_on, k)) {
+                if (lane_set(l.env_on, k)) {
                     r.origin = get3(l.env_origin, k);
                     r.dir = get3(l.env_dir, k);
                     r.tmax = std::numeric_limits<float>::infinity();
-                    set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-                    shadow_value[size_t(nshadow)] = get3(l.env_value, k);
-                    ++nshadow;
+                    add_shadow(r, get3(l.env_value, k));
                 }
                 counters.shadow += uint64_t(nshadow - ps.shadow_begin);
                 // The point lights, path by path (shade_vertex's own code).
@@ -290,14 +273,11 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
                     bp.specular = Vec3f(0.f);
-                    bp.two_sided = on(l.two_sided, k);
+                    bp.two_sided = lane_set(l.two_sided, k);
                     bp.kind = MaterialKind::Standard;
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
-                                        [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*, float) {
-                                            set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, shadow_ray);
-                                            shadow_value[size_t(nshadow)] = value;
-                                            ++nshadow;
-                                        });
+                                        [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*,
+                                            float) { add_shadow(shadow_ray, value); });
                 }
                 ps.shadow_end = nshadow;
             }

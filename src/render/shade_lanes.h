@@ -13,6 +13,8 @@
 // samples are the same bit for bit (Render.BatchedPlainPathsMatchTracePath).
 #pragma once
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <limits>
 
 #include "math/ray.h"
@@ -60,6 +62,19 @@ struct ShadeLanes {
         for (size_t i = 0; i < sizeof(*this) / sizeof(float); ++i) all[i] = 0.f;
     }
 };
+
+// A mask lane's float (all bits set: true), and whether lane k of a mask array is set.
+inline float lane_mask(bool b) {
+    float f;
+    const uint32_t bits = b ? ~0u : 0u;
+    std::memcpy(&f, &bits, sizeof f);
+    return f;
+}
+inline bool lane_set(const float* mask, int k) {
+    uint32_t bits;
+    std::memcpy(&bits, mask + k, sizeof bits);
+    return bits != 0;
+}
 
 namespace lanes {
 

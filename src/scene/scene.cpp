@@ -683,12 +683,16 @@ bool Scene::triangle_dpdu(int mesh, int64_t prim, Vec3f& dpdu) const {
     return edgepath::triangle_dpdu(m.vertex(tri[1]) - v0, m.vertex(tri[2]) - v0, d1, d2, dpdu);
 }
 
+Vec3f Scene::diffuse_reflectance(const SurfacePoint& sp) const {
+    const Mesh& mesh = meshes[sp.mesh];
+    const Vec3f kd = eval_texture3(materials[mesh.material].diffuse, sp.uv);
+    return mesh.colors ? kd * mesh.color(sp.prim, sp.b1, sp.b2) : kd;
+}
+
 BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     const Material& m = materials[meshes[sp.mesh].material];
     BsdfParams p;
-    p.diffuse = eval_texture3(m.diffuse, sp.uv);
-    const Mesh& mesh = meshes[sp.mesh];
-    if (mesh.colors) p.diffuse = p.diffuse * mesh.color(sp.prim, sp.b1, sp.b2);
+    p.diffuse = diffuse_reflectance(sp);
     p.specular = eval_texture3(m.specular, sp.uv);
     const float roughness = eval_texture1(m.roughness, sp.uv);
     p.alpha = std::max(roughness, kMinRoughness);

@@ -235,6 +235,9 @@ public:
         __builtin_prefetch(d + sizeof(TriangleData) - 1);
     }
     BsdfParams bsdf_params(const SurfacePoint& sp) const;
+    // bsdf_params' diffuse reflectance alone: the material's diffuse texture at sp's uv, times
+    // the mesh's vertex colour where it has them.
+    Vec3f diffuse_reflectance(const SurfacePoint& sp) const;
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
 
