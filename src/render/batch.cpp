@@ -113,8 +113,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     l.light_on[k] = lane_mask(false);
     l.light_given[k] = lane_mask(false);
     if (settings.use_nee && scene.light_distribution.valid()) {
-        float u = std::min(ul0, 0.99999994f);
-        const int li = scene.light_distribution.sample(u);
+        float u;
+        const int li = scene.pick_light(ul0, u);
         const Scene::EmissiveTriangle& lt = scene.lights[size_t(li)];
         const Mesh& m = scene.meshes[size_t(lt.mesh)];
         if (lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant()) {

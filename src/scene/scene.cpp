@@ -746,8 +746,8 @@ bool Scene::light_cone(const Mesh& m, const Vec3f& p, Vec3f& axis, float& one_mi
 
 bool Scene::sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const {
     if (!light_distribution.valid()) return false;
-    float u = std::min(u0, 0.99999994f);
-    int li = light_distribution.sample(u);
+    float u;
+    const int li = pick_light(u0, u);
     const EmissiveTriangle& lt = lights[li];
     if (lt.prim < 0 && meshes[size_t(lt.mesh)].solid_angle) {
         // By solid angle: a direction uniform in the bounding sphere's cone, then the first of

@@ -2,6 +2,7 @@
 // the light-sampling distributions. Built by build_scene(); update() points it at a new
 // description of the scene and rebuilds only what changed, so that it lives across calls.
 #pragma once
+#include <algorithm>
 #include <cstdint>
 #include <atomic>
 #include <memory>
@@ -251,6 +252,12 @@ public:
     // estimate by a random 0 or 1/p.
     // Samples an area light as seen from p (u0 picks the triangle, by power).
     bool sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const;
+    // The entry of `lights` that sample_area_light picks with u0 (light_distribution valid);
+    // u: u0 kept below 1 and remapped into the entry's bin.
+    int pick_light(float u0, float& u) const {
+        u = std::min(u0, 0.99999994f);
+        return light_distribution.sample(u);
+    }
     // Samples a direction towards the environment (by its radiance).
     bool sample_env(float u1, float u2, LightSample& ls) const;
     // Solid-angle density with which sample_area_light would produce the direction from p to
