@@ -93,12 +93,20 @@ def _load_scene(args) -> MitsubaScene:
 DEFAULT_MAX_BOUNCES = UNBOUNDED_MAX_BOUNCES
 
 
+# True while stderr may end in a line that is not finished: the progress line on a terminal
+# (it is rewritten in place), or one cut short by Ctrl-C between its text and its newline.
+_line_open = False
+
+
 def _progress(done: int, total: int, start: float, final: bool = False) -> None:
+    global _line_open
     elapsed = time.perf_counter() - start
     left = elapsed * (total - done) / done if done else 0.0
     end = "\n" if final or not sys.stderr.isatty() else ""
+    _line_open = True
     print(f"\r{done}/{total} spp, {elapsed:.1f} s elapsed, ~{left:.1f} s left ",
           end=end, file=sys.stderr, flush=True)
+    _line_open = not end
 
 
 def render_in_chunks(loaded: MitsubaScene, chunk_spp: int, num_threads=None, sampling="mis",
@@ -428,6 +436,13 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _say(message: str) -> None:
+    """One line on stderr, on a line of its own even after an unfinished progress line."""
+    global _line_open
+    print(("\n" if _line_open else "") + message, file=sys.stderr)
+    _line_open = False
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     """Runs one command. Exit status: 0 done, 1 an error in the input (one line on stderr),
     2 bad arguments (argparse's usage and one line), 130 interrupted (Ctrl-C)."""
@@ -436,10 +451,10 @@ def main(argv: Optional[List[str]] = None) -> int:
         try:
             args.run(args)
         except (ValueError, OSError, MemoryError) as error:
-            print(f"edgepath {args.command}: error: {error}", file=sys.stderr)
+            _say(f"edgepath {args.command}: error: {error}")
             return 1
     except KeyboardInterrupt:
-        print("edgepath: interrupted", file=sys.stderr)
+        _say("edgepath: interrupted")
         return 130
     return 0
 

@@ -1,6 +1,7 @@
 """The command line (edgepath.cli): render, derivative and info on tiny scenes, run through
 main(argv) (and once as a process)."""
 
+import io
 import os
 import signal
 import subprocess
@@ -280,6 +281,37 @@ def test_bad_arguments_of_derivative_and_demo(scene_file, capsys):
             cli.main(argv)
         _, err = capsys.readouterr()
         assert info.value.code == 2 and "Traceback" not in err and "error: argument" in err, argv
+
+
+class _CutStderr(io.StringIO):
+    """A stderr (terminal or not) where Ctrl-C lands in the first progress line: after its
+    text, before its newline (a pipe) or before the next chunk's line (a terminal)."""
+
+    def __init__(self, tty):
+        super().__init__()
+        self.tty, self.cut = tty, False
+
+    def isatty(self):
+        return self.tty
+
+    def write(self, text):
+        if not self.cut and " spp, " in self.getvalue() and (text == "\n" or self.tty):
+            self.cut = True
+            raise KeyboardInterrupt
+        return super().write(text)
+
+
+@pytest.mark.parametrize("tty", [False, True])
+def test_interrupted_inside_the_progress_line_says_so_on_a_line_of_its_own(
+        quad_obj, tmp_path, monkeypatch, tty):
+    stderr = _CutStderr(tty)
+    monkeypatch.setattr(sys, "stderr", stderr)
+    code = cli.main(["render", str(quad_obj), "-o", str(tmp_path / "out.png"), "--resolution",
+                     "4", "4", "--spp", "4", "--chunk-spp", "1", "--threads", "1"])
+    assert code == 130
+    lines = stderr.getvalue().replace("\r", "\n").strip().splitlines()
+    assert lines[-1] == "edgepath: interrupted" and " spp, " in lines[-2], lines
+    assert not (tmp_path / "out.png").exists()
 
 
 def test_ctrl_c_exits_130_with_one_line(quad_obj, tmp_path):
