@@ -284,25 +284,28 @@ def run_demo(iterations: int = 150, size: int = 128, spp: int = 4, output_dir: O
     gif_frames: List[np.ndarray] = []
     target8 = to_srgb8(target)
     bar = ProgressBar(iterations) if progress else None
-    for step in range(iterations):
-        optimizer.zero_grad()
-        estimate = current()
-        errors = parameter_errors(estimate)
-        image = render(demo_scene(estimate, size), spp=spp, seed=seed + step,
-                       secondary_edges=secondary_edges, **options)
-        loss = image_loss(image, target)
-        loss.backward()
-        optimizer.step()
-        schedule.step()
-        history["loss"].append(loss.item())
-        history["errors"].append(errors)
-        history["relative_error"].append(relative_error(errors, start_errors))
-        if output_dir is not None and (step % frame_every == 0 or step == iterations - 1):
-            gif_frames.append(np.concatenate([target8, to_srgb8(image)], axis=1))
+    try:
+        for step in range(iterations):
+            optimizer.zero_grad()
+            estimate = current()
+            errors = parameter_errors(estimate)
+            image = render(demo_scene(estimate, size), spp=spp, seed=seed + step,
+                           secondary_edges=secondary_edges, **options)
+            loss = image_loss(image, target)
+            loss.backward()
+            optimizer.step()
+            schedule.step()
+            history["loss"].append(loss.item())
+            history["errors"].append(errors)
+            history["relative_error"].append(relative_error(errors, start_errors))
+            if output_dir is not None and (step % frame_every == 0 or step == iterations - 1):
+                gif_frames.append(np.concatenate([target8, to_srgb8(image)], axis=1))
+            if bar is not None:
+                bar.update(step + 1, f"loss {loss.item():.3g}, "
+                                     f"error {history['relative_error'][-1]:.3f}")
+    finally:  # the bar's line is finished even when Ctrl-C or an error stops the loop
         if bar is not None:
-            bar.update(step + 1, f"loss {loss.item():.3g}, error {history['relative_error'][-1]:.3f}")
-    if bar is not None:
-        bar.close()
+            bar.close()
 
     final = current().detach()
     final_errors = parameter_errors(final)

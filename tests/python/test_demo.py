@@ -1,7 +1,11 @@
 """The inverse-rendering demo (``edgepath demo``), reduced: a few iterations on a small film."""
 
+import io
+import sys
+
 import pytest
 
+import edgepath.demo as demo_module
 from edgepath.cli import main
 from edgepath.demo import START, TRUTH, parameter_errors, run_demo
 
@@ -67,3 +71,28 @@ def test_demo_needs_the_secondary_edges():
     assert without.errors["light"] == pytest.approx(start_light, abs=1e-6)
     assert with_edges.errors["light"] < 0.3 * start_light
     assert without.history["relative_error"][-1] > 3 * with_edges.history["relative_error"][-1]
+
+
+class _Terminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+def test_progress_bar_line_is_finished_when_the_loop_is_interrupted(monkeypatch):
+    """Ctrl-C in the second step on a terminal: the bar's line (redrawn in place) still ends in
+    a newline, so the command line's 'interrupted' starts a line of its own."""
+    terminal = _Terminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    calls, render = [], demo_module.render
+
+    def render_then_interrupt(*args, **kwargs):  # the target, the floor, then the steps
+        calls.append(1)
+        if len(calls) == 4:
+            raise KeyboardInterrupt
+        return render(*args, **kwargs)
+
+    monkeypatch.setattr(demo_module, "render", render_then_interrupt, raising=True)
+    with pytest.raises(KeyboardInterrupt):
+        run_demo(iterations=3, size=16, spp=1, output_dir=None, progress=True,
+                 log=lambda line: None)
+    assert " 1/3 " in terminal.getvalue() and terminal.getvalue().endswith("\n")
