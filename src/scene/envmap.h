@@ -1,5 +1,6 @@
 // Lat-long environment map (Mitsuba's convention, see scene/desc.h), importance-sampled by a
-// piecewise-constant distribution over the cells between texels, weighted by sin(theta).
+// piecewise-constant distribution over the cells between texels, weighted by sin(theta); a
+// constant map (one texel), uniformly over the sphere.
 #pragma once
 #include <cmath>
 #include "sampling/distribution.h"
@@ -59,19 +60,18 @@ struct Envmap {
         float x = u * float(cols) - 0.5f;
         x -= float(cols) * std::floor(x / float(cols));
         if (x >= float(cols)) x = 0.f;  // rounding of tiny negative x
-        return {x, row_position(d)};
-    }
-    // Its y alone, from the local direction d.
-    float row_position(const Vec3f& d) const {
         float v = std::acos(std::clamp(d.y, -1.f, 1.f)) * kInvPi;
-        return v * float(rows);
+        return {x, v * float(rows)};
     }
 
     // One texel (a constant environment, as Mitsuba's `constant` emitter): the same value in
-    // every direction. Its lookups skip the direction's longitude (an arc tangent), which only
-    // weighs the texel against itself (the bilinear weights add up to 1, up to rounding), and
-    // its density depends on the latitude alone.
+    // every direction. Its lookups skip the direction's position (an arc tangent and an arc
+    // cosine), which only weighs the texel against itself (the bilinear weights add up to 1, up
+    // to rounding), and it is sampled uniformly over the sphere: density 1 / (4 pi) everywhere,
+    // where the lat-long cells' density would be 1 / (2 pi^2 sin theta), heavier at the poles
+    // and with more variance for the same value.
     bool constant() const { return tex.width == 1 && tex.height == 1; }
+    static constexpr float kUniformPdf = 0.25f * kInvPi;
 
     // The four texels of a lookup, their weights, and the derivatives of the weights with
     // respect to the local direction (for unit directions).
@@ -131,7 +131,7 @@ struct Envmap {
     // The value towards world_dir and the density sample() gives it, from one position lookup.
     Vec3f eval(const Vec3f& world_dir, float& pdf_out) const {
         if (constant()) {
-            pdf_out = pdf_at(Vec2f(0.f, row_position(to_local(world_dir))));
+            pdf_out = dist.valid() ? kUniformPdf : 0.f;
             return texel(0) * scale;
         }
         const Vec2f p = position(world_dir);
@@ -151,7 +151,7 @@ struct Envmap {
 
     float pdf(const Vec3f& world_dir) const {
         if (!dist.valid()) return 0.f;
-        return pdf_at(constant() ? Vec2f(0.f, row_position(to_local(world_dir))) : position(world_dir));
+        return constant() ? kUniformPdf : pdf_at(position(world_dir));
     }
     float pdf_at(const Vec2f& p) const {
         if (!dist.valid()) return 0.f;
@@ -163,10 +163,13 @@ struct Envmap {
 
     bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out) const {
         if (!dist.valid()) return false;
+        if (constant()) {  // uniform: no rotation needed
+            world_dir = square_to_sphere(u1, u2);
+            pdf_out = kUniformPdf;
+            return true;
+        }
         int r = 0, c = 0;
-        // A constant map has one cell, which a number in [0, 1) picks leaving the number as it
-        // is (its cdf is 0 then 1): the distribution's search skipped, the same result.
-        if (!(constant() && u1 >= 0.f && u1 < 1.f && u2 >= 0.f && u2 < 1.f)) dist.sample(u1, u2, r, c);
+        dist.sample(u1, u2, r, c);
         // Cell c lies between columns c and c + 1: u from (c + 0.5) / W to (c + 1.5) / W.
         float x = (float(c) + 0.5f + u2) / float(cols), y = (float(r) + u1) / float(rows);
         float theta = y * kPi, phi = x * 2.f * kPi;

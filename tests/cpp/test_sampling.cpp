@@ -445,7 +445,8 @@ TEST(Envmap, ConstantMapLookup) {
     ASSERT_TRUE(env.constant());
     const Vec3f value = Vec3f::load(texel) * d.scale;
     Rng rng(3, 9);
-    for (int i = 0; i < 2000; ++i) {
+    Acc cosine, z2;
+    for (int i = 0; i < 20000; ++i) {
         const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
         const Vec3f L = env.eval(w);
         float pdf = -1.f;
@@ -456,23 +457,31 @@ TEST(Envmap, ConstantMapLookup) {
             // The general lookup: the same texel, weights adding up to 1 up to rounding.
             EXPECT_NEAR(env.eval_at(env.position(w))[k], value[k], 2e-7f * value[k]);
         }
-        EXPECT_EQ(pdf, env.pdf_at(env.position(w)));
+        // Sampled uniformly over the sphere: one density everywhere, and the sampler's.
+        EXPECT_EQ(pdf, 0.25f * kInvPi);
         EXPECT_EQ(env.pdf(w), pdf);
         Vec3f ws;
-        float spdf;
-        const float u1 = rng.next_float(), u2 = rng.next_float();
-        ASSERT_TRUE(env.sample(u1, u2, ws, spdf));
+        float spdf = -1.f;
+        ASSERT_TRUE(env.sample(rng.next_float(), rng.next_float(), ws, spdf));
+        EXPECT_EQ(spdf, pdf);
         EXPECT_EQ(env.eval(ws).x, value.x);
-        // Its one cell, without the distribution's search: the same numbers as with it.
-        float v1 = u1, v2 = u2;
-        int row = -1, col = -1;
-        env.dist.sample(v1, v2, row, col);
-        EXPECT_EQ(row, 0);
-        EXPECT_EQ(col, 0);
-        EXPECT_EQ(v1, u1);
-        EXPECT_EQ(v2, u2);
-        if (std::abs(env.to_local(ws).y) < 0.99f) EXPECT_NEAR(env.pdf(ws), spdf, 2e-3f * spdf);
+        EXPECT_NEAR(length(ws), 1.f, 1e-6f);
+        // The integral of a clamped cosine about an arbitrary axis (pi), and of z^2 (4 pi / 3).
+        const Vec3f n = normalize(Vec3f(0.3f, -0.5f, 0.8f));
+        cosine.add(std::max(0.f, dot(n, ws)) / spdf);
+        z2.add(ws.z * ws.z / spdf);
     }
+    EXPECT_NEAR(cosine.mean(), kPi, 5 * cosine.se());
+    EXPECT_NEAR(z2.mean(), 4 * kPi / 3, 5 * z2.se());
+    // A black constant map is not sampled.
+    const float black[3] = {0.f, 0.f, 0.f};
+    d.values.data = black;
+    Envmap dark;
+    dark.build(d);
+    Vec3f w;
+    float p;
+    EXPECT_FALSE(dark.sample(0.3f, 0.6f, w, p));
+    EXPECT_EQ(dark.pdf(Vec3f(0.f, 1.f, 0.f)), 0.f);
 }
 
 TEST(Envmap, FootprintDerivativeMatchesFiniteDifferences) {
