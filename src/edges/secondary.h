@@ -96,6 +96,9 @@ public:
 
     // Adds recorded terms again, with the adjoint weight `weight`; returns the adjoint of p.
     Vec3f replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
+    // The same for each output colour at once (math/adjoint.h): colour c's term is that of the
+    // weight's channel c alone, as replay with (weight.x, 0, 0), ... would add it.
+    AVec3 replay_colours(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
 
 private:
     // One edge sample: edge `edge` (index into scene.edges()) at parameter t, the estimate
