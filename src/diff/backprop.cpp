@@ -549,8 +549,8 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
         // random stream, the same for every call on this record. Russian roulette by the
         // throughput: the term is sampled with probability q = min(1, max component of beta)
         // and weighted 1 / q, so that its weight a beta / q stays within the pixel's adjoint
-        // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint,
-        // so the sweeps that replay the terms (one per colour) keep the first sweep's draw.
+        // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint:
+        // one draw serves every colour (and any sweep that replays the terms).
         // A smooth vertex sees edges along one direction only: no boundary term of its own.
         // And by the vertex's class (its mesh and depth): the probability set from a pilot pass
         // (SecondaryEdges::survival; 1 without one), independent of this term's own samples.

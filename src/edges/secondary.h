@@ -43,9 +43,10 @@ struct EdgeTerm {
     EdgeSideGradient g;
 };
 
-// The edge terms of one path's vertices, kept by the first of several sweeps over the same path
-// and replayed by the others (forward-mode derivative images sweep once per colour): which edges
-// and points are sampled, and what the two sides see, do not depend on the adjoint.
+// The edge terms of one path's vertices, kept by a sweep over the path: which edges and points
+// are sampled, and what the two sides see, do not depend on the adjoint. The pilot pass of the
+// survival roulette reads them; a derivative image's sweep (backprop_path_colours) applies them to
+// each colour; another sweep over the same path with another adjoint may replay them.
 struct EdgeTermLog {
     std::vector<EdgeTerm> terms;
     std::vector<uint32_t> begin, end;  // vertex k's terms: [begin[k], end[k])
