@@ -559,8 +559,10 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
         if (secondary && k < secondary->max_bounces() && !delta && q > 0.f) {
             const Vec3f ab_q = ab / q;
             if constexpr (colours) {
-                // Sampled once (a zero weight: nothing added), then applied to each colour.
+                // Sampled once (a zero weight: recorded, nothing added), then applied to each
+                // colour.
                 const size_t b = log->terms.size();
+                log->begin[size_t(k)] = uint32_t(b);
                 Rng rng = Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0);
                 if (q >= 1.f || rng.next_float() < q) {
                     SurfacePoint bent = sp;
@@ -568,6 +570,7 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
                     secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, Vec3f(0.f),
                                    k >= 64 || ((moves >> k) & 1) != 0, rng, sink, &log->terms);
                 }
+                log->end[size_t(k)] = uint32_t(log->terms.size());
                 ha.dp += secondary->replay_colours(log->terms.data() + b, log->terms.size() - b, ab_q, sink);
             } else if (log && log->replaying) {
                 const size_t b = log->begin[size_t(k)];

@@ -76,7 +76,8 @@ public:
     // (the camera, or a mesh the path has met so far); if not, only edges of meshes whose
     // vertices are wanted can contribute, and only those are sampled. Adds the edge vertices'
     // gradients to `sink` and returns the adjoint of the vertex position p.
-    // With `record`, also appends the terms (EdgeTerm) it adds.
+    // With `record`, also appends the terms (EdgeTerm) it adds; with a zero `weight` as well,
+    // it only records them (nothing reaches `sink`, the result is zero).
     Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
               const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink,
               std::vector<EdgeTerm>* record = nullptr) const;
