@@ -223,5 +223,51 @@ TEST(ColourSweep, EqualsThreeSweepsForEveryParameter) {
     }
 }
 
+// The whole pass: each colour of the derivative image (every parameter group's direction at
+// once), summed over the image, against the reverse-mode gradient for the unit adjoint of that
+// colour at every pixel, dotted with the directions (the same paths, the same edge samples).
+TEST(ColourSweep, EachColourEqualsReverseModeWithItsUnitAdjoint) {
+    AllAdjointsScene s;
+    auto scene = build_scene(s.desc);
+    RenderOptions opt;
+    opt.max_bounces = 3;
+    opt.spp = 2;
+    opt.seed = 9;
+    const std::vector<Group> all = groups(s);
+    SceneGradients fwd, rev;
+    for (SceneGradients* g : {&fwd, &rev}) {
+        g->meshes.resize(5);
+        g->materials.resize(5);
+        g->point_lights.resize(1);
+    }
+    std::vector<std::vector<float>> dirs, bufs;
+    for (const Group& grp : all) {
+        dirs.emplace_back(size_t(grp.n));
+        for (size_t i = 0; i < dirs.back().size(); ++i) dirs.back()[i] = float(std::sin(0.7 * double(i) + 0.3));
+        bufs.emplace_back(size_t(grp.n), 0.f);
+    }
+    for (size_t k = 0; k < all.size(); ++k) {
+        all[k].slot(fwd).dir = dirs[k].data();
+        all[k].slot(rev).grad = bufs[k].data();
+    }
+    number_slots(rev);
+    const size_t n = size_t(s.desc.camera.width) * size_t(s.desc.camera.height) * 3;
+    std::vector<float> D(n), adj(n);
+    derivative_image(*scene, opt, fwd, D.data());
+    for (int c = 0; c < 3; ++c) {
+        SCOPED_TRACE("colour " + std::to_string(c));
+        double forward = 0.0;
+        for (size_t i = size_t(c); i < n; i += 3) forward += D[i];
+        for (size_t i = 0; i < n; ++i) adj[i] = i % 3 == size_t(c) ? 1.f : 0.f;
+        for (auto& b : bufs) std::fill(b.begin(), b.end(), 0.f);
+        render_gradients(*scene, opt, adj.data(), rev);
+        double reverse = 0.0;
+        for (size_t k = 0; k < all.size(); ++k)
+            for (size_t i = 0; i < bufs[k].size(); ++i) reverse += double(bufs[k][i]) * dirs[k][i];
+        EXPECT_GT(std::abs(forward), 1e-3);
+        EXPECT_NEAR(forward, reverse, 1e-4 * std::abs(forward)) << "forward " << forward << " reverse " << reverse;
+    }
+}
+
 }  // namespace
 }  // namespace edgepath
