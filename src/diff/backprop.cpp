@@ -340,10 +340,6 @@ Vec3f continuation_weight(const TBsdfParams<float>& bp, const Vec3f& ns, const P
     return T;
 }
 
-}  // namespace
-
-namespace {
-
 // d_delta_scatter (scene/specular.h) for the RGB adjoint `dweight` of the weight and the
 // adjoint `ddir` of the direction: into db (specular, n, wo) and d_eta. Lane by lane for Adj3:
 // colour c's sweep sees the channel c of dweight only.
