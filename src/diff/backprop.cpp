@@ -15,7 +15,8 @@ namespace {
 const GradSlot kNoSlot{};
 }  // namespace
 
-void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv) {
+template <class A>
+void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const A* dval, GradSink& sink, TVec2<A>* duv) {
     if (tex.is_constant()) {
         if (slot.wanted())
             for (int c = 0; c < tex.channels; ++c) sink.add(slot, c, dval[c]);
@@ -26,44 +27,101 @@ void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* 
         for (int c = 0; c < tex.channels; ++c) {
             if (slot.wanted()) sink.add(slot, f.texel[k] * tex.channels + c, f.weight[k] * dval[c]);
             if (duv) {
-                float t = tex.data[f.texel[k] * tex.channels + c] * dval[c];
+                A t = tex.data[f.texel[k] * tex.channels + c] * dval[c];
                 duv->x += f.dweight_du[k] * t;
                 duv->y += f.dweight_dv[k] * t;
             }
         }
 }
 
+template void d_texture<float>(const Texture&, const GradSlot&, Vec2f, const float*, GradSink&, Vec2f*);
+template void d_texture<Adj3>(const Texture&, const GradSlot&, Vec2f, const Adj3*, GradSink&, AVec2*);
+
 namespace {
 
+// An RGB adjoint as the scalar adjoints of its three channels (channel c: colour c's lane).
+template <class A>
+void rgb_adjoint(const Vec3f& v, A out[3]) {
+    out[0] = one_colour<A>(0, v.x);
+    out[1] = one_colour<A>(1, v.y);
+    out[2] = one_colour<A>(2, v.z);
+}
+
+// A linear map of float vectors applied to each colour's lane.
+template <class F>
+AVec3 per_lane(const AVec3& v, F f) {
+    AVec3 r;
+    for (int c = 0; c < 3; ++c) set_lane(r, c, f(lane(v, c)));
+    return r;
+}
+
+Vec3f to_world(const Envmap& env, const Vec3f& d) { return env.to_world_dir(d); }
+AVec3 to_world(const Envmap& env, const AVec3& d) {
+    return per_lane(d, [&](const Vec3f& l) { return env.to_world_dir(l); });
+}
+
+// d_spot_falloff (scene/spot.h) for the adjoint d_out: into dp[kSpotParams] and dw.
+void spot_adjoint(const float* profile, const Vec3f& w, float d_out, float* dp, Vec3f& dw) {
+    d_spot_falloff(profile, w, d_out, dp, dw);
+}
+void spot_adjoint(const float* profile, const Vec3f& w, const Adj3& d_out, Adj3* dp, AVec3& dw) {
+    for (int c = 0; c < 3; ++c) {
+        float p[kSpotParams] = {};
+        Vec3f d = lane(dw, c);
+        d_spot_falloff(profile, w, d_out.v[c], p, d);
+        set_lane(dw, c, d);
+        for (int i = 0; i < kSpotParams; ++i) dp[i].v[c] += p[i];
+    }
+}
+
+// The camera parameters' share of the adjoints of the camera ray (d_origin, d_dir).
+void add_camera(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& d_origin,
+                const Vec3f& d_dir, GradSink& sink) {
+    float cam[kCameraParams] = {};
+    d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, d_origin, d_dir, cam);
+    for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
+}
+void add_camera(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const AVec3& d_origin,
+                const AVec3& d_dir, GradSink& sink) {
+    float cam[3][kCameraParams] = {};
+    for (int c = 0; c < 3; ++c)
+        d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, lane(d_origin, c),
+                     lane(d_dir, c), cam[c]);
+    for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, Adj3(cam[0][i], cam[1][i], cam[2][i]));
+}
+
 // Adjoint of Envmap::eval: texels and rotation into their slots; returns d L / d world
-// direction (the caller decides whether the direction moves).
-Vec3f d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
+// direction (the caller decides whether the direction moves). dL: an RGB adjoint.
+template <class A>
+TVec3<A> d_envmap(const Envmap& env, const SceneGradients& slots, const Vec3f& dir, const Vec3f& dL, GradSink& sink) {
     Envmap::Footprint f = env.footprint(dir);
     const Vec3f dLs = dL * env.scale;
-    Vec3f d_local(0.f);
+    TVec3<A> d_local(A(0));
     for (int k = 0; k < 4; ++k) {
-        if (slots.envmap.wanted()) sink.add3(slots.envmap, f.texel[k], dLs.x * f.weight[k], dLs.y * f.weight[k], dLs.z * f.weight[k]);
-        d_local += f.dweight[k] * dot(dLs, env.texel(f.texel[k]));
+        if (slots.envmap.wanted()) sink.add_rgb<A>(slots.envmap, f.texel[k], dLs * f.weight[k]);
+        d_local += f.dweight[k] * colour_dot<A>(dLs, env.texel(f.texel[k]));
     }
     // local = R^T world: d local_i / d R_ji = world_j; d local / d world = R^T.
     if (slots.envmap_rotation.wanted())
         for (int j = 0; j < 3; ++j)
             for (int i = 0; i < 3; ++i) sink.add(slots.envmap_rotation, 3 * j + i, d_local[i] * dir[j]);
-    return env.to_world_dir(d_local);
+    return to_world(env, d_local);
 }
 
-// Adjoint of Scene::emitted for mesh m at sp towards w, Le = tex(uv) s(w), given the adjoint
-// dLe of Le: into the emission texture (and uv, if duv), the spot profile's slot; returns the
-// adjoint of w.
-Vec3f d_emitted(const Mesh& m, const SceneGradients::MeshSlots* ms, const SurfacePoint& sp, const Vec3f& w,
-                const Vec3f& dLe, GradSink& sink, Vec2f* duv) {
+// Adjoint of Scene::emitted for mesh m at sp towards w, Le = tex(uv) s(w), given the (RGB)
+// adjoint dLe of Le: into the emission texture (and uv, if duv), the spot profile's slot;
+// returns the adjoint of w.
+template <class A>
+TVec3<A> d_emitted(const Mesh& m, const SceneGradients::MeshSlots* ms, const SurfacePoint& sp, const Vec3f& w,
+                   const Vec3f& dLe, GradSink& sink, TVec2<A>* duv) {
     const float s = Scene::spot_scale(m.spot, m.spot_profile, w);
-    float d3[3] = {dLe.x * s, dLe.y * s, dLe.z * s};
+    A d3[3];
+    rgb_adjoint<A>(Vec3f(dLe.x * s, dLe.y * s, dLe.z * s), d3);
     d_texture(m.emission, ms ? ms->emission : kNoSlot, sp.uv, d3, sink, duv);
-    Vec3f dw(0.f);
+    TVec3<A> dw(A(0));
     if (m.spot) {
-        float dp[kSpotParams] = {};
-        d_spot_falloff(m.spot_profile, w, dot(dLe, eval_texture3(m.emission, sp.uv)), dp, dw);
+        A dp[kSpotParams] = {};
+        spot_adjoint(m.spot_profile, w, colour_dot<A>(dLe, eval_texture3(m.emission, sp.uv)), dp, dw);
         if (ms && ms->spot.wanted())
             for (int i = 0; i < kSpotParams; ++i) sink.add(ms->spot, i, dp[i]);
     }
@@ -85,12 +143,13 @@ VertexGeometry::VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& 
     sp = scene.surface_point(hit.mesh, hit.prim, th.b1, th.b2);
 }
 
-void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
-                const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir) {
+template <class A>
+void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
+                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir) {
     const Mesh& m = *g.mesh;
     float b[3] = {1.f - g.th.b1 - g.th.b2, g.th.b1, g.th.b2};
-    float db1 = a.db.x, db2 = a.db.y;
-    Vec3f dv[3] = {a.dtri[0], a.dtri[1], a.dtri[2]};
+    A db1 = a.db.x, db2 = a.db.y;
+    TVec3<A> dv[3] = {a.dtri[0], a.dtri[1], a.dtri[2]};
     // uv = sum b_i uv_i   (or uv = (b1, b2) without uvs)
     if (m.uvs) {
         const int32_t* ti = m.uv_indices + 3 * (g.tri - m.indices) / 3;
@@ -111,11 +170,10 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
         Vec3f c[3];
         for (int k = 0; k < 3; ++k) {
             c[k] = Vec3f::load(m.colors + 3 * int64_t(g.tri[k]));
-            if (ms && ms->colors.wanted())
-                sink.add3(ms->colors, g.tri[k], a.dcolor.x * b[k], a.dcolor.y * b[k], a.dcolor.z * b[k]);
+            if (ms && ms->colors.wanted()) sink.add_rgb<A>(ms->colors, g.tri[k], a.dcolor * b[k]);
         }
-        db1 += dot(a.dcolor, c[1] - c[0]);
-        db2 += dot(a.dcolor, c[2] - c[0]);
+        db1 += colour_dot<A>(a.dcolor, c[1] - c[0]);
+        db2 += colour_dot<A>(a.dcolor, c[2] - c[0]);
     }
     // Shading normal.
     if (m.normals) {
@@ -124,18 +182,18 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
         Vec3f n[3] = {Vec3f::load(m.normals + 3 * ni[0]), Vec3f::load(m.normals + 3 * ni[1]),
                       Vec3f::load(m.normals + 3 * ni[2])};
         Vec3f N = n[0] * b[0] + n[1] * b[1] + n[2] * b[2];
-        Vec3f dN = d_normalize(N, a.dn);
+        TVec3<A> dN = d_normalize(N, a.dn);
         if (ms && ms->normals.wanted())
             for (int k = 0; k < 3; ++k) sink.add3(ms->normals, ni[k], dN.x * b[k], dN.y * b[k], dN.z * b[k]);
         db1 += dot(dN, n[1] - n[0]);
         db2 += dot(dN, n[2] - n[0]);
     }
     // Geometric normal ng = normalize(cross(e1, e2)) (also the shading normal without normals).
-    const Vec3f dng = m.normals ? a.dng : a.dng + a.dn;
+    const TVec3<A> dng = m.normals ? a.dng : a.dng + a.dn;
     if (!is_black(dng)) {
         Vec3f e1 = g.v[1] - g.v[0], e2 = g.v[2] - g.v[0];
-        Vec3f dC = d_normalize(cross(e1, e2), dng);
-        Vec3f de1(0.f), de2(0.f);
+        TVec3<A> dC = d_normalize(cross(e1, e2), dng);
+        TVec3<A> de1(A(0)), de2(A(0));
         d_cross(e1, e2, dC, de1, de2);
         dv[1] += de1;
         dv[2] += de2;
@@ -146,7 +204,7 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
     db1 += dot(a.dp, g.v[1] - g.v[0]);
     db2 += dot(a.dp, g.v[2] - g.v[0]);
     // (t, b1, b2) = intersect(origin, dir, v0, v1, v2)
-    DTriangle<float> dt{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)};
+    DTriangle<A> dt;
     d_intersect_triangle(origin, dir, g.v[0], g.v[1], g.v[2], g.th, a.dt, db1, db2, dt);
     d_origin += dt.o;
     d_dir += dt.d;
@@ -157,8 +215,12 @@ void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradien
         for (int k = 0; k < 3; ++k) sink.add3(ms->vertices, g.tri[k], dv[k].x, dv[k].y, dv[k].z);
 }
 
+template void finish_hit<float>(const VertexGeometry&, const HitAdjoint&, const SceneGradients::MeshSlots*,
+                                GradSink&, const Vec3f&, const Vec3f&, Vec3f&, Vec3f&);
+
+template <class A>
 void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
-               GradSink& sink, HitAdjoint& ha) {
+               GradSink& sink, THitAdjoint<A>& ha) {
     const size_t material = size_t(g.mesh->material);
     const Texture& tex = scene.materials[material].diffuse;
     const GradSlot& slot = material < slots.materials.size() ? slots.materials[material].diffuse : kNoSlot;
@@ -168,12 +230,55 @@ void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients
         d = dval * g.mesh->color(g.sp.prim, g.sp.b1, g.sp.b2);
         ha.dcolor += dval * eval_texture3(tex, g.sp.uv);
     }
-    const float d3[3] = {d.x, d.y, d.z};
+    A d3[3];
+    rgb_adjoint<A>(d, d3);
     d_texture(tex, slot, g.sp.uv, d3, sink, &ha.duv);
 }
 
+template void d_diffuse<float>(const Scene&, const VertexGeometry&, const SceneGradients&, const Vec3f&, GradSink&,
+                               HitAdjoint&);
+
+namespace {
+
+// d_map_normal and d_triangle_dpdu (scene/normal_map.h), lane by lane for Adj3.
+void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v, const Vec3f& d_out,
+                        Vec3f& dn, Vec3f& ddpdu, Vec3f& dv) {
+    d_map_normal(n, has_dpdu, dpdu, v, d_out, dn, ddpdu, dv);
+}
+void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v, const AVec3& d_out,
+                        AVec3& dn, AVec3& ddpdu, AVec3& dv) {
+    for (int c = 0; c < 3; ++c) {
+        Vec3f a = lane(dn, c), b = lane(ddpdu, c), e = lane(dv, c);
+        d_map_normal(n, has_dpdu, dpdu, v, lane(d_out, c), a, b, e);
+        set_lane(dn, c, a);
+        set_lane(ddpdu, c, b);
+        set_lane(dv, c, e);
+    }
+}
+void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2, const Vec3f& ddpdu,
+                           Vec3f& de1, Vec3f& de2, Vec2f& dd1, Vec2f& dd2) {
+    d_triangle_dpdu(e1, e2, d1, d2, ddpdu, de1, de2, dd1, dd2);
+}
+void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2, const AVec3& ddpdu,
+                           AVec3& de1, AVec3& de2, AVec2& dd1, AVec2& dd2) {
+    for (int c = 0; c < 3; ++c) {
+        Vec3f a = lane(de1, c), b = lane(de2, c);
+        Vec2f p(dd1.x.v[c], dd1.y.v[c]), q(dd2.x.v[c], dd2.y.v[c]);
+        d_triangle_dpdu(e1, e2, d1, d2, lane(ddpdu, c), a, b, p, q);
+        set_lane(de1, c, a);
+        set_lane(de2, c, b);
+        dd1.x.v[c] = p.x;
+        dd1.y.v[c] = p.y;
+        dd2.x.v[c] = q.x;
+        dd2.y.v[c] = q.y;
+    }
+}
+
+}  // namespace
+
+template <class A>
 void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, GradSink& sink,
-                  HitAdjoint& ha) {
+                  THitAdjoint<A>& ha) {
     const size_t material = size_t(g.mesh->material);
     const Texture& map = scene.materials[material].normal_map;
     if (map.empty() || is_black(ha.dn)) return;
@@ -182,11 +287,11 @@ void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradie
     const Vec3f n = scene.unmapped_normal(mesh, prim, g.sp.b1, g.sp.b2);
     Vec3f dpdu(0.f);
     const bool has_dpdu = scene.triangle_dpdu(mesh, prim, dpdu);
-    Vec3f dn(0.f), ddpdu(0.f), dv(0.f);
-    d_map_normal(n, has_dpdu, dpdu, eval_texture3(map, g.sp.uv), ha.dn, dn, ddpdu, dv);
+    TVec3<A> dn(A(0)), ddpdu(A(0)), dv(A(0));
+    map_normal_adjoint(n, has_dpdu, dpdu, eval_texture3(map, g.sp.uv), ha.dn, dn, ddpdu, dv);
     ha.dn = dn;
     const GradSlot& slot = material < slots.materials.size() ? slots.materials[material].normal_map : kNoSlot;
-    const float d3[3] = {dv.x, dv.y, dv.z};
+    const A d3[3] = {dv.x, dv.y, dv.z};
     d_texture(map, slot, g.sp.uv, d3, sink, &ha.duv);
     if (!has_dpdu || is_black(ddpdu)) return;
     // dp/du from the triangle's edges and uv differences (Scene::triangle_dpdu).
@@ -198,9 +303,9 @@ void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradie
         d1 = Vec2f(t1[0] - t0[0], t1[1] - t0[1]);
         d2 = Vec2f(t2[0] - t0[0], t2[1] - t0[1]);
     }
-    Vec3f de1(0.f), de2(0.f);
-    Vec2f dd1(0.f, 0.f), dd2(0.f, 0.f);
-    d_triangle_dpdu(g.v[1] - g.v[0], g.v[2] - g.v[0], d1, d2, ddpdu, de1, de2, dd1, dd2);
+    TVec3<A> de1(A(0)), de2(A(0));
+    TVec2<A> dd1, dd2;
+    triangle_dpdu_adjoint(g.v[1] - g.v[0], g.v[2] - g.v[0], d1, d2, ddpdu, de1, de2, dd1, dd2);
     ha.dtri[1] += de1;
     ha.dtri[2] += de2;
     ha.dtri[0] -= de1 + de2;
@@ -213,6 +318,8 @@ void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradie
         ha.dtri_uv[0].y -= dd1.y + dd2.y;
     }
 }
+
+template void d_normal_map<float>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&, HitAdjoint&);
 
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
     return size_t(mesh) < s.meshes.size() ? &s.meshes[mesh] : nullptr;
@@ -233,29 +340,55 @@ Vec3f continuation_weight(const TBsdfParams<float>& bp, const Vec3f& ns, const P
     return T;
 }
 
-}  // namespace
+// d_delta_scatter (scene/specular.h) for the RGB adjoint `dweight` of the weight and the
+// adjoint `ddir` of the direction: into db (specular, n, wo) and d_eta. Lane by lane for Adj3:
+// colour c's sweep sees the channel c of dweight only.
+void delta_adjoint(const DeltaParams<float>& p, const Vec3f& n, const Vec3f& wo, bool refract, float inv_pdf,
+                   const Vec3f& ddir, const Vec3f& dweight, DBsdf<float>& db, float& d_eta) {
+    DDelta<float> dd{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+    d_delta_scatter(p, n, wo, refract, inv_pdf, ddir, dweight, dd);
+    db.specular += dd.specular;
+    db.n += dd.n;
+    db.wo += dd.wo;
+    d_eta += dd.eta;
+}
+void delta_adjoint(const DeltaParams<float>& p, const Vec3f& n, const Vec3f& wo, bool refract, float inv_pdf,
+                   const AVec3& ddir, const Vec3f& dweight, DBsdf<float, Adj3>& db, Adj3& d_eta) {
+    AVec3 dn, dwo;
+    Adj3 de;
+    for (int c = 0; c < 3; ++c) {
+        DDelta<float> dd{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+        d_delta_scatter(p, n, wo, refract, inv_pdf, lane(ddir, c), channel(dweight, c), dd);
+        db.specular[c] += dd.specular[c];
+        set_lane(dn, c, dd.n);
+        set_lane(dwo, c, dd.wo);
+        de.v[c] = dd.eta;
+    }
+    db.n += dn;
+    db.wo += dwo;
+    d_eta += de;
+}
 
-void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
-                   GradSink& sink, const SecondaryEdges* secondary, EdgeTermLog* log) {
+// The sweep, with scalar adjoints of type A (float: backprop_path; Adj3: backprop_path_colours).
+template <class A>
+void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a, GradSink& sink,
+           const SecondaryEdges* secondary, EdgeTermLog* log) {
+    constexpr bool colours = std::is_same_v<A, Adj3>;
     const auto& V = rec.vertices;
     const bool env_wanted = slots.envmap.wanted() || slots.envmap_rotation.wanted();
     if (rec.camera_missed) {
         // L = env(d0), d0 = the camera ray's direction.
         if (rec.emitters_hidden || !scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
         Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
-        Vec3f d_dir = d_envmap(scene.envmap, slots, r.dir, a, sink);
-        if (slots.camera.wanted()) {
-            float cam[kCameraParams] = {};
-            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, Vec3f(0.f), d_dir, cam);
-            for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
-        }
+        TVec3<A> d_dir = d_envmap<A>(scene.envmap, slots, r.dir, a, sink);
+        if (slots.camera.wanted()) add_camera(scene, slots, rec, TVec3<A>(A(0)), d_dir, sink);
         return;
     }
     const int K = int(V.size());
-    if (log && !log->replaying) log->start(size_t(K));
-    Vec3f A_next(0.f);   // adjoint of the throughput after vertex k
-    Vec3f dp_next(0.f);  // adjoint of vertex k's position from the ray that leaves it
-    Vec3f dd_next(0.f);  // adjoint of that ray's direction (used where vertex k is smooth)
+    if (log && (colours || !log->replaying)) log->start(size_t(K));
+    Vec3f A_next(0.f);      // adjoint of the throughput after vertex k
+    TVec3<A> dp_next(A(0));  // adjoint of vertex k's position from the ray that leaves it
+    TVec3<A> dd_next(A(0));  // adjoint of that ray's direction (used where vertex k is smooth)
     if (rec.escaped) {
         const PathVertexRecord& last = V[K - 1];
         Vec3f Le = scene.envmap.eval(last.next_dir);
@@ -264,7 +397,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             // beta after the last vertex = beta_last * T_last
             VertexGeometry g(scene, last.hit, last.origin, last.dir);
             Vec3f T = continuation_weight(bsdf_params_world(scene, g.sp), bend_normal(g.sp.ns, g.sp.ng, -last.dir), last);
-            Vec3f d_dir = d_envmap(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
+            TVec3<A> d_dir = d_envmap<A>(scene.envmap, slots, last.next_dir, a * last.beta * T * rec.escape_weight, sink);
             if (last.next_delta) dd_next = d_dir;
         }
     }
@@ -292,24 +425,24 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         Vec3f wo = -r.dir;
         Vec3f ab = a * r.beta;  // adjoint of anything added to the radiance at this vertex
         Vec3f A_k(0.f);
-        HitAdjoint ha;
+        THitAdjoint<A> ha;
         ha.dp = dp_next;
-        Vec3f dwo(0.f);
+        TVec3<A> dwo(A(0));
 
         // Emission seen at this vertex: E = w Le(uv)
         if (r.emission_weight > 0.f) {
             Vec3f Le = scene.emitted(sp, wo);
             if (!is_black(Le)) {
                 A_k += a * Le * r.emission_weight;
-                dwo += d_emitted(mesh, ms, sp, wo, ab * r.emission_weight, sink, &ha.duv);
+                dwo += d_emitted<A>(mesh, ms, sp, wo, ab * r.emission_weight, sink, &ha.duv);
             }
         }
 
         TBsdfParams<float> bp = bsdf_params_world(scene, sp);
         const bool delta = is_delta_kind(bp.kind, bp.rough);
         const Vec3f ns = bend_normal(sp.ns, sp.ng, wo);
-        DBsdf<float> db{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
-        float d_eta = 0.f;
+        DBsdf<float, A> db;
+        A d_eta = A(0);
         // Next-event estimation: N = f(wo, w_l) Le_l scale, for the area light and the
         // environment samples.
         for (const NeeRecord* nr : {&r.nee_area, &r.nee_env}) {
@@ -319,18 +452,18 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             Vec3f Le;
             if (env) {
                 Le = scene.envmap.eval(nr->dir);
-                if (env_wanted) d_envmap(scene.envmap, slots, nr->dir, ab * f * nr->scale, sink);
+                if (env_wanted) d_envmap<A>(scene.envmap, slots, nr->dir, ab * f * nr->scale, sink);
             } else {
                 const Mesh& lm = scene.meshes[nr->hit.mesh];
                 const SceneGradients::MeshSlots* lms = mesh_slots(slots, nr->hit.mesh);
                 VertexGeometry lg(scene, nr->hit, sp.p, nr->dir);
                 Le = scene.emitted(lg.sp, -nr->dir);
-                HitAdjoint la;
+                THitAdjoint<A> la;
                 // The sample's direction is fixed: the profile's own direction does not move.
-                d_emitted(lm, lms, lg.sp, -nr->dir, ab * f * nr->scale, sink,
-                          lm.emission.is_constant() ? nullptr : &la.duv);
+                d_emitted<A>(lm, lms, lg.sp, -nr->dir, ab * f * nr->scale, sink,
+                             lm.emission.is_constant() ? nullptr : &la.duv);
                 if (!lm.emission.is_constant()) {
-                    Vec3f d_dir_unused(0.f);
+                    TVec3<A> d_dir_unused(A(0));
                     finish_hit(lg, la, lms, sink, sp.p, nr->dir, ha.dp, d_dir_unused);
                 }
             }
@@ -353,7 +486,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             const float s = Scene::spot_scale(pl.spot, pl.spot_profile, -wl);
             const float g = s / dist2;
             A_k += a * f * I * g;
-            DBsdf<float> dl{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
+            DBsdf<float, A> dl;
             d_bsdf_eval_world(bp, ns, wo, wl, ab * I * g, dl);
             db.diffuse += dl.diffuse;
             db.specular += dl.specular;
@@ -361,23 +494,20 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
             db.wo += dl.wo;
             db.alpha += dl.alpha;
             db.eta += dl.eta;
-            Vec3f d_wl = dl.wi;
-            if (ps && ps->intensity.wanted()) {
-                const Vec3f dI = ab * f * g;
-                sink.add3(ps->intensity, 0, dI.x, dI.y, dI.z);
-            }
-            const float dg = dot(ab * f, I);
-            const float d_dist2 = -dg * g / dist2;
+            TVec3<A> d_wl = dl.wi;
+            if (ps && ps->intensity.wanted()) sink.add_rgb<A>(ps->intensity, 0, ab * f * g);
+            const A dg = colour_dot<A>(ab * f, I);
+            const A d_dist2 = -dg * g / dist2;
             if (pl.spot) {
-                float dp[kSpotParams] = {};
-                Vec3f dw(0.f);
-                d_spot_falloff(pl.spot_profile, -wl, dg / dist2, dp, dw);
+                A dp[kSpotParams] = {};
+                TVec3<A> dw(A(0));
+                spot_adjoint(pl.spot_profile, -wl, dg / dist2, dp, dw);
                 d_wl -= dw;
                 if (ps && ps->spot.wanted())
                     for (int i = 0; i < kSpotParams; ++i) sink.add(ps->spot, i, dp[i]);
             }
             const Vec3f to = Vec3f::load(pl.position) - sp.p;
-            const Vec3f d_to = d_normalize(to, d_wl) + to * (2.f * d_dist2);
+            const TVec3<A> d_to = d_normalize(to, d_wl) + to * (2.f * d_dist2);
             if (ps && ps->position.wanted()) sink.add3(ps->position, 0, d_to.x, d_to.y, d_to.z);
             ha.dp -= d_to;
         }
@@ -389,12 +519,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
                 const DeltaParams<float> dp = delta_params(bp);
                 if (delta_scatter(dp, ns, wo, r.next_refract, r.next_inv_pdf, dir, T)) {
                     A_k += T * A_next;
-                    DDelta<float> dd{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f), 0.f};
-                    d_delta_scatter(dp, ns, wo, r.next_refract, r.next_inv_pdf, dd_next, r.beta * A_next, dd);
-                    db.specular += dd.specular;
-                    db.n += dd.n;
-                    db.wo += dd.wo;
-                    d_eta += dd.eta;
+                    delta_adjoint(dp, ns, wo, r.next_refract, r.next_inv_pdf, dd_next, r.beta * A_next, db, d_eta);
                 }
             } else {
                 Vec3f T = bsdf_eval_world(bp, ns, wo, r.next_dir) * r.next_inv_pdf;
@@ -404,13 +529,14 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         // Material parameters at uv.
         {
-            float ds[3] = {db.specular.x, db.specular.y, db.specular.z};
-            float dr[1] = {eval_texture1(mat.roughness, sp.uv) > kMinRoughness ? db.alpha : 0.f};
+            A ds[3];
+            rgb_adjoint<A>(db.specular, ds);
+            A dr[1] = {eval_texture1(mat.roughness, sp.uv) > kMinRoughness ? db.alpha : A(0)};
             d_diffuse(scene, g, slots, db.diffuse, sink, ha);
             d_texture(mat.specular, mats ? mats->specular : kNoSlot, sp.uv, ds, sink, &ha.duv);
             d_texture(mat.roughness, mats ? mats->roughness : kNoSlot, sp.uv, dr, sink, &ha.duv);
             if (mat.kind == MaterialKind::Dielectric || mat.kind == MaterialKind::Plastic) {
-                float de[1] = {d_eta + db.eta};
+                A de[1] = {d_eta + db.eta};
                 d_texture(mat.ior, mats ? mats->ior : kNoSlot, sp.uv, de, sink, &ha.duv);
             }
         }
@@ -419,8 +545,8 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         // random stream, the same for every call on this record. Russian roulette by the
         // throughput: the term is sampled with probability q = min(1, max component of beta)
         // and weighted 1 / q, so that its weight a beta / q stays within the pixel's adjoint
-        // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint,
-        // so the sweeps that replay the terms (one per colour) keep the first sweep's draw.
+        // (unbiased; at the camera vertex beta = 1 and q = 1). q does not depend on the adjoint:
+        // one draw serves every colour (and any sweep that replays the terms).
         // A smooth vertex sees edges along one direction only: no boundary term of its own.
         // And by the vertex's class (its mesh and depth): the probability set from a pilot pass
         // (SecondaryEdges::survival; 1 without one), independent of this term's own samples.
@@ -428,7 +554,21 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         if (secondary) q *= secondary->survival(r.hit.mesh, k);
         if (secondary && k < secondary->max_bounces() && !delta && q > 0.f) {
             const Vec3f ab_q = ab / q;
-            if (log && log->replaying) {
+            if constexpr (colours) {
+                // Sampled once (a zero weight: recorded, nothing added), then applied to each
+                // colour.
+                const size_t b = log->terms.size();
+                log->begin[size_t(k)] = uint32_t(b);
+                Rng rng = Rng::for_sample(rec.stream, uint64_t(k), 0x5ec0);
+                if (q >= 1.f || rng.next_float() < q) {
+                    SurfacePoint bent = sp;
+                    bent.ns = ns;
+                    secondary->add(bent, wo, bp, secondary->max_bounces() - k - 1, Vec3f(0.f),
+                                   k >= 64 || ((moves >> k) & 1) != 0, rng, sink, &log->terms);
+                }
+                log->end[size_t(k)] = uint32_t(log->terms.size());
+                ha.dp += secondary->replay_colours(log->terms.data() + b, log->terms.size() - b, ab_q, sink);
+            } else if (log && log->replaying) {
                 const size_t b = log->begin[size_t(k)];
                 ha.dp += secondary->replay(log->terms.data() + b, log->end[size_t(k)] - b, ab_q, sink);
             } else {
@@ -446,7 +586,7 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         }
         dwo += db.wo;
 
-        Vec3f d_origin(0.f), d_dir(0.f);
+        TVec3<A> d_origin(A(0)), d_dir(A(0));
         d_normal_map(scene, g, slots, sink, ha);
         finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir);
         // wo = -d: the adjoint of the direction of the ray that found this vertex.
@@ -454,13 +594,23 @@ void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRe
         dp_next = d_origin;
         dd_next = d_dir;
         A_next = A_k;
-        if (k == 0 && slots.camera.wanted()) {
-            // The camera ray (origin, d0) comes from the camera parameters.
-            float cam[kCameraParams] = {};
-            d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, d_origin, d_dir, cam);
-            for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
-        }
+        // The camera ray (origin, d0) comes from the camera parameters.
+        if (k == 0 && slots.camera.wanted()) add_camera(scene, slots, rec, d_origin, d_dir, sink);
     }
+}
+
+}  // namespace
+
+void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& a,
+                   GradSink& sink, const SecondaryEdges* secondary, EdgeTermLog* log) {
+    sweep<float>(scene, slots, rec, a, sink, secondary, log);
+}
+
+void backprop_path_colours(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, float w,
+                           GradSink& sink, const SecondaryEdges* secondary, EdgeTermLog* log) {
+    EdgeTermLog scratch;
+    if (secondary && !log) log = &scratch;
+    sweep<Adj3>(scene, slots, rec, Vec3f(w), sink, secondary, log);
 }
 
 }  // namespace edgepath

@@ -19,6 +19,14 @@ struct EdgeTermLog;
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& adjoint,
                    GradSink& sink, const SecondaryEdges* secondary = nullptr, EdgeTermLog* log = nullptr);
 
+// Forward mode (a derivative image): the three colours' sweeps in one, adjoint (w, w, w) with
+// one lane of every scalar adjoint per colour (math/adjoint.h). `sink` (projecting) then holds
+// the three colours' projections (GradSink::take_projections), the same, lane by lane, as three
+// backprop_path calls with the adjoints (w, 0, 0), (0, w, 0), (0, 0, w). With `secondary`, `log`
+// is required: scratch for the edge terms, sampled once and applied to each colour.
+void backprop_path_colours(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, float w,
+                           GradSink& sink, const SecondaryEdges* secondary = nullptr, EdgeTermLog* log = nullptr);
+
 // ---- pieces of the sweep, shared with the output channels (diff/channels.h) ------------------
 
 // The differentiable geometry of a hit: a fixed ray (origin, dir) meeting a triangle.
@@ -32,42 +40,47 @@ struct VertexGeometry {
     VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir);
 };
 
-// Adjoints of the quantities derived from a hit.
-struct HitAdjoint {
-    Vec3f dp, dn, dng;  // position, shading normal (unbent), geometric normal
-    Vec3f dcolor;       // interpolated vertex colour (Mesh::color)
-    Vec2f duv;          // texture coordinates
-    Vec2f db;           // barycentrics (b1, b2)
-    float dt = 0.f;     // distance along the ray
+// Adjoints of the quantities derived from a hit. A: the scalar adjoints' type (float, or Adj3
+// for one lane per output colour); the vertex colour's adjoint is an RGB one (channel c belongs
+// to colour c with Adj3).
+template <class A>
+struct THitAdjoint {
+    TVec3<A> dp, dn, dng;  // position, shading normal (unbent), geometric normal
+    Vec3f dcolor;          // interpolated vertex colour (Mesh::color)
+    TVec2<A> duv;          // texture coordinates
+    TVec2<A> db;           // barycentrics (b1, b2)
+    A dt = A(0);           // distance along the ray
     // Direct adjoints of the triangle's three vertex positions and three uvs (the normal map's
     // tangent depends on them, not through the hit point).
-    Vec3f dtri[3];
-    Vec2f dtri_uv[3];
-    HitAdjoint()
-        : dp(0.f), dn(0.f), dng(0.f), dcolor(0.f), duv(0.f, 0.f), db(0.f, 0.f),
-          dtri{Vec3f(0.f), Vec3f(0.f), Vec3f(0.f)},
-          dtri_uv{Vec2f(0.f, 0.f), Vec2f(0.f, 0.f), Vec2f(0.f, 0.f)} {}
+    TVec3<A> dtri[3];
+    TVec2<A> dtri_uv[3];
+    THitAdjoint() : dcolor(0.f) {}
 };
+using HitAdjoint = THitAdjoint<float>;
 
 // Sends the adjoints `a` of a hit to the mesh's buffers (`ms`, may be null) and adds the
 // adjoint of the ray through the intersection to (d_origin, d_dir).
-void finish_hit(const VertexGeometry& g, const HitAdjoint& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
-                const Vec3f& origin, const Vec3f& dir, Vec3f& d_origin, Vec3f& d_dir);
+template <class A>
+void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
+                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir);
 
 // Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
-void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const float* dval, GradSink& sink, Vec2f* duv);
+template <class A>
+void d_texture(const Texture& tex, const GradSlot& slot, Vec2f uv, const A* dval, GradSink& sink, TVec2<A>* duv);
 
 // Adjoint of the diffuse reflectance at g's hit, diffuse(uv) times the vertex colour
 // (Scene::bsdf_params), for material `material`: texels into its slot, the colour's adjoint
-// into ha.dcolor and the uv's into ha.duv.
+// into ha.dcolor and the uv's into ha.duv. `dval`: an RGB adjoint.
+template <class A>
 void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
-               GradSink& sink, HitAdjoint& ha);
+               GradSink& sink, THitAdjoint<A>& ha);
 
 // Adjoint of the material's normal map at g's hit (Scene::surface_point): turns ha.dn, the
 // adjoint of the mapped shading normal, into that of the normal before the map, and sends the
 // rest to the map's texels (its slot), ha.duv, ha.dtri and ha.dtri_uv. Nothing without a map.
+template <class A>
 void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, GradSink& sink,
-                  HitAdjoint& ha);
+                  THitAdjoint<A>& ha);
 
 // The slots of mesh `mesh`, or null when none were given.
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh);

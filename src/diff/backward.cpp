@@ -167,17 +167,12 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
             GradSink& sink = sinks.local();
             float* o = out + (int64_t(y) * scene.out_width + x) * nv;  // each pixel belongs to one tile: no race
             if (radiance) {
-                // One sweep per colour; the edge terms are sampled by the first and replayed by
-                // the others.
-                EdgeTermLog& log = logs.local();
-                log.replaying = false;
-                for (int c = 0; c < 3; ++c) {
-                    Vec3f e(0.f);
-                    e[c] = inv_spp;
-                    backprop_path(scene, dirs, rec, e, sink, sec, sec ? &log : nullptr);
-                    log.replaying = true;
-                    o[ro + c] += float(sink.take_projection());
-                }
+                // The three colours in one sweep (backprop_path_colours): each colour's value is
+                // that of a sweep with the unit adjoint of its own colour.
+                backprop_path_colours(scene, dirs, rec, inv_spp, sink, sec, sec ? &logs.local() : nullptr);
+                double p[3];
+                sink.take_projections(p);
+                for (int c = 0; c < 3; ++c) o[ro + c] += float(p[c]);
             }
             if (hit_values && !rec.camera_missed) {
                 const PathVertexRecord& v = rec.vertices[0];

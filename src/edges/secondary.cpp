@@ -312,4 +312,25 @@ Vec3f SecondaryEdges::replay(const EdgeTerm* terms, size_t count, const Vec3f& w
     return d_p;
 }
 
+AVec3 SecondaryEdges::replay_colours(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const {
+    AVec3 d_p;
+    for (size_t i = 0; i < count; ++i) {
+        const EdgeTerm& term = terms[i];
+        // As apply: s = weight . u, here one colour's channel at a time.
+        Adj3 s(weight.x * term.u.x, weight.y * term.u.y, weight.z * term.u.z);
+        for (float& v : s.v)
+            if (!std::isfinite(v)) v = 0.f;
+        if (is_zero(s)) continue;
+        const Edge& e = scene_.edges()[size_t(term.edge)];
+        const EdgeSideGradient& g = term.g;
+        if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {
+            const GradSlot& vs = slots_.meshes[size_t(e.mesh)].vertices;
+            sink.add3(vs, e.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
+            sink.add3(vs, e.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
+        }
+        d_p += g.d_o * s;
+    }
+    return d_p;
+}
+
 }  // namespace edgepath

@@ -43,9 +43,10 @@ struct EdgeTerm {
     EdgeSideGradient g;
 };
 
-// The edge terms of one path's vertices, kept by the first of several sweeps over the same path
-// and replayed by the others (forward-mode derivative images sweep once per colour): which edges
-// and points are sampled, and what the two sides see, do not depend on the adjoint.
+// The edge terms of one path's vertices, kept by a sweep over the path: which edges and points
+// are sampled, and what the two sides see, do not depend on the adjoint. The pilot pass of the
+// survival roulette reads them; a derivative image's sweep (backprop_path_colours) applies them to
+// each colour; another sweep over the same path with another adjoint may replay them.
 struct EdgeTermLog {
     std::vector<EdgeTerm> terms;
     std::vector<uint32_t> begin, end;  // vertex k's terms: [begin[k], end[k])
@@ -75,7 +76,8 @@ public:
     // (the camera, or a mesh the path has met so far); if not, only edges of meshes whose
     // vertices are wanted can contribute, and only those are sampled. Adds the edge vertices'
     // gradients to `sink` and returns the adjoint of the vertex position p.
-    // With `record`, also appends the terms (EdgeTerm) it adds.
+    // With `record`, also appends the terms (EdgeTerm) it adds; with a zero `weight` as well,
+    // it only records them (nothing reaches `sink`, the result is zero).
     Vec3f add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfParams<float>& bsdf, int bounces_left,
               const Vec3f& weight, bool position_matters, Rng rng, GradSink& sink,
               std::vector<EdgeTerm>* record = nullptr) const;
@@ -96,6 +98,9 @@ public:
 
     // Adds recorded terms again, with the adjoint weight `weight`; returns the adjoint of p.
     Vec3f replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
+    // The same for each output colour at once (math/adjoint.h): colour c's term is that of the
+    // weight's channel c alone, as replay with (weight.x, 0, 0), ... would add it.
+    AVec3 replay_colours(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const;
 
 private:
     // One edge sample: edge `edge` (index into scene.edges()) at parameter t, the estimate

@@ -8,7 +8,7 @@ namespace edgepath {
 
 template <class T>
 struct TVec2 {
-    T x = 0, y = 0;
+    T x = T(0), y = T(0);
     TVec2() = default;
     TVec2(T x_, T y_) : x(x_), y(y_) {}
     T operator[](int i) const { return i == 0 ? x : y; }
@@ -17,7 +17,7 @@ struct TVec2 {
 
 template <class T>
 struct TVec3 {
-    T x = 0, y = 0, z = 0;
+    T x = T(0), y = T(0), z = T(0);
     TVec3() = default;
     TVec3(T x_, T y_, T z_) : x(x_), y(y_), z(z_) {}
     explicit TVec3(T s) : x(s), y(s), z(s) {}

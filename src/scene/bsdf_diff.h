@@ -7,6 +7,7 @@
 #pragma once
 #include <algorithm>
 #include <cmath>
+#include "math/adjoint.h"
 #include "math/vec.h"
 #include "scene/desc.h"
 #include "scene/plastic.h"
@@ -31,11 +32,14 @@ inline bool is_delta_kind(MaterialKind kind, bool rough) {
     return kind == MaterialKind::Conductor || (kind == MaterialKind::Dielectric && !rough);
 }
 
-template <class T>
+// The adjoints of a BSDF's value: diffuse and specular are RGB adjoints (type T); the others
+// scalar ones (A: float, or Adj3 for one lane per output colour, math/adjoint.h).
+template <class T, class A = T>
 struct DBsdf {
-    TVec3<T> diffuse, specular, n, wo, wi;
-    T alpha = 0;
-    T eta = 0;  // rough dielectric and plastic only
+    TVec3<T> diffuse, specular;
+    TVec3<A> n, wo, wi;
+    A alpha = A(0);
+    A eta = A(0);  // rough dielectric and plastic only
 };
 
 namespace detail {
@@ -47,12 +51,12 @@ template <class T> T ggx_d(T c, T a) {
     T d = c * c * (a * a - 1) + 1;
     return a * a / (pi<T>() * d * d);
 }
-template <class T> void d_ggx_d(T c, T a, T dD, T& dc, T& da) {
+template <class T, class A> void d_ggx_d(T c, T a, A dD, A& dc, A& da) {
     if (c <= 0) return;
     T d = c * c * (a * a - 1) + 1;
     T D = a * a / (pi<T>() * d * d);
     // dD/dd = -2 D / d
-    T dd = -2 * D / d * dD;
+    A dd = -2 * D / d * dD;
     dc += dd * 2 * c * (a * a - 1);
     da += dD * 2 * a / (pi<T>() * d * d) + dd * 2 * a * c * c;
 }
@@ -64,15 +68,15 @@ template <class T> T smith_g1(T c, T ch, T a) {
     T t2 = (1 - c * c) / (c * c);
     return 2 / (1 + std::sqrt(1 + a * a * t2));
 }
-template <class T> void d_smith_g1(T c, T ch, T a, T dG, T& dc, T& da) {
+template <class T, class A> void d_smith_g1(T c, T ch, T a, A dG, A& dc, A& da) {
     if (ch * c <= 0 || c * c >= 1) return;
     T t2 = (1 - c * c) / (c * c);
     T q = std::sqrt(1 + a * a * t2);
     // G = 2 / (1 + q)
-    T dq = -2 / ((1 + q) * (1 + q)) * dG;
+    A dq = -2 / ((1 + q) * (1 + q)) * dG;
     // q = sqrt(1 + a^2 t2)
     da += dq * a * t2 / q;
-    T dt2 = dq * a * a / (2 * q);
+    A dt2 = dq * a * a / (2 * q);
     // t2 = 1 / c^2 - 1
     dc += dt2 * (-2 / (c * c * c));
 }
@@ -100,23 +104,23 @@ bool ggx_geometry(T alpha, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>
 }
 // Adds the adjoint of ggx_geometry, given the adjoints of S and of oh (through a Fresnel factor),
 // to dalpha, dn, dwo, dwi, dco, dci.
-template <class T>
-void d_ggx_geometry(T alpha, const TVec3<T>& n, const TVec3<T>& wo, T co, T ci, const GgxGeometry<T>& g, T dS, T doh,
-                    T& dalpha, TVec3<T>& dn, TVec3<T>& dwo, TVec3<T>& dwi, T& dco, T& dci) {
+template <class T, class A>
+void d_ggx_geometry(T alpha, const TVec3<T>& n, const TVec3<T>& wo, T co, T ci, const GgxGeometry<T>& g, A dS, A doh,
+                    A& dalpha, TVec3<A>& dn, TVec3<A>& dwo, TVec3<A>& dwi, A& dco, A& dci) {
     // S = D Go Gi / (4 co)
-    const T dD = dS * g.Go * g.Gi / (4 * co);
-    const T dGo = dS * g.D * g.Gi / (4 * co);
-    const T dGi = dS * g.D * g.Go / (4 * co);
+    const A dD = dS * g.Go * g.Gi / (4 * co);
+    const A dGo = dS * g.D * g.Gi / (4 * co);
+    const A dGi = dS * g.D * g.Go / (4 * co);
     dco += -dS * g.S / co;
-    T dch = 0;
+    A dch = A(0);
     d_ggx_d(g.ch, alpha, dD, dch, dalpha);
     d_smith_g1(co, g.oh, alpha, dGo, dco, dalpha);
     d_smith_g1(ci, g.oh, alpha, dGi, dci, dalpha);
     // ch = n . h, oh = wo . h, h = H / |H|, H = wo + wi
-    const TVec3<T> dh = n * dch + wo * doh;
+    const TVec3<A> dh = n * dch + wo * doh;
     dn += g.h * dch;
     dwo += g.h * doh;
-    const TVec3<T> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
+    const TVec3<A> dH = (dh - g.h * dot(g.h, dh)) / g.hl;
     dwo += dH;
     dwi += dH;
 }
@@ -147,26 +151,26 @@ template <class T> T fresnel_dielectric(T c, T e) {
     const T rs = (c - a) / (c + a), rp = (b - ct) / (b + ct);
     return (rs * rs + rp * rp) / 2;
 }
-template <class T> void d_fresnel_dielectric(T c, T e, T dF, T& dc, T& de) {
+template <class T, class A> void d_fresnel_dielectric(T c, T e, A dF, A& dc, A& de) {
     const T q = (1 - c * c) / (e * e);
     if (q >= 1) return;
     const T ct = std::sqrt(1 - q), a = e * ct, b = e * c;
     const T rs = (c - a) / (c + a), rp = (b - ct) / (b + ct);
     // F = (rs^2 + rp^2) / 2
-    const T drs = dF * rs, drp = dF * rp;
+    const A drs = dF * rs, drp = dF * rp;
     // rs = (c - a) / (c + a), rp = (b - ct) / (b + ct)
     const T ua = (c + a) * (c + a), ub = (b + ct) * (b + ct);
     dc += drs * 2 * a / ua;
-    const T da = -drs * 2 * c / ua;
-    const T db = drp * 2 * ct / ub;
-    T dct = -drp * 2 * b / ub;
+    const A da = -drs * 2 * c / ua;
+    const A db = drp * 2 * ct / ub;
+    A dct = -drp * 2 * b / ub;
     // a = e ct, b = e c
     de += da * ct + db * c;
     dct += da * e;
     dc += db * e;
     // ct = sqrt(1 - q), q = (1 - c^2) / e^2
     if (ct > 0) {
-        const T dq = -dct / (2 * ct);
+        const A dq = -dct / (2 * ct);
         dc += dq * (-2 * c / (e * e));
         de += dq * (-2 * (1 - c * c) / (e * e * e));
     }
@@ -225,15 +229,16 @@ bool rough_dielectric_terms(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& w
 }
 
 // Adds the adjoint of the rough dielectric's value for its adjoint dv to (dn, dwo, dwi, dalpha, deta).
-template <class T>
-void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T dv,
-                        TVec3<T>& dn, TVec3<T>& dwo, TVec3<T>& dwi, T& dalpha, T& deta) {
+template <class T, class A>
+void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, A dv,
+                        TVec3<A>& dn, TVec3<A>& dwo, TVec3<A>& dwi, A& dalpha, A& deta) {
     RoughDielectricTerms<T> r;
     if (!rough_dielectric_terms(alpha, eta, n, wo, wi, r)) return;
-    T dF = 0, dD = 0, dGo = 0, dGi = 0, dco = 0, dci = 0, doh = 0, dih = 0, de = 0, dch = 0;
+    A dF = A(0), dD = A(0), dGo = A(0), dGi = A(0), dco = A(0), dci = A(0), doh = A(0), dih = A(0), de = A(0),
+      dch = A(0);
     if (r.reflect) {
         // v = F D Go Gi / (4 co)
-        const T k = dv / (4 * r.co);
+        const A k = dv / (4 * r.co);
         dF = k * r.D * r.Go * r.Gi;
         dD = k * r.F * r.Go * r.Gi;
         dGo = k * r.F * r.D * r.Gi;
@@ -243,14 +248,14 @@ void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, c
         // v = oh (-ih) (1 - F) D Go Gi / (co den^2)
         const T base = r.oh * -r.ih / (r.co * r.den * r.den);
         dF = -dv * base * r.D * r.Go * r.Gi;
-        const T k = dv * base * (1 - r.F);
+        const A k = dv * base * (1 - r.F);
         dD = k * r.Go * r.Gi;
         dGo = k * r.D * r.Gi;
         dGi = k * r.D * r.Go;
         doh += dv * (-r.ih) * (1 - r.F) * r.D * r.Go * r.Gi / (r.co * r.den * r.den);
         dih += -dv * r.oh * (1 - r.F) * r.D * r.Go * r.Gi / (r.co * r.den * r.den);
         dco = -dv * r.v / r.co;
-        const T dden = -2 * dv * r.v / r.den;
+        const A dden = -2 * dv * r.v / r.den;
         // den = oh + e ih
         doh += dden;
         de += dden * r.ih;
@@ -263,13 +268,13 @@ void d_rough_dielectric(T alpha, T eta, const TVec3<T>& n, const TVec3<T>& wo, c
     d_smith_g1(r.co, r.oh, alpha, dGo, dco, dalpha);
     d_smith_g1(r.ci, r.ih, alpha, dGi, dci, dalpha);
     // ch = s n . h, oh = wo . h, ih = wi . h
-    const TVec3<T> dh = n * (r.s * dch) + wo * doh + wi * dih;
+    const TVec3<A> dh = n * (r.s * dch) + wo * doh + wi * dih;
     dn += r.h * (r.s * dch);
     dwo += r.h * doh;
     dwi += r.h * dih;
     // h = sg H / |H|
-    const TVec3<T> dh0 = dh * r.sg;
-    const TVec3<T> dH = (dh0 - r.h0 * dot(r.h0, dh0)) / r.hl;
+    const TVec3<A> dh0 = dh * r.sg;
+    const TVec3<A> dH = (dh0 - r.h0 * dot(r.h0, dh0)) / r.hl;
     // H = wo + wi, or wo + e wi
     dwo += dH;
     if (r.reflect) {
@@ -292,7 +297,8 @@ template <class T> T coat_transmittance(const CoatTable& tab, T c, T eta) {
     const CoatLookup l = coat_lookup(float(c));
     return T(tab.t[l.i]) * (1 - T(l.w)) + T(tab.t[l.i + 1]) * T(l.w);
 }
-template <class T> void d_coat_transmittance(const CoatTable& tab, T c, T eta, T dt, T& dc, T& dalpha, T& deta) {
+template <class T, class A>
+void d_coat_transmittance(const CoatTable& tab, T c, T eta, A dt, A& dc, A& dalpha, A& deta) {
     if (tab.smooth) {
         d_fresnel_dielectric(c, eta, -dt, dc, deta);
         return;
@@ -335,24 +341,24 @@ TVec3<T> plastic_terms(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T
 }
 
 // Adds the adjoint of plastic_terms (output adjoint dr) to d, and to dn / dco / dci.
-template <class T>
+template <class T, class A>
 void d_plastic(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, const TVec3<T>& wi, T co, T ci,
-               const TVec3<T>& dr, DBsdf<T>& d, TVec3<T>& dn, T& dco, T& dci) {
+               const TVec3<T>& dr, DBsdf<T, A>& d, TVec3<A>& dn, A& dco, A& dci) {
     PlasticTerms<T> t;
     plastic_terms(p, n, wo, wi, co, ci, t);
     const CoatTable& tab = *p.coat;
     // result = diff k
-    const T dk = dot(dr, t.diff);
-    T dR = 0;
+    const A dk = colour_dot<A>(dr, t.diff);
+    A dR = A(0);
     for (int c = 0; c < 3; ++c) {
         // diff = kd / den, den = 1 - R (linear) or 1 - kd R (nonlinear)
         const T ddiff = dr[c] * t.k, den = t.den[c];
         if (p.nonlinear) {
             d.diffuse[c] += ddiff / (den * den);
-            dR += ddiff * p.diffuse[c] * p.diffuse[c] / (den * den);
+            dR += one_colour<A>(c, ddiff * p.diffuse[c] * p.diffuse[c] / (den * den));
         } else {
             d.diffuse[c] += ddiff / den;
-            dR += ddiff * p.diffuse[c] / (den * den);
+            dR += one_colour<A>(c, ddiff * p.diffuse[c] / (den * den));
         }
     }
     d.alpha += dR * T(tab.dr_dalpha);
@@ -366,8 +372,8 @@ void d_plastic(const TBsdfParams<T>& p, const TVec3<T>& n, const TVec3<T>& wo, c
     if (!t.spec) return;
     // result += ks F g.S
     d.specular += dr * (t.F * t.g.S);
-    const T dFS = dot(dr, p.specular);
-    T doh = 0;
+    const A dFS = colour_dot<A>(dr, p.specular);
+    A doh = A(0);
     if (t.g.oh > 0) d_fresnel_dielectric(t.g.oh, p.eta, dFS * t.g.S, doh, d.eta);
     d_ggx_geometry(p.alpha, n, wo, co, ci, t.g, dFS * t.F, doh, d.alpha, dn, d.wo, d.wi, dco, dci);
 }
@@ -389,9 +395,9 @@ TVec3<T> bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo)
 }
 
 // Adds the adjoint of bend_normal for the output adjoint `dout` to (dns, dwo); ng is a constant.
-template <class T>
-void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, const TVec3<T>& dout, TVec3<T>& dns,
-                   TVec3<T>& dwo) {
+template <class T, class A>
+void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, const TVec3<A>& dout, TVec3<A>& dns,
+                   TVec3<A>& dwo) {
     const T s = dot(wo, ng) < 0 ? T(-1) : T(1), d = dot(wo, ns);
     if (s * d >= T(kMinShadingCosine)) {
         dns += dout;
@@ -399,8 +405,8 @@ void d_bend_normal(const TVec3<T>& ns, const TVec3<T>& ng, const TVec3<T>& wo, c
     }
     // N = ns + k wo, k = s c - wo . ns
     const T k = s * T(kMinShadingCosine) - d;
-    const TVec3<T> dN = d_normalize(ns + wo * k, dout);
-    const T dk = dot(dN, wo);
+    const TVec3<A> dN = d_normalize(ns + wo * k, dout);
+    const A dk = dot(dN, wo);
     dns += dN - wo * dk;
     dwo += dN * k - ns * dk;
 }
@@ -431,12 +437,12 @@ TVec3<T> bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo
 }
 
 // Adds to `d` the adjoint of bsdf_eval_world for the output adjoint `dr`.
-template <class T>
+template <class T, class A>
 void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, const TVec3<T>& wi,
-                       const TVec3<T>& dr, DBsdf<T>& d) {
+                       const TVec3<T>& dr, DBsdf<T, A>& d) {
     if (p.kind == MaterialKind::Dielectric && p.rough) {
         // result = (v, v, v)
-        detail::d_rough_dielectric(p.alpha, p.eta, n, wo, wi, dr.x + dr.y + dr.z, d.n, d.wo, d.wi, d.alpha, d.eta);
+        detail::d_rough_dielectric(p.alpha, p.eta, n, wo, wi, colour_sum<A>(dr), d.n, d.wo, d.wi, d.alpha, d.eta);
         return;
     }
     if (p.kind != MaterialKind::Standard && p.kind != MaterialKind::Plastic) return;
@@ -448,23 +454,23 @@ void d_bsdf_eval_world(const TBsdfParams<T>& p, TVec3<T> n, const TVec3<T>& wo, 
     }
     T ci = dot(n, wi);
     if (co <= 0 || ci <= 0) return;
-    TVec3<T> dn(T(0));
-    T dco = 0, dci = 0;
+    TVec3<A> dn(A(0));
+    A dco = A(0), dci = A(0);
     if (p.kind == MaterialKind::Plastic) {
         detail::d_plastic(p, n, wo, wi, co, ci, dr, d, dn, dco, dci);
     } else {
         // result = diffuse * ci / pi
         d.diffuse += dr * (ci / detail::pi<T>());
-        dci += dot(dr, p.diffuse) / detail::pi<T>();
+        dci += colour_dot<A>(dr, p.diffuse) / detail::pi<T>();
         detail::GgxTerms<T> g;
         if (!is_black(p.specular) && detail::ggx_terms(p, n, wo, wi, co, ci, g)) {
             // result += F * S
             TVec3<T> dF = dr * g.S;
-            T dS = dot(dr, g.F);
+            A dS = colour_dot<A>(dr, g.F);
             // F = ks + (1 - ks) m^5, m = clamp(1 - oh)
             d.specular += dF * (1 - g.m5);
             T m4 = g.m * g.m * g.m * g.m;
-            T dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? dot(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : T(0);
+            A dm = (1 - g.oh > 0 && 1 - g.oh < 1) ? colour_dot<A>(dF, TVec3<T>(T(1)) - p.specular) * 5 * m4 : A(0);
             detail::d_ggx_geometry(p.alpha, n, wo, co, ci, g, dS, -dm, d.alpha, dn, d.wo, d.wi, dco, dci);
         }
     }

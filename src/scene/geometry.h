@@ -1,6 +1,7 @@
 // Where a fixed ray meets a triangle's plane, and its adjoint. The gradient pass holds ray
 // directions fixed, so a hit point moves with the ray origin and with the triangle it lands on.
 #pragma once
+#include "math/adjoint.h"
 #include "math/vec.h"
 
 namespace edgepath {
@@ -38,24 +39,25 @@ bool intersect_triangle(const TVec3<T>& o, const TVec3<T>& d, const TVec3<T>& v0
     return true;
 }
 
-template <class T>
+template <class A>
 struct DTriangle {
-    TVec3<T> o, d, v0, v1, v2;
+    TVec3<A> o, d, v0, v1, v2;
 };
 
 // Adjoint of intersect_triangle. With M = [-d, e1, e2] and x = (t, b1, b2), M x = o - v0, so
 // lambda = M^-T dx and do = lambda, dv0 = -lambda, dd = lambda t, de1 = -lambda b1, de2 = -lambda b2.
-template <class T>
+// A: the adjoints' scalar (math/adjoint.h).
+template <class T, class A>
 void d_intersect_triangle(const TVec3<T>& /*o*/, const TVec3<T>& d, const TVec3<T>& v0, const TVec3<T>& v1,
-                          const TVec3<T>& v2, const TriangleHit<T>& h, T dt, T db1, T db2, DTriangle<T>& g) {
+                          const TVec3<T>& v2, const TriangleHit<T>& h, A dt, A db1, A db2, DTriangle<A>& g) {
     TVec3<T> e1 = v1 - v0, e2 = v2 - v0, nd = -d;
     T det = dot(nd, cross(e1, e2));
     if (det == 0) return;
     // Rows of M^T are (-d, e1, e2); its inverse has columns (e1 x e2, e2 x -d, -d x e1) / det.
-    TVec3<T> lambda = (cross(e1, e2) * dt + cross(e2, nd) * db1 + cross(nd, e1) * db2) / det;
+    TVec3<A> lambda = (cross(e1, e2) * dt + cross(e2, nd) * db1 + cross(nd, e1) * db2) / det;
     g.o += lambda;
     g.d += lambda * h.t;
-    TVec3<T> de1 = -lambda * h.b1, de2 = -lambda * h.b2;
+    TVec3<A> de1 = -lambda * h.b1, de2 = -lambda * h.b2;
     g.v0 += -lambda - de1 - de2;
     g.v1 += de1;
     g.v2 += de2;

@@ -5,6 +5,7 @@
 #pragma once
 #include <cstdint>
 #include <vector>
+#include "math/adjoint.h"
 #include "scene/camera.h"
 
 namespace edgepath {
@@ -104,6 +105,30 @@ public:
         add(slot, 3 * i + 1, y);
         add(slot, 3 * i + 2, z);
     }
+    // One value per output colour (math/adjoint.h): forward mode only, into the projections of
+    // the three colours (take_projections).
+    void add(const GradSlot& slot, int64_t i, const Adj3& v) {
+        if (!slot.dir) return;
+        const double d = double(slot.dir[i]);
+        colour_projection_[0] += d * v.v[0];
+        colour_projection_[1] += d * v.v[1];
+        colour_projection_[2] += d * v.v[2];
+    }
+    void add3(const GradSlot& slot, int64_t i, const Adj3& x, const Adj3& y, const Adj3& z) {
+        add(slot, 3 * i, x);
+        add(slot, 3 * i + 1, y);
+        add(slot, 3 * i + 2, z);
+    }
+    // The RGB adjoint v of an RGB parameter triple: channel c belongs to colour c with Adj3.
+    template <class A>
+    void add_rgb(const GradSlot& slot, int64_t i, const Vec3f& v) {
+        if constexpr (std::is_same_v<A, Adj3>) {
+            if (!slot.dir) return;
+            for (int c = 0; c < 3; ++c) colour_projection_[c] += double(slot.dir[3 * i + c]) * v[c];
+        } else {
+            add3(slot, i, v.x, v.y, v.z);
+        }
+    }
 
     void flush() {
         for (auto& e : cache_)
@@ -117,6 +142,13 @@ public:
         projection_ = 0.0;
         return p;
     }
+    // The three colours' projections of the Adj3 values added since the last call.
+    void take_projections(double out[3]) {
+        for (int c = 0; c < 3; ++c) {
+            out[c] = colour_projection_[c];
+            colour_projection_[c] = 0.0;
+        }
+    }
 
 private:
     static constexpr int kCacheSize = 256, kWays = 4;
@@ -128,6 +160,7 @@ private:
     };
     bool project_;
     double projection_ = 0.0;
+    double colour_projection_[3] = {0.0, 0.0, 0.0};
     Entry cache_[kCacheSize];
 };
 

@@ -1,0 +1,115 @@
+// Adjoint types of the gradient pass's sweep (diff/backprop.h). The sweep is linear in its
+// adjoint; its colour operations are component-wise (throughputs, reflectances, emission), so the
+// adjoint of an RGB quantity with the unit adjoint of colour c stays zero outside channel c. Only
+// the scalar adjoints (positions, normals, directions, roughness, uvs: anything the forward pass
+// computes from a reduction over colours) mix the colours. A derivative image (three outputs per
+// pixel) therefore sweeps once with the adjoint (1, 1, 1): its RGB adjoints stay Vec3f, channel c
+// belonging to colour c, and its scalar adjoints are Adj3, one lane per output colour. The
+// gradient pass (one output, the loss) sweeps with float scalar adjoints; the helpers below then
+// reduce to the float expressions (dot, sums) that the sweep always had.
+#pragma once
+#include <type_traits>
+#include "math/vec.h"
+
+namespace edgepath {
+
+// A scalar adjoint for each of the three output colours.
+struct Adj3 {
+    float v[3] = {0.f, 0.f, 0.f};
+    Adj3() = default;
+    explicit Adj3(float s) : v{s, s, s} {}
+    Adj3(float a, float b, float c) : v{a, b, c} {}
+    Adj3& operator+=(const Adj3& o) {
+        v[0] += o.v[0];
+        v[1] += o.v[1];
+        v[2] += o.v[2];
+        return *this;
+    }
+    Adj3& operator-=(const Adj3& o) {
+        v[0] -= o.v[0];
+        v[1] -= o.v[1];
+        v[2] -= o.v[2];
+        return *this;
+    }
+};
+
+inline Adj3 operator+(Adj3 a, const Adj3& b) { return a += b; }
+inline Adj3 operator-(Adj3 a, const Adj3& b) { return a -= b; }
+inline Adj3 operator-(const Adj3& a) { return {-a.v[0], -a.v[1], -a.v[2]}; }
+inline Adj3 operator*(const Adj3& a, float s) { return {a.v[0] * s, a.v[1] * s, a.v[2] * s}; }
+inline Adj3 operator*(float s, const Adj3& a) { return {s * a.v[0], s * a.v[1], s * a.v[2]}; }
+inline Adj3 operator/(const Adj3& a, float s) { return {a.v[0] / s, a.v[1] / s, a.v[2] / s}; }
+inline bool is_zero(const Adj3& a) { return a.v[0] == 0.f && a.v[1] == 0.f && a.v[2] == 0.f; }
+inline bool is_zero(float a) { return a == 0.f; }
+
+// Geometric vectors of Adj3 (one vector per colour) against float vectors, mirroring the
+// expressions of math/vec.h lane by lane.
+using AVec3 = TVec3<Adj3>;
+using AVec2 = TVec2<Adj3>;
+
+inline AVec3 operator*(const Vec3f& a, const Adj3& s) { return {a.x * s, a.y * s, a.z * s}; }
+inline AVec3 operator*(const Adj3& s, const Vec3f& a) { return {a.x * s, a.y * s, a.z * s}; }
+inline AVec3 operator*(const AVec3& a, float s) { return {a.x * s, a.y * s, a.z * s}; }
+inline AVec3 operator*(float s, const AVec3& a) { return {a.x * s, a.y * s, a.z * s}; }
+// As TVec3::operator/=: a multiplication by the reciprocal.
+inline AVec3 operator/(const AVec3& a, float s) {
+    const float r = 1.f / s;
+    return {a.x * r, a.y * r, a.z * r};
+}
+inline Adj3 dot(const Vec3f& a, const AVec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Adj3 dot(const AVec3& a, const Vec3f& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline AVec3 cross(const Vec3f& a, const AVec3& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline AVec3 cross(const AVec3& a, const Vec3f& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline bool is_black(const AVec3& a) { return is_zero(a.x) && is_zero(a.y) && is_zero(a.z); }
+
+// ---- the reductions over colours, per adjoint type ---------------------------------------------
+
+// The scalar adjoint of s where the RGB quantity v s has the RGB adjoint `a`: dot(a, v), or for
+// Adj3 the colours' own products.
+template <class A, class T>
+A colour_dot(const TVec3<T>& a, const TVec3<T>& v) {
+    if constexpr (std::is_same_v<A, Adj3>)
+        return {a.x * v.x, a.y * v.y, a.z * v.z};
+    else
+        return dot(a, v);
+}
+// The scalar adjoint of s where the RGB quantity is (s, s, s).
+template <class A, class T>
+A colour_sum(const TVec3<T>& a) {
+    if constexpr (std::is_same_v<A, Adj3>)
+        return {a.x, a.y, a.z};
+    else
+        return a.x + a.y + a.z;
+}
+// Channel c's part x of an RGB adjoint as a scalar adjoint.
+template <class A, class T>
+A one_colour(int c, T x) {
+    if constexpr (std::is_same_v<A, Adj3>) {
+        Adj3 r;
+        r.v[c] = x;
+        return r;
+    } else {
+        (void)c;
+        return x;
+    }
+}
+
+// Lanes: colour c's vector, and the way back (for the few adjoints computed lane by lane).
+inline Vec3f lane(const AVec3& a, int c) { return {a.x.v[c], a.y.v[c], a.z.v[c]}; }
+inline void set_lane(AVec3& a, int c, const Vec3f& v) {
+    a.x.v[c] = v.x;
+    a.y.v[c] = v.y;
+    a.z.v[c] = v.z;
+}
+// Channel c of an RGB vector (the others zero).
+inline Vec3f channel(const Vec3f& a, int c) {
+    Vec3f r(0.f);
+    r[c] = a[c];
+    return r;
+}
+
+}  // namespace edgepath
