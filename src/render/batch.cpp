@@ -10,6 +10,7 @@ namespace edgepath {
 namespace {
 
 static_assert(kLanes == lanes_of<RTCRay16>(), "the batches trace RTCRay16 packets");
+static_assert(kBatchSize == kShadeBatch, "shade_lanes takes a batch's paths");
 
 // Embree's packets, each with its lane mask.
 struct alignas(64) RayHitPacket {
@@ -237,7 +238,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
             ps.shadow_end = nshadow;
         }
-        // The plain vertices, four at a time; then their rays into the packets.
+        // The plain vertices, a vector of them at a time; then their rays into the packets.
         if (nplain_ > 0) {
             ShadeLanes<kBatchSize>& l = lanes;
             shade_lanes(l, nplain_, settings.mis);
