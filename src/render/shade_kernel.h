@@ -5,8 +5,9 @@
 // in its order, whatever the width.
 //
 // Included by the translation units that compile it for one width each (render/shade_lanes.cpp,
-// render/shade_lanes_avx2.cpp): the latter includes it after switching its code to AVX2, so this
-// header includes nothing of its own (render/shade_lanes.h and the headers below come first).
+// render/shade_lanes_avx2.cpp): the latter includes it after switching its code to AVX2, having
+// included the headers below before the switch (their include guards then skip them here), so
+// that their inline functions stay compiled for the baseline processor.
 #pragma once
 #include <cmath>
 
@@ -149,7 +150,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         };
 
         // The area light's sample (Scene::sample_light_triangle, by area, or the one given)
-        // and its shadow ray (spawn_ray_to), where any of the four has one.
+        // and its shadow ray (spawn_ray_to), where any path of the vector has one.
         if (M::load(L.light_on + k).bits() != 0) {
             const M light_on = M::load(L.light_on + k), given = M::load(L.light_given + k);
             M on = light_on;
@@ -192,7 +193,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             (len * F(1.f - kShadowEpsilon)).store(L.light_tmax + k);
         }
 
-        // The environment's sample and its shadow ray (spawn_ray), where any of the four has one.
+        // The environment's sample and its shadow ray (spawn_ray), where any path of the vector has one.
         if (M::load(L.env_on + k).bits() != 0) {
             M on = M::load(L.env_on + k);
             const V ldir = load3<V>(L.env_dir, k);
