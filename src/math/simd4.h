@@ -24,6 +24,7 @@ namespace edgepath {
 #if defined(__SSE2__)
 
 struct F4 {
+    static constexpr int width = 4;
     __m128 v;
     F4() = default;
     F4(__m128 x) : v(x) {}
@@ -91,6 +92,7 @@ inline F4 next_float_down(F4 x) { return -next_float_up(-x); }
 #else  // no SSE2: lane by lane
 
 struct F4 {
+    static constexpr int width = 4;
     float v[4];
     F4() = default;
     F4(float s) : v{s, s, s, s} {}

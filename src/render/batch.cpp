@@ -10,6 +10,7 @@ namespace edgepath {
 namespace {
 
 static_assert(kLanes == lanes_of<RTCRay16>(), "the batches trace RTCRay16 packets");
+static_assert(kBatchSize == kShadeBatch, "shade_lanes takes a batch's paths");
 
 // Embree's packets, each with its lane mask.
 struct alignas(64) RayHitPacket {
@@ -50,6 +51,29 @@ struct PathBatch::Impl {
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
     // Per material: diffuse (MaterialKind::Standard with a constant black specular).
     std::vector<char> plain_material;
+    // Per mesh, for its plain vertices: the diffuse reflectance where it is the same at every
+    // point (a constant texture, no vertex colours), and then the mask of its reflecting.
+    struct PlainMesh {
+        bool plain = false;  // its material's vertices are plain
+        bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
+        bool constant = false;
+        Vec3f diffuse;
+        float reflects = 0.f;
+    };
+    std::vector<PlainMesh> plain_mesh;
+    // What the vectors take of an entry of scene.lights: whether they sample it (a triangle
+    // sampled by area with a constant emission and no spot), and then its triangle, the
+    // probability of its pick, its area, emission and sides. Kept for every entry where the
+    // scene has few (a batch's tables are made for each tile), looked up path by path otherwise.
+    struct LightEntry {
+        bool in_vectors = false;
+        TriangleData td;
+        float pmf = 0.f, area = 0.f;
+        Vec3f emission;
+        float two_sided = 0.f;
+    };
+    static constexpr size_t kMaxLightEntries = 64;
+    std::vector<LightEntry> light_entries;
     ShadeLanes<kBatchSize> lanes;
     int plain[kBatchSize];
     int nplain_ = 0;
@@ -58,14 +82,56 @@ struct PathBatch::Impl {
         for (const Material& m : scene.materials)
             plain_material.push_back(m.kind == MaterialKind::Standard && m.specular.is_constant() &&
                                      is_black(Vec3f::load(m.specular.data)));
+        for (const Mesh& m : scene.meshes) {
+            PlainMesh pm;
+            const Material& mat = scene.materials[size_t(m.material)];
+            pm.plain = plain_material[size_t(m.material)];
+            pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
+            if (plain_material[size_t(m.material)] && mat.diffuse.is_constant() && !m.colors) {
+                pm.constant = true;
+                pm.diffuse = Vec3f::load(mat.diffuse.data);  // Scene::diffuse_reflectance's
+                pm.reflects = plain_reflects(pm.diffuse, mat);
+            }
+            plain_mesh.push_back(pm);
+        }
+        if (scene.light_distribution.valid() && scene.lights.size() <= kMaxLightEntries) {
+            light_entries.resize(scene.lights.size());
+            for (size_t li = 0; li < scene.lights.size(); ++li) light_entry(int(li), light_entries[li]);
+        }
         // At most one on the area lights, one on the environment and one a point light for
         // each path.
         const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
         shadow_value.resize(max_shadow);
         shadow.resize((max_shadow + kLanes - 1) / kLanes);
+        // What Embree only reads, once: the rays then take their extents only.
+        for (RayPacket& pk : shadow) set_packet_constants(pk.r);
+        for (RayHitPacket& pk : next) set_packet_constants(pk.rh.ray);
     }
 
     void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
+    // The mask of a plain vertex's reflecting (a reflectance with luminance above 0).
+    static float plain_reflects(const Vec3f& diffuse, const Material& mat) {
+        return lane_mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+    }
+    // Scene::surface_point(h), into sp.
+    void surface_point(const Hit& h, SurfacePoint& sp) const {
+        if (plain_mesh[size_t(h.mesh)].flat)
+            scene.surface_point_base(h.mesh, h.prim, h.b1, h.b2, sp);
+        else
+            sp = scene.surface_point(h);
+    }
+    // Entry li of scene.lights for the vectors, into e.
+    void light_entry(int li, LightEntry& e) const {
+        const Scene::EmissiveTriangle& lt = scene.lights[size_t(li)];
+        const Mesh& m = scene.meshes[size_t(lt.mesh)];
+        e.in_vectors = lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant();
+        if (!e.in_vectors) return;
+        e.td = m.triangle_data[lt.prim];
+        e.pmf = float(double(scene.light_distribution.pmf(li)));
+        e.area = scene.light_triangle_area(m, lt.prim);
+        e.emission = Vec3f::load(m.emission.data);
+        e.two_sided = lane_mask(m.two_sided_emission);
+    }
     // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
     // drawn in shade_vertex's order, its light picked and its environment sample taken).
     // False, with nothing drawn, for a light sample the vectors cannot take (an infinite
@@ -91,10 +157,11 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
     // Scene::bsdf_params' diffuse reflectance; the specular is black.
-    const Vec3f diffuse = scene.diffuse_reflectance(ps.sp);
+    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+    const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
     l.two_sided[k] = lane_mask(mat.two_sided);
-    l.reflects[k] = lane_mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+    l.reflects[k] = pm.constant ? pm.reflects : plain_reflects(diffuse, mat);
 
     const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
     float ue1 = ul1, ue2 = ul2;
@@ -115,22 +182,22 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     if (settings.use_nee && scene.light_distribution.valid()) {
         float u;
         const int li = scene.pick_light(ul0, u);
-        const Scene::EmissiveTriangle& lt = scene.lights[size_t(li)];
-        const Mesh& m = scene.meshes[size_t(lt.mesh)];
-        if (lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant()) {
+        LightEntry looked_up;
+        if (light_entries.empty()) light_entry(li, looked_up);
+        const LightEntry& e = light_entries.empty() ? looked_up : light_entries[size_t(li)];
+        if (e.in_vectors) {
             const Vec2f b = square_to_triangle(ul1, ul2);
             l.b1[k] = b.x;
             l.b2[k] = b.y;
-            const TriangleData& td = m.triangle_data[lt.prim];
-            put3(l.v0, td.v0);
-            put3(l.v1, td.v1);
-            put3(l.v2, td.v2);
-            put3(l.light_ng, td.ng);
-            l.edge[k] = td.largest_edge;
-            l.pmf[k] = float(double(scene.light_distribution.pmf(li)));
-            l.area[k] = scene.light_triangle_area(m, lt.prim);
-            put3(l.emission, Vec3f::load(m.emission.data));
-            l.two_sided_emission[k] = lane_mask(m.two_sided_emission);
+            put3(l.v0, e.td.v0);
+            put3(l.v1, e.td.v1);
+            put3(l.v2, e.td.v2);
+            put3(l.light_ng, e.td.ng);
+            l.edge[k] = e.td.largest_edge;
+            l.pmf[k] = e.pmf;
+            l.area[k] = e.area;
+            put3(l.emission, e.emission);
+            l.two_sided_emission[k] = e.two_sided;
             l.light_on[k] = lane_mask(true);
         } else {
             LightSample ls;
@@ -193,7 +260,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         const bool emitter = scene.meshes[size_t(cs.first.hit.mesh)].is_emitter();
         if (opt.max_bounces == 0 && !emitter) continue;  // no surface point needed
         PathState& ps = paths[i];
-        ps.sp = scene.surface_point(cs.first.hit);
+        surface_point(cs.first.hit, ps.sp);
         if (!opt.hide_emitters && emitter) L[i] += scene.emitted(ps.sp, -cs.ray.dir);
         if (opt.max_bounces == 0) continue;
         ps.beta = Vec3f(1.f);
@@ -214,18 +281,18 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             ps.pdf = pdf;
             ps.delta = delta;
             ps.next = nnext;
-            set_ray_lane(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
+            set_ray_extent(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
             ++nnext;
         };
         auto add_shadow = [&](const Ray& r, const Vec3f& value) {
-            set_ray_lane(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
+            set_ray_extent(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
             shadow_value[size_t(nshadow)] = value;
             ++nshadow;
         };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
-            const int material = scene.meshes[size_t(ps.sp.mesh)].material;
-            if (plain_material[size_t(material)] && gather_plain(j, scene.materials[size_t(material)], samples[live[j]].rng))
+            if (plain_mesh[size_t(ps.sp.mesh)].plain &&
+                gather_plain(j, scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)], samples[live[j]].rng))
                 continue;
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
@@ -237,7 +304,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
             ps.shadow_end = nshadow;
         }
-        // The plain vertices, four at a time; then their rays into the packets.
+        // The plain vertices, a vector of them at a time; then their rays into the packets.
         if (nplain_ > 0) {
             ShadeLanes<kBatchSize>& l = lanes;
             shade_lanes(l, nplain_, settings.mis);
@@ -327,7 +394,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             if (last && !(continuation_counts(settings, ps.delta) && scene.meshes[size_t(hit.mesh)].is_emitter()))
                 continue;
             const Vec3f prev_p = ps.sp.p;
-            ps.sp = scene.surface_point(hit);
+            surface_point(hit, ps.sp);
             ps.dir = dir;
             if (met_emission(scene, settings, hit.mesh, prev_p, ps.sp, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
             if (!last) live[kept++] = i;

@@ -8,7 +8,8 @@ void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* firs
     static_assert(kPacketSize == lanes_of<RTCRay8>(), "intersect_packet traces RTCRayHit8 packets");
     alignas(32) int valid[kPacketSize];
     alignas(32) RTCRayHit8 rh;
-    for (int i = 0; i < n; ++i) set_ray_lane(rh.ray, i, rays[i]);
+    set_packet_constants(rh.ray);
+    for (int i = 0; i < n; ++i) set_ray_extent(rh.ray, i, rays[i]);
     close_packet(rh.ray, valid, n);  // unused lanes repeat the first ray, masked off
     clear_hits(rh);
     RTCIntersectContext ctx;

@@ -624,30 +624,19 @@ bool Scene::occluded(const Ray& ray) const {
 SurfacePoint Scene::surface_point(int mesh, int64_t prim, float b1, float b2) const {
     const Mesh& m = meshes[mesh];
     SurfacePoint sp;
-    sp.mesh = mesh;
-    sp.prim = prim;
-    sp.b1 = b1;
-    sp.b2 = b2;
-    float b0 = 1.f - b1 - b2;
-    const TriangleData& td = m.triangle_data[prim];
-    sp.p = td.v0 * b0 + td.v1 * b1 + td.v2 * b2;
-    sp.p_error = triangle_point_error(td.v0, td.v1, td.v2, b0, b1, b2, td.largest_edge);
-    sp.ng = td.ng;
+    surface_point_base(mesh, prim, b1, b2, sp);
+    const float b0 = 1.f - b1 - b2;
     if (m.normals) {
         const int32_t* ni = m.normal_indices + 3 * prim;
         Vec3f n = Vec3f::load(m.normals + 3 * ni[0]) * b0 + Vec3f::load(m.normals + 3 * ni[1]) * b1 +
                   Vec3f::load(m.normals + 3 * ni[2]) * b2;
         float l = length(n);
         sp.ns = l > 0.f ? n / l : sp.ng;
-    } else {
-        sp.ns = sp.ng;
     }
     if (m.uvs) {
         const int32_t* ti = m.uv_indices + 3 * prim;
         const float *t0 = m.uvs + 2 * ti[0], *t1 = m.uvs + 2 * ti[1], *t2 = m.uvs + 2 * ti[2];
         sp.uv = Vec2f(t0[0] * b0 + t1[0] * b1 + t2[0] * b2, t0[1] * b0 + t1[1] * b1 + t2[1] * b2);
-    } else {
-        sp.uv = Vec2f(b1, b2);
     }
     const Texture& normal_map = materials[size_t(m.material)].normal_map;
     if (!normal_map.empty()) {

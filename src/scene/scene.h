@@ -224,6 +224,23 @@ public:
     bool occluded(const Ray& ray) const;
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
+    // What surface_point sets of every point, into sp: its triangle, barycentrics, point, the
+    // point's error bound and the geometric normal; and the shading normal and uv of a mesh
+    // without normals and uvs (ng, and the barycentrics). surface_point's whole result for a
+    // mesh without normals, uvs or a normal map (the forward batch calls it for those).
+    void surface_point_base(int mesh, int64_t prim, float b1, float b2, SurfacePoint& sp) const {
+        const TriangleData& td = meshes[size_t(mesh)].triangle_data[prim];
+        sp.mesh = mesh;
+        sp.prim = prim;
+        sp.b1 = b1;
+        sp.b2 = b2;
+        const float b0 = 1.f - b1 - b2;
+        sp.p = td.v0 * b0 + td.v1 * b1 + td.v2 * b2;
+        sp.p_error = triangle_point_error(td.v0, td.v1, td.v2, b0, b1, b2, td.largest_edge);
+        sp.ng = td.ng;
+        sp.ns = sp.ng;
+        sp.uv = Vec2f(b1, b2);
+    }
     // The shading normal before the normal map (interpolated normals, or ng) at barycentrics
     // (b1, b2) of triangle `prim`, and the triangle's dp/du for the normal map (false: none).
     Vec3f unmapped_normal(int mesh, int64_t prim, float b1, float b2) const;

@@ -3,12 +3,15 @@
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
+#include <memory>
 #include <vector>
 
 #include "edgepath.h"
 #include "moved_scene.h"
 #include "render/packet.h"
 #include "render/path.h"
+#include "render/shade_lanes.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
@@ -804,6 +807,186 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
             }
     }
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+}
+
+// shade_lanes' widths in force for the life of a test, then the processor's widest again.
+struct ForcedShadeWidth {
+    explicit ForcedShadeWidth(ShadeWidth w) { force_shade_width(w); }
+    ~ForcedShadeWidth() { force_shade_width(ShadeWidth::Auto); }
+};
+
+// ShadeLanes' inputs for n paths, drawn from `rng`: unit normals and directions, small error
+// bounds, the disk's numbers with its centre (0.5, 0.5) and its diagonals among them, masks on
+// and off, light samples by area (some at the shading point itself, some seen edge on or from
+// behind) and given ones, sky samples, with a black reflectance or throughput here and there.
+void random_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng) {
+    auto u = [&] { return rng.next_float(); };
+    auto unit = [&] {
+        const Vec3f v(2 * u() - 1, 2 * u() - 1, 2 * u() - 1);
+        return length(v) > 1e-3f ? normalize(v) : Vec3f(0, 0, 1);
+    };
+    auto put = [](float (&a)[3][kShadeBatch], int k, const Vec3f& v) {
+        for (int c = 0; c < 3; ++c) a[c][k] = v[c];
+    };
+    for (int k = 0; k < n; ++k) {
+        const Vec3f p(4 * u() - 2, 4 * u() - 2, 4 * u() - 2), ng = unit();
+        put(L.p, k, p);
+        put(L.p_error, k, Vec3f(1e-6f * u(), 1e-6f * u(), 1e-6f * u()));
+        put(L.ng, k, ng);
+        put(L.ns, k, u() < 0.3f ? ng : normalize(ng + 0.8f * unit()));
+        put(L.dir, k, unit());
+        put(L.beta, k, u() < 0.05f ? Vec3f(0.f) : Vec3f(u(), u(), u()));
+        put(L.diffuse, k, u() < 0.05f ? Vec3f(0.f) : Vec3f(u(), u(), u()));
+        L.two_sided[k] = lane_mask(u() < 0.5f);
+        L.reflects[k] = lane_mask(u() < 0.95f);
+        const float d = u();
+        L.disk[0][k] = d < 0.05f ? 0.5f : u();
+        L.disk[1][k] = d < 0.05f ? 0.5f : d < 0.1f ? L.disk[0][k] : u();
+        L.light_on[k] = lane_mask(u() < 0.8f);
+        L.light_given[k] = lane_mask(lane_set(L.light_on, k) && u() < 0.25f);
+        const float b1 = u(), b2 = u() * (1 - b1);
+        L.b1[k] = b1;
+        L.b2[k] = b2;
+        const Vec3f v0(4 * u() - 2, 2 + u(), 4 * u() - 2);
+        const Vec3f v1 = v0 + Vec3f(u(), 0.1f * u(), 0), v2 = v0 + Vec3f(0, 0.1f * u(), u());
+        put(L.v0, k, u() < 0.03f ? p : v0);  // some light points at the shading point
+        put(L.v1, k, v1);
+        put(L.v2, k, v2);
+        put(L.light_ng, k, u() < 0.5f ? Vec3f(0, -1, 0) : unit());
+        L.edge[k] = 2 + u();
+        L.pmf[k] = 0.1f + u();
+        L.area[k] = u() < 0.03f ? 0.f : 0.05f + u();
+        put(L.emission, k, u() < 0.05f ? Vec3f(0.f) : Vec3f(5 * u(), 5 * u(), 5 * u()));
+        L.two_sided_emission[k] = lane_mask(u() < 0.5f);
+        put(L.given_dir, k, unit());
+        L.given_pdf[k] = 0.01f + u();
+        put(L.given_radiance, k, Vec3f(u(), u(), u()));
+        put(L.given_p, k, p + 3.f * unit());
+        put(L.given_p_error, k, Vec3f(1e-6f * u(), 1e-6f * u(), 1e-6f * u()));
+        put(L.given_ng, k, unit());
+        L.env_on[k] = lane_mask(u() < 0.7f);
+        put(L.env_dir, k, unit());
+        put(L.env_radiance, k, Vec3f(u(), u(), u()));
+        L.env_pdf[k] = u() < 0.03f ? 0.f : 0.05f + u();
+    }
+}
+
+// The forward pass's diffuse vertices are shaded in AVX2's vectors of eight where the processor
+// has AVX2, in SSE2's of four otherwise (render/shade_lanes.h): each lane's operations are the
+// same, so both give the same bits. Checked on shade_lanes' arrays (every output of 64 random
+// paths and of a partial batch of 13, each strategy of weights) and on whole images, each width
+// forced in turn: both bit for bit trace_path's.
+TEST(Render, ShadeLanesWidthsAgree) {
+    EXPECT_TRUE(shade_width_available(ShadeWidth::Sse2));
+    if (!shade_width_available(ShadeWidth::Avx2)) {
+        EXPECT_EQ(shade_width(), ShadeWidth::Sse2);
+        EXPECT_THROW(force_shade_width(ShadeWidth::Avx2), std::invalid_argument);
+        GTEST_SKIP() << "this processor (or build) has no AVX2: only the SSE2 width runs";
+    }
+    EXPECT_EQ(shade_width(), ShadeWidth::Avx2);
+    Rng rng(5, 7);
+    int goes_on = 0, light_on = 0, env_on = 0, compared = 0;
+    for (int round = 0; round < 40; ++round)
+        for (int n : {kShadeBatch, 13})
+            for (bool mis : {true, false}) {
+                auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
+                random_lanes(*in, n, rng);
+                auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+                auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+                shade_lanes(*narrow, n, mis, ShadeWidth::Sse2);
+                shade_lanes(*wide, n, mis, ShadeWidth::Avx2);
+                // What the batch reads back: the bent normal, the continuation, the masks of the
+                // shadow rays and, where a mask is set, its ray and value. (A vector in which no
+                // path has a light sample leaves those arrays as they were: the two widths group
+                // the paths differently.)
+                int differing = 0;
+                auto same = [&](const float* x, const float* y, int k) {
+                    differing += std::memcmp(x + k, y + k, sizeof(float)) != 0;
+                };
+                auto same3 = [&](const float (&x)[3][kShadeBatch], const float (&y)[3][kShadeBatch], int k) {
+                    for (int c = 0; c < 3; ++c) same(x[c], y[c], k);
+                };
+                const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide;
+                for (int k = 0; k < n; ++k) {
+                    same3(a.ns, b.ns, k);
+                    same(a.goes_on, b.goes_on, k);
+                    same3(a.next_origin, b.next_origin, k);
+                    same3(a.next_dir, b.next_dir, k);
+                    same3(a.next_beta, b.next_beta, k);
+                    same(a.next_pdf, b.next_pdf, k);
+                    same(a.light_on, b.light_on, k);
+                    if (lane_set(a.light_on, k)) {
+                        same3(a.light_origin, b.light_origin, k);
+                        same3(a.light_dir, b.light_dir, k);
+                        same(a.light_tmax, b.light_tmax, k);
+                        same3(a.light_value, b.light_value, k);
+                    }
+                    same(a.env_on, b.env_on, k);
+                    if (lane_set(a.env_on, k)) {
+                        same3(a.env_origin, b.env_origin, k);
+                        same3(a.env_value, b.env_value, k);
+                    }
+                }
+                EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths, mis " << mis;
+                for (int k = 0; k < n; ++k) {
+                    goes_on += lane_set(narrow->goes_on, k);
+                    light_on += lane_set(narrow->light_on, k);
+                    env_on += lane_set(narrow->env_on, k);
+                }
+                ++compared;
+            }
+    EXPECT_EQ(compared, 40 * 2 * 2);
+    // Not a vacuous comparison: many paths go on and have light samples, not all.
+    const int paths = 40 * 2 * (kShadeBatch + 13);
+    EXPECT_GT(goes_on, paths / 3);
+    EXPECT_LT(goes_on, paths);
+    EXPECT_GT(light_on, paths / 8);
+    EXPECT_LT(light_on, paths);
+    EXPECT_GT(env_on, paths / 8);
+    EXPECT_LT(env_on, paths);
+
+    // Whole images: diffuse surfaces (one- and two-sided, vertex colours), a lamp, a sky.
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.4f, -0.4f, 0.3f), 0.6f, 12, 24);
+    MeshData screen = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), r({0.3f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
+    std::vector<float> tint(size_t(ball.num_vertices()) * 3);
+    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
+    std::vector<float> sky(4 * 8 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7);
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 24, 20, 60);
+    d.materials.push_back(material(kd, black, r));
+    d.materials.push_back(material(red, black, r));
+    d.materials[1].two_sided = true;
+    d.materials.push_back(material(black, black, r));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(0));
+    d.meshes[1].colors = tint.data();
+    d.meshes.push_back(screen.desc(1));
+    d.meshes.push_back(lamp.desc(2));
+    d.meshes[3].emission = le.desc();
+    d.has_envmap = true;
+    d.envmap.values = {sky.data(), 4, 8, 3};
+    auto scene = build_scene(d);
+    RenderOptions opt;
+    opt.spp = 4;
+    opt.seed = 3;
+    int images = 0;
+    for (int bounces : {1, 3}) {
+        opt.max_bounces = bounces;
+        RayCounters counters;
+        const std::vector<float> reference = trace_path_image(*scene, opt, counters);
+        for (ShadeWidth w : {ShadeWidth::Sse2, ShadeWidth::Avx2}) {
+            ForcedShadeWidth forced(w);
+            EXPECT_EQ(shade_width(), w);
+            images += expect_render_matches(*scene, opt, reference, counters,
+                                            "width " + std::to_string(int(w)) + ", " + std::to_string(bounces) + " bounces");
+        }
+    }
+    EXPECT_EQ(images, 2 * 2 * 2);
+    EXPECT_EQ(shade_width(), ShadeWidth::Avx2);
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
