@@ -66,6 +66,86 @@ inline AVec3 cross(const AVec3& a, const Vec3f& b) {
 }
 inline bool is_black(const AVec3& a) { return is_zero(a.x) && is_zero(a.y) && is_zero(a.z); }
 
+// A scalar adjoint for each of N output values (the output channels' values of a derivative
+// image, diff/channels.h): lane j is what a sweep with the unit adjoint of value j alone would
+// compute, by the same float operations (those of Adj3, lane by lane).
+template <int N>
+struct AdjN {
+    float v[N];
+    AdjN() {
+        for (int j = 0; j < N; ++j) v[j] = 0.f;
+    }
+    explicit AdjN(float s) {
+        for (int j = 0; j < N; ++j) v[j] = s;
+    }
+    AdjN& operator+=(const AdjN& o) {
+        for (int j = 0; j < N; ++j) v[j] += o.v[j];
+        return *this;
+    }
+    AdjN& operator-=(const AdjN& o) {
+        for (int j = 0; j < N; ++j) v[j] -= o.v[j];
+        return *this;
+    }
+};
+// Lanes enough for every continuous value of the output channels (render/channels.h).
+constexpr int kMaxAdjLanes = 32;
+
+template <int N> inline AdjN<N> operator+(AdjN<N> a, const AdjN<N>& b) { return a += b; }
+template <int N> inline AdjN<N> operator-(AdjN<N> a, const AdjN<N>& b) { return a -= b; }
+template <int N> inline AdjN<N> operator-(const AdjN<N>& a) {
+    AdjN<N> r;
+    for (int j = 0; j < N; ++j) r.v[j] = -a.v[j];
+    return r;
+}
+template <int N> inline AdjN<N> operator*(const AdjN<N>& a, float s) {
+    AdjN<N> r;
+    for (int j = 0; j < N; ++j) r.v[j] = a.v[j] * s;
+    return r;
+}
+template <int N> inline AdjN<N> operator*(float s, const AdjN<N>& a) {
+    AdjN<N> r;
+    for (int j = 0; j < N; ++j) r.v[j] = s * a.v[j];
+    return r;
+}
+template <int N> inline AdjN<N> operator/(const AdjN<N>& a, float s) {
+    AdjN<N> r;
+    for (int j = 0; j < N; ++j) r.v[j] = a.v[j] / s;
+    return r;
+}
+template <int N> inline bool is_zero(const AdjN<N>& a) {
+    for (int j = 0; j < N; ++j)
+        if (a.v[j] != 0.f) return false;
+    return true;
+}
+
+template <int N> inline TVec3<AdjN<N>> operator*(const Vec3f& a, const AdjN<N>& s) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(const AdjN<N>& s, const Vec3f& a) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(const TVec3<AdjN<N>>& a, float s) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(float s, const TVec3<AdjN<N>>& a) { return {a.x * s, a.y * s, a.z * s}; }
+// As TVec3::operator/=: a multiplication by the reciprocal.
+template <int N> inline TVec3<AdjN<N>> operator/(const TVec3<AdjN<N>>& a, float s) {
+    const float r = 1.f / s;
+    return {a.x * r, a.y * r, a.z * r};
+}
+template <int N> inline AdjN<N> dot(const Vec3f& a, const TVec3<AdjN<N>>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <int N> inline AdjN<N> dot(const TVec3<AdjN<N>>& a, const Vec3f& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <int N> inline TVec3<AdjN<N>> cross(const Vec3f& a, const TVec3<AdjN<N>>& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <int N> inline TVec3<AdjN<N>> cross(const TVec3<AdjN<N>>& a, const Vec3f& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <int N> inline bool is_black(const TVec3<AdjN<N>>& a) { return is_zero(a.x) && is_zero(a.y) && is_zero(a.z); }
+template <int N> inline Vec3f lane(const TVec3<AdjN<N>>& a, int j) { return {a.x.v[j], a.y.v[j], a.z.v[j]}; }
+template <int N> inline void set_lane(TVec3<AdjN<N>>& a, int j, const Vec3f& v) {
+    a.x.v[j] = v.x;
+    a.y.v[j] = v.y;
+    a.z.v[j] = v.z;
+}
+
+template <class A> struct is_adj_n : std::false_type {};
+template <int N> struct is_adj_n<AdjN<N>> : std::true_type {};
+
 // ---- the reductions over colours, per adjoint type ---------------------------------------------
 
 // The scalar adjoint of s where the RGB quantity v s has the RGB adjoint `a`: dot(a, v), or for
