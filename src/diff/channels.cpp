@@ -152,12 +152,7 @@ void d_hit_channel_lanes(const Scene& scene, const ChannelLayout& layout, const 
     finish_hit(g, ha, mesh_slots(slots, hit.mesh), sink, ray.origin, ray.dir, d_origin, d_dir);
     if (slots.camera.wanted()) {
         A cam[kCameraParams];
-        for (int j = 0; j < N; ++j) {
-            if (!on(j)) continue;
-            float cj[kCameraParams] = {};
-            d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, lane(d_origin, j), lane(d_dir, j), cj);
-            for (int i = 0; i < kCameraParams; ++i) cam[i].v[j] = cj[i];
-        }
+        d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, d_origin, d_dir, cam);
         for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
     }
     double p[N];
