@@ -231,7 +231,7 @@ template void finish_hit<float>(const VertexGeometry&, const HitAdjoint&, const 
 EDGEPATH_FINISH_HIT_N(4)
 EDGEPATH_FINISH_HIT_N(8)
 EDGEPATH_FINISH_HIT_N(16)
-EDGEPATH_FINISH_HIT_N(32)
+EDGEPATH_FINISH_HIT_N(28)
 #undef EDGEPATH_FINISH_HIT_N
 
 template <class A>
@@ -377,8 +377,8 @@ template void d_normal_map<AdjN<8>>(const Scene&, const VertexGeometry&, const S
                                     THitAdjoint<AdjN<8>>&);
 template void d_normal_map<AdjN<16>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
                                      THitAdjoint<AdjN<16>>&);
-template void d_normal_map<AdjN<32>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
-                                     THitAdjoint<AdjN<32>>&);
+template void d_normal_map<AdjN<28>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
+                                     THitAdjoint<AdjN<28>>&);
 
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
     return size_t(mesh) < s.meshes.size() ? &s.meshes[mesh] : nullptr;

@@ -167,6 +167,7 @@ void d_hit_channel_values(const Scene& scene, const ChannelLayout& layout, const
                           GradSink& sink, double* out) {
     const int skip = layout.offset[int(Channel::Radiance)];
     const int nv = layout.num_values;
+    static_assert(kMaxChannelValues <= 28 && kMaxChannelValues <= kMaxAdjLanes, "lanes for every value");
     if (nv <= 4)
         d_hit_channel_lanes<4>(scene, layout, slots, film, lens, ray, hit, w, skip, sink, out);
     else if (nv <= 8)
@@ -174,7 +175,7 @@ void d_hit_channel_values(const Scene& scene, const ChannelLayout& layout, const
     else if (nv <= 16)
         d_hit_channel_lanes<16>(scene, layout, slots, film, lens, ray, hit, w, skip, sink, out);
     else
-        d_hit_channel_lanes<32>(scene, layout, slots, film, lens, ray, hit, w, skip, sink, out);
+        d_hit_channel_lanes<28>(scene, layout, slots, film, lens, ray, hit, w, skip, sink, out);
 }
 
 }  // namespace edgepath

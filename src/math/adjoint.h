@@ -137,7 +137,8 @@ struct AdjN {
         return r;
     }
 };
-// Lanes enough for every continuous value of the output channels (render/channels.h).
+// The most lanes a GradSink projects (at least every continuous value of the output channels,
+// render/channels.h).
 constexpr int kMaxAdjLanes = 32;
 
 template <int N> inline AdjN<N> operator+(AdjN<N> a, const AdjN<N>& b) { return a += b; }

@@ -3,7 +3,7 @@
 // before, kept as the reference: d_hit_channels once per value with the adjoint of that value
 // alone, for every parameter group of a scene that reaches every adjoint (textured diffuse,
 // roughness and normal map, vertex colours, plastic, mirror, glass, camera), through a pinhole
-// and a thin lens, and for layouts of 4 to 32 lanes with radiance among the values.
+// and a thin lens, and for layouts of 4 to 28 lanes with radiance among the values.
 #include <gtest/gtest.h>
 
 #include <cmath>
