@@ -3,7 +3,8 @@
 // before, kept as the reference: d_hit_channels once per value with the adjoint of that value
 // alone, for every parameter group of a scene that reaches every adjoint (textured diffuse,
 // roughness and normal map, vertex colours, plastic, mirror, glass, camera), through a pinhole
-// and a thin lens, and for layouts of 4 to 28 lanes with radiance among the values.
+// and a thin lens (and the other cameras), and for layouts of 4 to 28 lanes with radiance among
+// the values.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -115,6 +116,28 @@ TEST(ChannelLanes, EqualsOneCallPerValueForEveryParameter) {
             }
         }
         // Each lane runs the float operations of its own call: the same bits.
+        EXPECT_EQ(exact, total);
+    }
+}
+
+// The other cameras (orthographic, fisheye, panorama: the camera ray's adjoint in lanes takes
+// their own branches), for the camera's parameters and the floor's vertices.
+TEST(ChannelLanes, OtherCameras) {
+    for (CameraType type : {CameraType::Orthographic, CameraType::Fisheye, CameraType::Panorama}) {
+        SCOPED_TRACE("camera type " + std::to_string(int(type)));
+        AllAdjointsScene s;
+        s.desc.camera.type = type;
+        s.desc.camera.ortho_scale = 2.5f;
+        if (type == CameraType::Fisheye) s.desc.camera.fov = 160.f;
+        auto scene = build_scene(s.desc);
+        const ChannelLayout layout(kEveryValue);
+        int exact = 0, total = 0;
+        for (const Group& grp : groups(s)) {
+            if (grp.name != "camera" && grp.name != "floor vertices") continue;
+            double scale = 0.0;
+            EXPECT_EQ(compare(*scene, s, grp, layout, exact, total, scale), 0) << grp.name;
+            EXPECT_GT(scale, 1e-6) << "no value reaches " << grp.name;
+        }
         EXPECT_EQ(exact, total);
     }
 }
