@@ -172,8 +172,13 @@ void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGra
             c[k] = Vec3f::load(m.colors + 3 * int64_t(g.tri[k]));
             if (ms && ms->colors.wanted()) sink.add_rgb<A>(ms->colors, g.tri[k], a.dcolor * b[k]);
         }
-        db1 += colour_dot<A>(a.dcolor, c[1] - c[0]);
-        db2 += colour_dot<A>(a.dcolor, c[2] - c[0]);
+        if constexpr (is_adj_n<A>::value) {
+            db1 += dot(a.dcolor, c[1] - c[0]);
+            db2 += dot(a.dcolor, c[2] - c[0]);
+        } else {
+            db1 += colour_dot<A>(a.dcolor, c[1] - c[0]);
+            db2 += colour_dot<A>(a.dcolor, c[2] - c[0]);
+        }
     }
     // Shading normal.
     if (m.normals) {
@@ -217,6 +222,17 @@ void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGra
 
 template void finish_hit<float>(const VertexGeometry&, const HitAdjoint&, const SceneGradients::MeshSlots*,
                                 GradSink&, const Vec3f&, const Vec3f&, Vec3f&, Vec3f&);
+#define EDGEPATH_FINISH_HIT_N(N)                                                                                     \
+    template void finish_hit<AdjN<N>>(const VertexGeometry&, const THitAdjoint<AdjN<N>>&,                             \
+                                      const SceneGradients::MeshSlots*, GradSink&, const Vec3f&, const Vec3f&,        \
+                                      TVec3<AdjN<N>>&, TVec3<AdjN<N>>&);                                              \
+    template void d_texture<AdjN<N>>(const Texture&, const GradSlot&, Vec2f, const AdjN<N>*, GradSink&,              \
+                                     TVec2<AdjN<N>>*);
+EDGEPATH_FINISH_HIT_N(4)
+EDGEPATH_FINISH_HIT_N(8)
+EDGEPATH_FINISH_HIT_N(16)
+EDGEPATH_FINISH_HIT_N(28)
+#undef EDGEPATH_FINISH_HIT_N
 
 template <class A>
 void d_diffuse(const Scene& scene, const VertexGeometry& g, const SceneGradients& slots, const Vec3f& dval,
@@ -274,6 +290,41 @@ void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, co
     }
 }
 
+// Lane by lane for AdjN, each lane only where its adjoint is not zero (where a sweep with that
+// lane's unit adjoint alone returns before the call).
+template <int N>
+void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v,
+                        const TVec3<AdjN<N>>& d_out, TVec3<AdjN<N>>& dn, TVec3<AdjN<N>>& ddpdu,
+                        TVec3<AdjN<N>>& dv) {
+    for (int j = 0; j < N; ++j) {
+        const Vec3f d = lane(d_out, j);
+        if (is_black(d)) continue;
+        Vec3f a = lane(dn, j), b = lane(ddpdu, j), e = lane(dv, j);
+        d_map_normal(n, has_dpdu, dpdu, v, d, a, b, e);
+        set_lane(dn, j, a);
+        set_lane(ddpdu, j, b);
+        set_lane(dv, j, e);
+    }
+}
+template <int N>
+void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2,
+                           const TVec3<AdjN<N>>& ddpdu, TVec3<AdjN<N>>& de1, TVec3<AdjN<N>>& de2,
+                           TVec2<AdjN<N>>& dd1, TVec2<AdjN<N>>& dd2) {
+    for (int j = 0; j < N; ++j) {
+        const Vec3f d = lane(ddpdu, j);
+        if (is_black(d)) continue;
+        Vec3f a = lane(de1, j), b = lane(de2, j);
+        Vec2f p(dd1.x.v[j], dd1.y.v[j]), q(dd2.x.v[j], dd2.y.v[j]);
+        d_triangle_dpdu(e1, e2, d1, d2, d, a, b, p, q);
+        set_lane(de1, j, a);
+        set_lane(de2, j, b);
+        dd1.x.v[j] = p.x;
+        dd1.y.v[j] = p.y;
+        dd2.x.v[j] = q.x;
+        dd2.y.v[j] = q.y;
+    }
+}
+
 }  // namespace
 
 template <class A>
@@ -320,6 +371,14 @@ void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradie
 }
 
 template void d_normal_map<float>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&, HitAdjoint&);
+template void d_normal_map<AdjN<4>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
+                                    THitAdjoint<AdjN<4>>&);
+template void d_normal_map<AdjN<8>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
+                                    THitAdjoint<AdjN<8>>&);
+template void d_normal_map<AdjN<16>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
+                                     THitAdjoint<AdjN<16>>&);
+template void d_normal_map<AdjN<28>>(const Scene&, const VertexGeometry&, const SceneGradients&, GradSink&,
+                                     THitAdjoint<AdjN<28>>&);
 
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh) {
     return size_t(mesh) < s.meshes.size() ? &s.meshes[mesh] : nullptr;

@@ -40,13 +40,23 @@ struct VertexGeometry {
     VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& origin, const Vec3f& dir);
 };
 
-// Adjoints of the quantities derived from a hit. A: the scalar adjoints' type (float, or Adj3
-// for one lane per output colour); the vertex colour's adjoint is an RGB one (channel c belongs
-// to colour c with Adj3).
+// The adjoint of an RGB quantity: Vec3f for float and Adj3 (channel c belongs to colour c with
+// Adj3), a vector of lanes for AdjN (whose lanes are output values, not colours).
+template <class A>
+struct RgbAdjoint {
+    using type = Vec3f;
+};
+template <int N>
+struct RgbAdjoint<AdjN<N>> {
+    using type = TVec3<AdjN<N>>;
+};
+
+// Adjoints of the quantities derived from a hit. A: the scalar adjoints' type (float, Adj3 for
+// one lane per output colour, or AdjN for one lane per output value).
 template <class A>
 struct THitAdjoint {
     TVec3<A> dp, dn, dng;  // position, shading normal (unbent), geometric normal
-    Vec3f dcolor;          // interpolated vertex colour (Mesh::color)
+    typename RgbAdjoint<A>::type dcolor;  // interpolated vertex colour (Mesh::color)
     TVec2<A> duv;          // texture coordinates
     TVec2<A> db;           // barycentrics (b1, b2)
     A dt = A(0);           // distance along the ray
@@ -54,7 +64,7 @@ struct THitAdjoint {
     // tangent depends on them, not through the hit point).
     TVec3<A> dtri[3];
     TVec2<A> dtri_uv[3];
-    THitAdjoint() : dcolor(0.f) {}
+    THitAdjoint() {}  // every adjoint zero (TVec2, TVec3 and the lanes start at zero)
 };
 using HitAdjoint = THitAdjoint<float>;
 

@@ -179,13 +179,13 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
                 Ray ray;
                 ray.origin = v.origin;
                 ray.dir = v.dir;
-                float e[kMaxChannelValues] = {};
+                // Every value in one pass (a lane per value): value j's the same, bit for bit,
+                // as d_hit_channels with the adjoint inv_spp at j alone.
+                double p[kMaxChannelValues];
+                d_hit_channel_values(scene, layout, dirs, rec.film, rec.lens, ray, v.hit, inv_spp, sink, p);
                 for (int j = 0; j < nv; ++j) {
                     if (radiance && j >= ro && j < ro + 3) continue;
-                    e[j] = inv_spp;
-                    d_hit_channels(scene, layout, dirs, rec.film, rec.lens, ray, v.hit, e, sink);
-                    e[j] = 0.f;
-                    o[j] += float(sink.take_projection());
+                    o[j] += float(p[j]);
                 }
             }
         },

@@ -19,4 +19,13 @@ struct Hit;
 void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots, const Vec2f& film,
                     const Vec2f& lens, const Ray& ray, const Hit& hit, const float* adjoint, GradSink& sink);
 
+// Forward mode, every value of the layout at once: out[j] (j < layout.num_values) = the
+// projection on the directions of `slots` that d_hit_channels would give `sink` for the adjoint w
+// at value j and zero elsewhere (the same float operations, lane by lane: math/adjoint.h, AdjN);
+// zero for radiance's values. The hit's geometry and everything that does not depend on the
+// adjoint is computed once for all the values.
+void d_hit_channel_values(const Scene& scene, const ChannelLayout& layout, const SceneGradients& slots,
+                          const Vec2f& film, const Vec2f& lens, const Ray& ray, const Hit& hit, float w,
+                          GradSink& sink, double* out);
+
 }  // namespace edgepath

@@ -11,6 +11,10 @@
 #include <type_traits>
 #include "math/vec.h"
 
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
+
 namespace edgepath {
 
 // A scalar adjoint for each of the three output colours.
@@ -65,6 +69,118 @@ inline AVec3 cross(const AVec3& a, const Vec3f& b) {
     return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 inline bool is_black(const AVec3& a) { return is_zero(a.x) && is_zero(a.y) && is_zero(a.z); }
+
+// A scalar adjoint for each of N output values (the output channels' values of a derivative
+// image, diff/channels.h): lane j is what a sweep with the unit adjoint of value j alone would
+// compute, by the same float operations (those of Adj3, lane by lane).
+template <int N>
+struct AdjN {
+    static_assert(N % 4 == 0, "lanes in fours");
+    alignas(16) float v[N];
+    AdjN() { fill(0.f); }
+    explicit AdjN(float s) { fill(s); }
+    // Four lanes at a time (SSE2: each lane rounds as the scalar instruction does). The value
+    // passes through an empty asm statement so that the compiler cannot see a zero fill: it
+    // would make that a memset ('rep stos'), several times slower at these sizes.
+    void fill(float s) {
+#if defined(__SSE2__)
+        __m128 x = _mm_set1_ps(s);
+        __asm__("" : "+x"(x));
+        for (int k = 0; k < N; k += 4) _mm_store_ps(v + k, x);
+#else
+        for (int j = 0; j < N; ++j) v[j] = s;
+#endif
+    }
+    AdjN& operator+=(const AdjN& o) {
+#if defined(__SSE2__)
+        for (int k = 0; k < N; k += 4) _mm_store_ps(v + k, _mm_add_ps(_mm_load_ps(v + k), _mm_load_ps(o.v + k)));
+#else
+        for (int j = 0; j < N; ++j) v[j] += o.v[j];
+#endif
+        return *this;
+    }
+    AdjN& operator-=(const AdjN& o) {
+#if defined(__SSE2__)
+        for (int k = 0; k < N; k += 4) _mm_store_ps(v + k, _mm_sub_ps(_mm_load_ps(v + k), _mm_load_ps(o.v + k)));
+#else
+        for (int j = 0; j < N; ++j) v[j] -= o.v[j];
+#endif
+        return *this;
+    }
+    AdjN& operator*=(float s) {
+#if defined(__SSE2__)
+        const __m128 x = _mm_set1_ps(s);
+        for (int k = 0; k < N; k += 4) _mm_store_ps(v + k, _mm_mul_ps(_mm_load_ps(v + k), x));
+#else
+        for (int j = 0; j < N; ++j) v[j] *= s;
+#endif
+        return *this;
+    }
+    AdjN& operator/=(float s) {
+#if defined(__SSE2__)
+        const __m128 x = _mm_set1_ps(s);
+        for (int k = 0; k < N; k += 4) _mm_store_ps(v + k, _mm_div_ps(_mm_load_ps(v + k), x));
+#else
+        for (int j = 0; j < N; ++j) v[j] /= s;
+#endif
+        return *this;
+    }
+    // -x flips the sign bit, as the scalar negation does (zeros included).
+    AdjN negated() const {
+        AdjN r(*this);
+#if defined(__SSE2__)
+        const __m128 sign = _mm_set1_ps(-0.f);
+        for (int k = 0; k < N; k += 4) _mm_store_ps(r.v + k, _mm_xor_ps(_mm_load_ps(v + k), sign));
+#else
+        for (int j = 0; j < N; ++j) r.v[j] = -v[j];
+#endif
+        return r;
+    }
+};
+// The most lanes a GradSink projects (at least every continuous value of the output channels,
+// render/channels.h).
+constexpr int kMaxAdjLanes = 32;
+
+template <int N> inline AdjN<N> operator+(AdjN<N> a, const AdjN<N>& b) { return a += b; }
+template <int N> inline AdjN<N> operator-(AdjN<N> a, const AdjN<N>& b) { return a -= b; }
+template <int N> inline AdjN<N> operator-(const AdjN<N>& a) { return a.negated(); }
+template <int N> inline AdjN<N> operator*(AdjN<N> a, float s) { return a *= s; }
+// s * a: multiplication commutes exactly in IEEE arithmetic.
+template <int N> inline AdjN<N> operator*(float s, AdjN<N> a) { return a *= s; }
+template <int N> inline AdjN<N> operator/(AdjN<N> a, float s) { return a /= s; }
+template <int N> inline bool is_zero(const AdjN<N>& a) {
+    for (int j = 0; j < N; ++j)
+        if (a.v[j] != 0.f) return false;
+    return true;
+}
+
+template <int N> inline TVec3<AdjN<N>> operator*(const Vec3f& a, const AdjN<N>& s) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(const AdjN<N>& s, const Vec3f& a) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(const TVec3<AdjN<N>>& a, float s) { return {a.x * s, a.y * s, a.z * s}; }
+template <int N> inline TVec3<AdjN<N>> operator*(float s, const TVec3<AdjN<N>>& a) { return {a.x * s, a.y * s, a.z * s}; }
+// As TVec3::operator/=: a multiplication by the reciprocal.
+template <int N> inline TVec3<AdjN<N>> operator/(const TVec3<AdjN<N>>& a, float s) {
+    const float r = 1.f / s;
+    return {a.x * r, a.y * r, a.z * r};
+}
+template <int N> inline AdjN<N> dot(const Vec3f& a, const TVec3<AdjN<N>>& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <int N> inline AdjN<N> dot(const TVec3<AdjN<N>>& a, const Vec3f& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+template <int N> inline TVec3<AdjN<N>> cross(const Vec3f& a, const TVec3<AdjN<N>>& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <int N> inline TVec3<AdjN<N>> cross(const TVec3<AdjN<N>>& a, const Vec3f& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+template <int N> inline bool is_black(const TVec3<AdjN<N>>& a) { return is_zero(a.x) && is_zero(a.y) && is_zero(a.z); }
+template <int N> inline Vec3f lane(const TVec3<AdjN<N>>& a, int j) { return {a.x.v[j], a.y.v[j], a.z.v[j]}; }
+template <int N> inline void set_lane(TVec3<AdjN<N>>& a, int j, const Vec3f& v) {
+    a.x.v[j] = v.x;
+    a.y.v[j] = v.y;
+    a.z.v[j] = v.z;
+}
+
+template <class A> struct is_adj_n : std::false_type {};
+template <int N> struct is_adj_n<AdjN<N>> : std::true_type {};
 
 // ---- the reductions over colours, per adjoint type ---------------------------------------------
 

@@ -188,10 +188,11 @@ void camera_ray(const TCameraParams<T>& c, T px, T py, TVec3<T>& o, TVec3<T>& d)
     camera_ray(c, px, py, kLensCentre, kLensCentre, o, d);
 }
 
-// Adds the adjoint of camera_ray for output adjoints (d_o, d_d) to grad[kCameraParams].
-template <class T>
-void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, const TVec3<T>& d_o,
-                  const TVec3<T>& d_d, T* grad) {
+// Adds the adjoint of camera_ray for output adjoints (d_o, d_d) to grad[kCameraParams]. A: the
+// adjoints' scalar (T, or math/adjoint.h's lanes: each lane computed as T's code computes it).
+template <class T, class A = T>
+void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, const TVec3<A>& d_o,
+                  const TVec3<A>& d_d, A* grad) {
     TVec3<T> F = c.look_at - c.position;
     TVec3<T> f = normalize(F);
     TVec3<T> R = cross(f, c.up);
@@ -201,8 +202,8 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
     T tx = persp ? std::tan(c.fov * T(3.14159265358979323846 / 360.0)) : c.ortho_scale;
     T ax = 2 * px / T(c.width) - 1, ay = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
     T sx = ax * tx, sy = ay * tx;
-    TVec3<T> dposition(T(0)), df(T(0)), dr(T(0)), du(T(0));
-    T dsx = T(0), dsy = T(0);
+    TVec3<A> dposition(A(0)), df(A(0)), dr(A(0)), du(A(0));
+    A dsx = A(0), dsy = A(0);
     if (is_spherical(c.type)) {
         // o = position; d = r a + u b + f cf, (a, b, cf) of the film point (and the fisheye's fov)
         const T half_fov = c.fov * T(kCameraPi / 360.0);
@@ -216,7 +217,7 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
             // theta = r half_fov: a = nx sin(theta) / r, b = ny sin(theta) / r, cf = cos(theta)
             const T nx = 2 * px / T(c.width) - 1, ny = (1 - 2 * py / T(c.height)) * T(c.height) / T(c.width);
             const T rr = std::sqrt(nx * nx + ny * ny), theta = rr * half_fov;
-            const T dhalf = std::cos(theta) * (dot(d_d, r) * nx + dot(d_d, u) * ny) - std::sin(theta) * rr * dot(d_d, f);
+            const A dhalf = std::cos(theta) * (dot(d_d, r) * nx + dot(d_d, u) * ny) - std::sin(theta) * rr * dot(d_d, f);
             grad[9] += dhalf * T(kCameraPi / 360.0);
         }
     } else if (c.type == CameraType::ThinLens) {
@@ -225,8 +226,8 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
         const Vec2f l = square_to_disk(lu, lv);
         const TVec3<T> lens = r * T(l.x) + u * T(l.y);
         const TVec3<T> a = lens * c.aperture_radius, w = f + r * sx + u * sy;
-        const TVec3<T> dD = d_normalize(w * c.focus_distance - a, d_d);
-        const TVec3<T> dw = dD * c.focus_distance, da = d_o - dD;
+        const TVec3<A> dD = d_normalize(w * c.focus_distance - a, d_d);
+        const TVec3<A> dw = dD * c.focus_distance, da = d_o - dD;
         grad[12] += dot(dD, w);
         grad[11] += dot(da, lens);
         dposition += d_o;
@@ -238,7 +239,7 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
     } else if (persp) {
         // o = position; d = normalize(f + r sx + u sy)
         dposition += d_o;
-        TVec3<T> dD = d_normalize(f + r * sx + u * sy, d_d);
+        TVec3<A> dD = d_normalize(f + r * sx + u * sy, d_d);
         df += dD;
         dr += dD * sx;
         du += dD * sy;
@@ -254,7 +255,7 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
         df += d_d;
     }
     // sx = ax tx, sy = ay tx
-    T dtx = dsx * ax + dsy * ay;
+    A dtx = dsx * ax + dsy * ay;
     // tx = tan(fov pi / 360) or ortho_scale
     if (is_spherical(c.type))
         ;  // no screen offsets
@@ -265,11 +266,11 @@ void d_camera_ray(const TCameraParams<T>& c, T px, T py, float lu, float lv, con
     // u = cross(r, f)
     d_cross(r, f, du, dr, df);
     // r = normalize(R), R = cross(f, up)
-    TVec3<T> dR = d_normalize(R, dr);
-    TVec3<T> dup(T(0));
+    TVec3<A> dR = d_normalize(R, dr);
+    TVec3<A> dup(A(0));
     d_cross(f, c.up, dR, df, dup);
     // f = normalize(look_at - position)
-    TVec3<T> dF = d_normalize(F, df);
+    TVec3<A> dF = d_normalize(F, df);
     for (int k = 0; k < 3; ++k) {
         grad[k] += dposition[k] - dF[k];
         grad[3 + k] += dF[k];

@@ -119,6 +119,26 @@ public:
         add(slot, 3 * i + 1, y);
         add(slot, 3 * i + 2, z);
     }
+    // One value per output value's lane (math/adjoint.h, AdjN): forward mode only, into the
+    // lanes' projections (take_lane_projections).
+    template <int N>
+    void add(const GradSlot& slot, int64_t i, const AdjN<N>& v) {
+        static_assert(N <= kMaxAdjLanes);
+        if (!slot.dir) return;
+        const double d = double(slot.dir[i]);
+        for (int j = 0; j < N; ++j) lane_projection_[j] += d * v.v[j];
+    }
+    template <int N>
+    void add3(const GradSlot& slot, int64_t i, const AdjN<N>& x, const AdjN<N>& y, const AdjN<N>& z) {
+        add(slot, 3 * i, x);
+        add(slot, 3 * i + 1, y);
+        add(slot, 3 * i + 2, z);
+    }
+    // An RGB parameter triple's adjoints, one vector per lane.
+    template <class A, int N>
+    void add_rgb(const GradSlot& slot, int64_t i, const TVec3<AdjN<N>>& v) {
+        add3(slot, i, v.x, v.y, v.z);
+    }
     // The RGB adjoint v of an RGB parameter triple: channel c belongs to colour c with Adj3.
     template <class A>
     void add_rgb(const GradSlot& slot, int64_t i, const Vec3f& v) {
@@ -150,6 +170,14 @@ public:
         }
     }
 
+    // The first n lanes' projections of the AdjN values added since the last call.
+    void take_lane_projections(double* out, int n) {
+        for (int j = 0; j < n; ++j) {
+            out[j] = lane_projection_[j];
+            lane_projection_[j] = 0.0;
+        }
+    }
+
 private:
     static constexpr int kCacheSize = 256, kWays = 4;
     static constexpr uint64_t kKeyStride = 97;  // slots' first values spread over the cache
@@ -161,6 +189,7 @@ private:
     bool project_;
     double projection_ = 0.0;
     double colour_projection_[3] = {0.0, 0.0, 0.0};
+    double lane_projection_[kMaxAdjLanes] = {};
     Entry cache_[kCacheSize];
 };
 
