@@ -293,9 +293,8 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     return apply(term, weight, sink);
 }
 
-Vec3f SecondaryEdges::apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const {
-    const float s = dot(weight, term.u);
-    if (s == 0.f || !std::isfinite(s)) return Vec3f(0.f);
+template <class S>
+TVec3<S> SecondaryEdges::send(const EdgeTerm& term, const S& s, GradSink& sink) const {
     const Edge& e = scene_.edges()[size_t(term.edge)];
     const EdgeSideGradient& g = term.g;
     if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {
@@ -304,6 +303,12 @@ Vec3f SecondaryEdges::apply(const EdgeTerm& term, const Vec3f& weight, GradSink&
         sink.add3(vs, e.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
     }
     return g.d_o * s;
+}
+
+Vec3f SecondaryEdges::apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const {
+    const float s = dot(weight, term.u);
+    if (s == 0.f || !std::isfinite(s)) return Vec3f(0.f);
+    return send(term, s, sink);
 }
 
 Vec3f SecondaryEdges::replay(const EdgeTerm* terms, size_t count, const Vec3f& weight, GradSink& sink) const {
@@ -320,15 +325,7 @@ AVec3 SecondaryEdges::replay_colours(const EdgeTerm* terms, size_t count, const 
         Adj3 s(weight.x * term.u.x, weight.y * term.u.y, weight.z * term.u.z);
         for (float& v : s.v)
             if (!std::isfinite(v)) v = 0.f;
-        if (is_zero(s)) continue;
-        const Edge& e = scene_.edges()[size_t(term.edge)];
-        const EdgeSideGradient& g = term.g;
-        if (size_t(e.mesh) < slots_.meshes.size() && slots_.meshes[size_t(e.mesh)].vertices.wanted()) {
-            const GradSlot& vs = slots_.meshes[size_t(e.mesh)].vertices;
-            sink.add3(vs, e.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
-            sink.add3(vs, e.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
-        }
-        d_p += g.d_o * s;
+        if (!is_zero(s)) d_p += send(term, s, sink);
     }
     return d_p;
 }

@@ -111,6 +111,10 @@ private:
     // A term's gradients for the adjoint weight `weight`: to the edge's ends into `sink`; returns
     // the adjoint of the vertex position.
     Vec3f apply(const EdgeTerm& term, const Vec3f& weight, GradSink& sink) const;
+    // What apply and replay_colours share: the term's gradients scaled by s (a float, or an
+    // Adj3 with one scale per colour) into the edge's ends; returns the vertex position's.
+    template <class S>
+    TVec3<S> send(const EdgeTerm& term, const S& s, GradSink& sink) const;
 
     // A set of edges with its sampler by length (uniform).
     struct EdgeSet {

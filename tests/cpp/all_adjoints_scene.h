@@ -116,6 +116,18 @@ struct Group {
     int64_t n;
 };
 
+// Slots sized for the scene, with group `grp`'s slot pointed at a fixed direction, kept in `dir`.
+inline SceneGradients directions_of(const Group& grp, std::vector<float>& dir) {
+    SceneGradients g;
+    g.meshes.resize(5);
+    g.materials.resize(5);
+    g.point_lights.resize(1);
+    dir.resize(size_t(grp.n));
+    for (size_t i = 0; i < dir.size(); ++i) dir[i] = float(std::sin(0.7 * double(i) + 0.3));
+    grp.slot(g).dir = dir.data();
+    return g;
+}
+
 inline std::vector<Group> groups(const AllAdjointsScene& s) {
     std::vector<Group> out;
     const char* mesh_names[5] = {"floor", "ball", "box", "glass", "lamp"};

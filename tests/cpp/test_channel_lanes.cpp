@@ -36,13 +36,8 @@ int compare(const Scene& scene, const AllAdjointsScene& s, const Group& grp, con
     opt.max_bounces = 1;
     opt.spp = 2;
     const float w = 1.f / float(opt.spp);
-    SceneGradients g;
-    g.meshes.resize(5);
-    g.materials.resize(5);
-    g.point_lights.resize(1);
-    std::vector<float> dir(size_t(grp.n));
-    for (size_t i = 0; i < dir.size(); ++i) dir[i] = float(std::sin(0.7 * double(i) + 0.3));
-    grp.slot(g).dir = dir.data();
+    std::vector<float> dir;
+    SceneGradients g = directions_of(grp, dir);
     const int nv = layout.num_values, ro = layout.offset[int(Channel::Radiance)];
     GradSink sink(true);
     PathRecord rec;

@@ -31,13 +31,8 @@ TEST(ColourSweep, EqualsThreeSweepsForEveryParameter) {
     const float w = 1.f / float(opt.spp);
     for (const Group& grp : groups(s)) {
         SCOPED_TRACE(grp.name);
-        SceneGradients g;
-        g.meshes.resize(5);
-        g.materials.resize(5);
-        g.point_lights.resize(1);
-        std::vector<float> dir(size_t(grp.n));
-        for (size_t i = 0; i < dir.size(); ++i) dir[i] = float(std::sin(0.7 * double(i) + 0.3));
-        grp.slot(g).dir = dir.data();
+        std::vector<float> dir;
+        SceneGradients g = directions_of(grp, dir);
         SecondaryEdges secondary(*scene, opt, g);
         const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
         GradSink sink(true);
