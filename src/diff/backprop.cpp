@@ -74,22 +74,6 @@ void spot_adjoint(const float* profile, const Vec3f& w, const Adj3& d_out, Adj3*
     }
 }
 
-// The camera parameters' share of the adjoints of the camera ray (d_origin, d_dir).
-void add_camera(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& d_origin,
-                const Vec3f& d_dir, GradSink& sink) {
-    float cam[kCameraParams] = {};
-    d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, d_origin, d_dir, cam);
-    for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
-}
-void add_camera(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const AVec3& d_origin,
-                const AVec3& d_dir, GradSink& sink) {
-    float cam[3][kCameraParams] = {};
-    for (int c = 0; c < 3; ++c)
-        d_camera_ray(scene.camera_params, rec.film.x, rec.film.y, rec.lens.x, rec.lens.y, lane(d_origin, c),
-                     lane(d_dir, c), cam[c]);
-    for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, Adj3(cam[0][i], cam[1][i], cam[2][i]));
-}
-
 // Adjoint of Envmap::eval: texels and rotation into their slots; returns d L / d world
 // direction (the caller decides whether the direction moves). dL: an RGB adjoint.
 template <class A>
@@ -256,47 +240,21 @@ template void d_diffuse<float>(const Scene&, const VertexGeometry&, const SceneG
 
 namespace {
 
-// d_map_normal and d_triangle_dpdu (scene/normal_map.h), lane by lane for Adj3.
+// d_map_normal and d_triangle_dpdu (scene/normal_map.h) for float adjoints.
 void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v, const Vec3f& d_out,
                         Vec3f& dn, Vec3f& ddpdu, Vec3f& dv) {
     d_map_normal(n, has_dpdu, dpdu, v, d_out, dn, ddpdu, dv);
-}
-void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v, const AVec3& d_out,
-                        AVec3& dn, AVec3& ddpdu, AVec3& dv) {
-    for (int c = 0; c < 3; ++c) {
-        Vec3f a = lane(dn, c), b = lane(ddpdu, c), e = lane(dv, c);
-        d_map_normal(n, has_dpdu, dpdu, v, lane(d_out, c), a, b, e);
-        set_lane(dn, c, a);
-        set_lane(ddpdu, c, b);
-        set_lane(dv, c, e);
-    }
 }
 void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2, const Vec3f& ddpdu,
                            Vec3f& de1, Vec3f& de2, Vec2f& dd1, Vec2f& dd2) {
     d_triangle_dpdu(e1, e2, d1, d2, ddpdu, de1, de2, dd1, dd2);
 }
-void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2, const AVec3& ddpdu,
-                           AVec3& de1, AVec3& de2, AVec2& dd1, AVec2& dd2) {
-    for (int c = 0; c < 3; ++c) {
-        Vec3f a = lane(de1, c), b = lane(de2, c);
-        Vec2f p(dd1.x.v[c], dd1.y.v[c]), q(dd2.x.v[c], dd2.y.v[c]);
-        d_triangle_dpdu(e1, e2, d1, d2, lane(ddpdu, c), a, b, p, q);
-        set_lane(de1, c, a);
-        set_lane(de2, c, b);
-        dd1.x.v[c] = p.x;
-        dd1.y.v[c] = p.y;
-        dd2.x.v[c] = q.x;
-        dd2.y.v[c] = q.y;
-    }
-}
-
-// Lane by lane for AdjN, each lane only where its adjoint is not zero (where a sweep with that
-// lane's unit adjoint alone returns before the call).
-template <int N>
-void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v,
-                        const TVec3<AdjN<N>>& d_out, TVec3<AdjN<N>>& dn, TVec3<AdjN<N>>& ddpdu,
-                        TVec3<AdjN<N>>& dv) {
-    for (int j = 0; j < N; ++j) {
+// The same lane by lane for Adj3 and AdjN, each lane only where its adjoint is not zero (where a
+// sweep with that lane's unit adjoint alone returns before the call).
+template <class A>
+void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const Vec3f& v, const TVec3<A>& d_out,
+                        TVec3<A>& dn, TVec3<A>& ddpdu, TVec3<A>& dv) {
+    for (int j = 0; j < kAdjLanes<A>; ++j) {
         const Vec3f d = lane(d_out, j);
         if (is_black(d)) continue;
         Vec3f a = lane(dn, j), b = lane(ddpdu, j), e = lane(dv, j);
@@ -306,11 +264,10 @@ void map_normal_adjoint(const Vec3f& n, bool has_dpdu, const Vec3f& dpdu, const 
         set_lane(dv, j, e);
     }
 }
-template <int N>
+template <class A>
 void triangle_dpdu_adjoint(const Vec3f& e1, const Vec3f& e2, const Vec2f& d1, const Vec2f& d2,
-                           const TVec3<AdjN<N>>& ddpdu, TVec3<AdjN<N>>& de1, TVec3<AdjN<N>>& de2,
-                           TVec2<AdjN<N>>& dd1, TVec2<AdjN<N>>& dd2) {
-    for (int j = 0; j < N; ++j) {
+                           const TVec3<A>& ddpdu, TVec3<A>& de1, TVec3<A>& de2, TVec2<A>& dd1, TVec2<A>& dd2) {
+    for (int j = 0; j < kAdjLanes<A>; ++j) {
         const Vec3f d = lane(ddpdu, j);
         if (is_black(d)) continue;
         Vec3f a = lane(de1, j), b = lane(de2, j);
@@ -440,7 +397,7 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
         if (rec.emitters_hidden || !scene.has_envmap || !(env_wanted || slots.camera.wanted())) return;
         Ray r = scene.camera.generate_ray(rec.film.x, rec.film.y, rec.lens.x, rec.lens.y);
         TVec3<A> d_dir = d_envmap<A>(scene.envmap, slots, r.dir, a, sink);
-        if (slots.camera.wanted()) add_camera(scene, slots, rec, TVec3<A>(A(0)), d_dir, sink);
+        d_camera_params(scene, slots, rec.film, rec.lens, TVec3<A>(A(0)), d_dir, sink);
         return;
     }
     const int K = int(V.size());
@@ -654,7 +611,7 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
         dd_next = d_dir;
         A_next = A_k;
         // The camera ray (origin, d0) comes from the camera parameters.
-        if (k == 0 && slots.camera.wanted()) add_camera(scene, slots, rec, d_origin, d_dir, sink);
+        if (k == 0) d_camera_params(scene, slots, rec.film, rec.lens, d_origin, d_dir, sink);
     }
 }
 

@@ -95,4 +95,16 @@ void d_normal_map(const Scene& scene, const VertexGeometry& g, const SceneGradie
 // The slots of mesh `mesh`, or null when none were given.
 const SceneGradients::MeshSlots* mesh_slots(const SceneGradients& s, int mesh);
 
+// The camera parameters' share of the adjoints (d_origin, d_dir) of the camera ray through film
+// point `film` and lens point `lens`, into the camera's slot (when wanted). A: float, or
+// math/adjoint.h's lanes (each lane computed as float's code computes it).
+template <class A>
+void d_camera_params(const Scene& scene, const SceneGradients& slots, const Vec2f& film, const Vec2f& lens,
+                     const TVec3<A>& d_origin, const TVec3<A>& d_dir, GradSink& sink) {
+    if (!slots.camera.wanted()) return;
+    A cam[kCameraParams] = {};
+    d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, d_origin, d_dir, cam);
+    for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
+}
+
 }  // namespace edgepath

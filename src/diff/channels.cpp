@@ -53,14 +53,14 @@ void d_hit_channels(const Scene& scene, const ChannelLayout& layout, const Scene
     Vec3f d_origin(0.f), d_dir(0.f);
     d_normal_map(scene, g, slots, sink, ha);
     finish_hit(g, ha, mesh_slots(slots, hit.mesh), sink, ray.origin, ray.dir, d_origin, d_dir);
-    if (slots.camera.wanted()) {
-        float cam[kCameraParams] = {};
-        d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, d_origin, d_dir, cam);
-        for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
-    }
+    d_camera_params(scene, slots, film, lens, d_origin, d_dir, sink);
 }
 
 namespace {
+
+// Whether value j of the layout's nv values has a lane: all but the radiance's three (starting
+// at `skip`, -1 without radiance), which the sweep computes.
+bool has_lane(int j, int nv, int skip) { return j < nv && !(skip >= 0 && j >= skip && j < skip + 3); }
 
 // Lane j of `d` set to w where value j (the values of channel c start at `off`) is one of the
 // lanes, for the adjoints a[0..n) of d_hit_channels that point at the values off..off+n.
@@ -68,8 +68,7 @@ template <int N>
 void one_hot(AdjN<N>* d, int n, int off, int nv, int skip, float w) {
     for (int c = 0; c < n; ++c) {
         d[c] = AdjN<N>();
-        const int j = off + c;
-        if (j < nv && !(skip >= 0 && j >= skip && j < skip + 3)) d[c].v[j] = w;
+        if (has_lane(off + c, nv, skip)) d[c].v[off + c] = w;
     }
 }
 
@@ -79,7 +78,7 @@ void d_hit_channel_lanes(const Scene& scene, const ChannelLayout& layout, const 
                          GradSink& sink, double* out) {
     using A = AdjN<N>;
     const int nv = layout.num_values;
-    const auto on = [&](int j) { return j < nv && !(skip >= 0 && j >= skip && j < skip + 3); };
+    const auto on = [&](int j) { return has_lane(j, nv, skip); };
     const VertexGeometry g(scene, hit, ray.origin, ray.dir);
     const size_t material = size_t(g.mesh->material);
     const Material& mat = scene.materials[material];
@@ -150,11 +149,7 @@ void d_hit_channel_lanes(const Scene& scene, const ChannelLayout& layout, const 
     TVec3<A> d_origin, d_dir;
     d_normal_map(scene, g, slots, sink, ha);
     finish_hit(g, ha, mesh_slots(slots, hit.mesh), sink, ray.origin, ray.dir, d_origin, d_dir);
-    if (slots.camera.wanted()) {
-        A cam[kCameraParams];
-        d_camera_ray(scene.camera_params, film.x, film.y, lens.x, lens.y, d_origin, d_dir, cam);
-        for (int i = 0; i < kCameraParams; ++i) sink.add(slots.camera, i, cam[i]);
-    }
+    d_camera_params(scene, slots, film, lens, d_origin, d_dir, sink);
     double p[N];
     sink.take_lane_projections(p, N);
     for (int j = 0; j < nv; ++j) out[j] = on(j) ? p[j] : 0.0;

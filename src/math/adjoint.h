@@ -182,6 +182,10 @@ template <int N> inline void set_lane(TVec3<AdjN<N>>& a, int j, const Vec3f& v) 
 template <class A> struct is_adj_n : std::false_type {};
 template <int N> struct is_adj_n<AdjN<N>> : std::true_type {};
 
+// The number of lanes of a lane type (Adj3: 3, AdjN<N>: N).
+template <class A> constexpr int kAdjLanes = 3;
+template <int N> constexpr int kAdjLanes<AdjN<N>> = N;
+
 // ---- the reductions over colours, per adjoint type ---------------------------------------------
 
 // The scalar adjoint of s where the RGB quantity v s has the RGB adjoint `a`: dot(a, v), or for
