@@ -49,12 +49,12 @@ struct PathBatch::Impl {
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
-    // Per material: diffuse (MaterialKind::Standard with a constant black specular).
-    std::vector<char> plain_material;
     // Per mesh, for its plain vertices: the diffuse reflectance where it is the same at every
     // point (a constant texture, no vertex colours), and then the mask of its reflecting.
     struct PlainMesh {
-        bool plain = false;  // its material's vertices are plain
+        // its material's vertices are plain: diffuse (MaterialKind::Standard with a constant
+        // black specular)
+        bool plain = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
         bool constant = false;
         Vec3f diffuse;
@@ -79,15 +79,13 @@ struct PathBatch::Impl {
     int nplain_ = 0;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
-        for (const Material& m : scene.materials)
-            plain_material.push_back(m.kind == MaterialKind::Standard && m.specular.is_constant() &&
-                                     is_black(Vec3f::load(m.specular.data)));
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
-            pm.plain = plain_material[size_t(m.material)];
+            pm.plain = mat.kind == MaterialKind::Standard && mat.specular.is_constant() &&
+                       is_black(Vec3f::load(mat.specular.data));
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
-            if (plain_material[size_t(m.material)] && mat.diffuse.is_constant() && !m.colors) {
+            if (pm.plain && mat.diffuse.is_constant() && !m.colors) {
                 pm.constant = true;
                 pm.diffuse = Vec3f::load(mat.diffuse.data);  // Scene::diffuse_reflectance's
                 pm.reflects = plain_reflects(pm.diffuse, mat);
