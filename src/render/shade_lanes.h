@@ -16,11 +16,9 @@
 // AVX2 and four (SSE2, math/simd4.h) otherwise, chosen at run time: the same samples bit for
 // bit either way (Render.ShadeLanesWidthsAgree), since each lane's operations are the same.
 #pragma once
-#include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstring>
-#include <limits>
-
 
 namespace edgepath {
 
