@@ -62,6 +62,9 @@ _first_vertices = {}
 _moved = {}
 # Whether the kept scene's edge hierarchy was refit since it was last built.
 _refit = {}
+# The scenes these are kept for, held alive: a scene freed after its test could otherwise give
+# its id to a later test's scene, which would inherit its twin and history.
+_alive = {}
 
 
 def geometric(scene):
@@ -84,6 +87,7 @@ def assert_same_as_fresh(scene):
     always equal the fresh scene's. (The refit tree itself is checked against a fresh build in
     tests/cpp/test_hierarchy.cpp and test_a_refit_edge_hierarchy_equals_a_fresh_one_that_splits_alike
     below.)"""
+    assert _alive.setdefault(id(scene), scene) is scene
     twin = _twins.setdefault(id(scene), fresh(scene))
     twin.camera, twin.meshes, twin.envmap = scene.camera, list(scene.meshes), scene.envmap
     vertices = [m.vertices.detach().clone() for m in scene.meshes]
