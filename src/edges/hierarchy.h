@@ -208,30 +208,46 @@ public:
     Choice pdf(const Query& q, int32_t edge, int32_t start = 0) const;
 
 private:
-    struct Node {
+    // 128 bytes on a 64-byte boundary, two cache lines: the first holds what every score reads
+    // (coarse(), importance_of(), the descents), the second a leaf's edge or an inner node's
+    // normal cone (read only where there are silhouettes to bound) and what the build, refit and
+    // pdf() read. A node's two children are adjacent (left, left + 1): the descents score both.
+    struct Leaf {
+        Vec3f a, b, n0, n1;         // its ends; of a smooth edge or a crease: its faces' normals
+    };
+    struct Cone {
+        Vec3f axis;                 // the normal cone of an inner node's smooth edges
+        float sin = 0.f;
+        // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
+        float plane_lo = 0.f, plane_hi = 0.f;
+    };
+    struct alignas(64) Node {
         Vec3f lo, hi;
         Vec3f center;
         float radius = 0.f;         // of the bounding sphere
-        Vec3f cone_axis;
-        float cone_cos = -1.f, cone_sin = 0.f;  // the normal cone; cos -1: no culling
-        float dihedral = 0.f;       // mean angle between the two faces' normals (smooth edges)
-        // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
-        float plane_lo = 0.f, plane_hi = 0.f;
         float length = 0.f;
         int32_t count = 0;          // edges under it
-        int32_t left = -1;          // children left, right; leaf when left < 0
-        int32_t right = -1;
-        int32_t parent = -1;
-        int32_t edge = -1;          // leaf: index into scene.edges()
-        Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
+        int32_t left = -1;          // children left, left + 1; leaf when left < 0
+        float cone_cos = -1.f;      // the normal cone (inner nodes: Cone); cos -1: no culling
+        float dihedral = 0.f;       // mean angle between the two faces' normals (smooth edges)
         bool always = false;        // holds a boundary edge or a crease
         bool crease = false;        // holds only creases
-        bool seam = false;          // holds a seam (Edge::seam)
         bool dark_behind = false;   // holds only edges whose two faces are black seen from behind
         bool emissive = false;      // holds an edge of an emitter
-        bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
+        // The second line: a leaf's edge, or an inner node's cone (fit_cone; cone_cos > -1).
+        union {
+            Leaf leaf;
+            Cone cone;
+        };
+        int32_t edge = -1;          // leaf: index into scene.edges()
+        int32_t parent = -1;
         int32_t first = 0;          // its edges: order_[first, first + count)
+        bool seam = false;          // holds a seam (Edge::seam)
+        bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
+        Node() : leaf() {}
+        int32_t right() const { return left + 1; }
     };
+    static_assert(sizeof(Node) == 128, "a node is two cache lines");
 public:
     // A node's own bounds at a point: its importance under both strategies; whether p lies
     // inside its bounding sphere, and whether the light cone is narrow beside it (then its
@@ -298,11 +314,13 @@ private:
     static void set_leaf(const Input& in, size_t i, Node& node);
     void refit(const Input& in);
     void refresh_flags(const Input& in);
-    void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
+    // The subtree over items [begin, end) rooted at `index`, its other nodes from `next` on.
+    void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent,
+                     int32_t next);
     // A subtree over items [begin, end): [begin, split) the discontinuities from everywhere,
     // [split, end) the smooth edges, each under a child of its own when both are there.
     void build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end, int32_t index,
-                     int32_t parent);
+                     int32_t parent, int32_t next);
     void finish_inner(int32_t index);
     void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
     // Whether a descent with strategy k that has split `used` times splits at n, whose children
