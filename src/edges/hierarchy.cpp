@@ -4,6 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
@@ -501,6 +504,13 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
     const std::vector<Edge>& all = scene.edges();
     for (size_t k = 0; k < nodes_.size(); ++k) {
         const Node& node = nodes_[k];
+        if (node.left >= 0) {  // the children: side by side after it, its edges split between them
+            if (size_t(node.left) <= k || size_t(node.right()) >= nodes_.size()) return int32_t(k);
+            const Node &l = nodes_[size_t(node.left)], &r = nodes_[size_t(node.right())];
+            if (l.parent != int32_t(k) || r.parent != int32_t(k) || l.count + r.count != node.count ||
+                l.first != node.first || r.first != node.first + l.count)
+                return int32_t(k);
+        }
         const float scale = tol * (length(node.hi - node.lo) + length(node.center) + 1e-6f);
         double total = 0.0;
         for (int32_t j = node.first; j < node.first + node.count; ++j) {
@@ -534,6 +544,26 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
         if (std::abs(total - double(node.length)) > double(tol) * (total + 1e-6)) return int32_t(k);
     }
     return -1;
+}
+
+int32_t EdgeHierarchy::first_difference(const EdgeHierarchy& other) const {
+    auto same = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof(a)) == 0; };
+    for (size_t k = 0; k < nodes_.size(); ++k) {
+        if (k >= other.nodes_.size()) return int32_t(k);
+        const Node &a = nodes_[k], &b = other.nodes_[k];
+        bool equal = same(a.lo, b.lo) && same(a.hi, b.hi) && same(a.center, b.center) && same(a.radius, b.radius) &&
+                     same(a.length, b.length) && a.count == b.count && a.left == b.left && same(a.cone_cos, b.cone_cos) &&
+                     same(a.dihedral, b.dihedral) && a.always == b.always && a.crease == b.crease &&
+                     a.dark_behind == b.dark_behind && a.emissive == b.emissive && a.edge == b.edge &&
+                     a.parent == b.parent && a.first == b.first && a.seam == b.seam && a.mixed == b.mixed;
+        if (equal && a.left < 0) equal = same(a.leaf.a, b.leaf.a) && same(a.leaf.b, b.leaf.b) && same(a.leaf.n0, b.leaf.n0) &&
+                                         same(a.leaf.n1, b.leaf.n1);
+        else if (equal && !a.mixed && (!a.always || a.crease))  // fit_cone's
+            equal = same(a.cone.axis, b.cone.axis) && same(a.cone.sin, b.cone.sin) && same(a.cone.plane_lo, b.cone.plane_lo) &&
+                    same(a.cone.plane_hi, b.cone.plane_hi);
+        if (!equal) return int32_t(k);
+    }
+    return nodes_.size() == other.nodes_.size() ? -1 : int32_t(nodes_.size());
 }
 
 // ---- importance -------------------------------------------------------------------------------
@@ -1013,6 +1043,15 @@ void LightTriangles::set(const Vec3f& p_, const Vec3f (*corners)[3], int count_,
             n[i][k] = bounded && l > 0.f ? c * ((det > 0.f ? 1.f : -1.f) / l) : Vec3f(0.f);
             abs_n[i][k] = Vec3f(std::abs(n[i][k].x), std::abs(n[i][k].y), std::abs(n[i][k].z));
         }
+        for (int k = 0; k < 4; ++k) {
+            const Vec3f &nk = n[i][k % 3], &ak = abs_n[i][k % 3];
+            planes[i].x[k] = nk.x;
+            planes[i].y[k] = nk.y;
+            planes[i].z[k] = nk.z;
+            planes[i].ax[k] = ak.x;
+            planes[i].ay[k] = ak.y;
+            planes[i].az[k] = ak.z;
+        }
     }
 }
 
@@ -1026,11 +1065,27 @@ bool LightTriangles::outside(const Vec3f& lo, const Vec3f& hi) const {
     const Vec3f c = (lo + hi) * 0.5f - p, half = (hi - lo) * 0.5f;
     const float far = std::abs(c.x) + std::abs(c.y) + std::abs(c.z) + half.x + half.y + half.z;
     const float reach = (margin + 1e-5f) * far;
+    // Each triangle's three planes at once (Planes; lane 3 repeats lane 0), in the order of
+    // dot(n, c) + dot(abs_n, half) + reach: the same values as one plane at a time.
+#if defined(__SSE2__)
+    const __m128 cx = _mm_set1_ps(c.x), cy = _mm_set1_ps(c.y), cz = _mm_set1_ps(c.z);
+    const __m128 hx = _mm_set1_ps(half.x), hy = _mm_set1_ps(half.y), hz = _mm_set1_ps(half.z);
+    const __m128 r = _mm_set1_ps(reach), zero = _mm_setzero_ps();
+    for (int i = 0; i < count; ++i) {
+        const Planes& t = planes[i];
+        const __m128 nc = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(t.x), cx), _mm_mul_ps(_mm_load_ps(t.y), cy)),
+                                     _mm_mul_ps(_mm_load_ps(t.z), cz));
+        const __m128 ah = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(t.ax), hx), _mm_mul_ps(_mm_load_ps(t.ay), hy)),
+                                     _mm_mul_ps(_mm_load_ps(t.az), hz));
+        if (_mm_movemask_ps(_mm_cmplt_ps(_mm_add_ps(_mm_add_ps(nc, ah), r), zero)) == 0) return false;
+    }
+#else
     for (int i = 0; i < count; ++i) {
         bool out = false;
         for (int k = 0; k < 3 && !out; ++k) out = dot(n[i][k], c) + dot(abs_n[i][k], half) + reach < 0.f;
         if (!out) return false;
     }
+#endif
     return true;
 }
 

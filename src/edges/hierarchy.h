@@ -106,8 +106,16 @@ struct LightTriangles {
     int count = 0;
     float margin = 0.f;
     Vec3f n[kMax][3];      // zero: no bound from that side (p in the triangle's plane, a degenerate one)
-    Vec3f abs_n[kMax][3];  // their components' absolute values (outside())
+    Vec3f abs_n[kMax][3];  // their components' absolute values
     Vec3f p;               // the point they are seen from
+    // A triangle's three planes again, lane k of each row for plane k (lane 3 repeats plane 0),
+    // for outside(): the three tests of a triangle in one pass, the same arithmetic as
+    // dot(n, c) + dot(abs_n, half) for each.
+    struct alignas(16) Planes {
+        float x[4], y[4], z[4];     // n
+        float ax[4], ay[4], az[4];  // abs_n
+    };
+    Planes planes[kMax];
     // From the triangles' corners (count <= kMax) seen from p.
     void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
     // Whether the box [lo, hi] lies wholly outside every triangle's widened wedge: for each
@@ -167,9 +175,14 @@ public:
     double build_ms() const { return build_ms_; }
     // Checks (for tests) that every node's box and sphere hold its edges as `scene` has them
     // now, its length is theirs, its normal cone holds their faces' normals and its plane range
-    // their planes at its centre, within a relative tolerance `tol`; returns the first node that
-    // fails, or -1.
+    // their planes at its centre, within a relative tolerance `tol`, and that its children lie
+    // side by side after it, their parent it, their edges its own in order; returns the first
+    // node that fails, or -1.
     int32_t check_bounds(const Scene& scene, float tol) const;
+    // The first node (for tests) whose bounds, flags or links differ from `other`'s, bit for
+    // bit (a leaf's edge, an inner node's normal cone where it has one); -1 where none does and
+    // both have as many nodes.
+    int32_t first_difference(const EdgeHierarchy& other) const;
 
     // The nodes' bounds at one point, kept across the descents of one query (both strategies,
     // every split, and the levels of children that score a node): each is computed once.
