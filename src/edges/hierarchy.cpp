@@ -782,8 +782,8 @@ void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, b
             return;
         }
         float a[2], b[2];
-        importance(q, n.left, a, 0, 0);
-        importance(q, n.right(), b, 0, 0);
+        leaves_sum(q, n.left, a);
+        leaves_sum(q, n.right(), b);
         out[0] = a[0] + b[0];
         out[1] = a[1] + b[1];
         if (kept) {
@@ -820,6 +820,35 @@ void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, b
         importance(q, n.right(), b, 0, light_refine - 1);
         out[1] = a[1] + b[1];
     }
+}
+
+// importance(q, index, out, 0, 0) for a node of a small subtree, without its general case:
+// a leaf is scored by its own bounds (never inside nor narrow), a node by its children's sum.
+void EdgeHierarchy::leaves_sum(const Query& q, int32_t index, float out[2]) const {
+    bool found = false;
+    Coarse* const kept = q.memo ? q.memo->lookup(index, found) : nullptr;
+    if (found) {
+        out[0] = kept->value[0];
+        out[1] = kept->value[1];
+        return;
+    }
+    const Node& n = nodes_[size_t(index)];
+    Coarse scratch;
+    Coarse& c = kept ? *kept : scratch;
+    if (n.left < 0) {
+        coarse(q, n, c);  // zero for an empty leaf
+    } else {
+        c = Coarse();
+        if (n.length > 0.f) {  // else only empty leaves: never descended into
+            float a[2], b[2];
+            leaves_sum(q, n.left, a);
+            leaves_sum(q, n.right(), b);
+            c.value[0] = a[0] + b[0];
+            c.value[1] = a[1] + b[1];
+        }
+    }
+    out[0] = c.value[0];
+    out[1] = c.value[1];
 }
 
 EdgeHierarchy::Coarse* EdgeHierarchy::Memo::insert(int32_t node) {

@@ -318,6 +318,9 @@ private:
     // The same, past the memo's entry (`kept`, or null; `found`: it held the node already).
     void importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
                        int light_refine) const;
+    // A small subtree's importance (at most kExactLeaves edges): the sum of its leaves' own
+    // values, each kept in the memo (what importance() with no refinement gives for it).
+    void leaves_sum(const Query& q, int32_t index, float out[2]) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).
