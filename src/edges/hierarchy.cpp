@@ -880,7 +880,7 @@ void EdgeHierarchy::Memo::reset() {
 
 // ---- sampling ---------------------------------------------------------------------------------
 
-bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2],
+inline bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2],
                            int k, int used) const {
     if (used >= kMaxSplits || !(il[k] > 0.f) || !(ir[k] > 0.f)) return false;
     // p inside both boxes: the bounds (no better than the lobe's peak) cannot tell them apart.
