@@ -4,6 +4,9 @@
 #include <chrono>
 #include <cmath>
 #include <cstring>
+#if defined(__SSE2__)
+#include <xmmintrin.h>
+#endif
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
@@ -210,32 +213,31 @@ void EdgeHierarchy::set_leaf(const Input& in, size_t i, Node& node) {
     node.always = in.always[i] != 0;
     node.center = (node.lo + node.hi) * 0.5f;
     node.radius = length(node.hi - node.lo) * 0.5f;
-    node.a = in.p0[i];
-    node.b = in.p1[i];
-    node.n0 = in.n0[i];
-    node.n1 = in.n1[i];
+    node.leaf.a = in.p0[i];
+    node.leaf.b = in.p1[i];
+    node.leaf.n0 = in.n0[i];
+    node.leaf.n1 = in.n1[i];
     node.dark_behind = in.dark_behind[i] != 0;
     node.emissive = in.emissive[i] != 0;
     node.crease = in.crease[i] != 0;
     node.seam = in.seam[i] != 0;
-    node.cone_axis = Vec3f();
     node.cone_cos = -1.f;
-    node.cone_sin = 0.f;
     node.dihedral = 0.f;
     const Vec3f s = in.n0[i] + in.n1[i];
     if ((!node.always || node.crease) && length(s) > 1e-6f) {
-        node.cone_axis = normalize(s);
-        node.cone_cos = std::clamp(dot(node.cone_axis, in.n0[i]), -1.f, 1.f);
-        node.cone_sin = sine(node.cone_cos);
+        // The cone's axis (the normals' mean) is not kept: a leaf tests its two faces exactly.
+        node.cone_cos = std::clamp(dot(normalize(s), in.n0[i]), -1.f, 1.f);
         node.dihedral = 2.f * std::acos(node.cone_cos);
     }
 }
 
-// The subtree over items [begin, end) takes the 2 (end - begin) - 1 nodes from `index` on: its
-// root, then the left subtree, then the right one; so both halves can be built at once. The
-// items end up in the order of the leaves (order_), each node's from node.first on.
+// The subtree over items [begin, end) has its root at `index` and its other 2 (end - begin) - 2
+// nodes from `next` on: the root's two children side by side (the descents score both), then
+// the left child's other nodes, then the right one's; so both halves can be built at once, and
+// children come after their parents. The items end up in the order of the leaves (order_),
+// each node's from node.first on.
 void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index,
-                                int32_t parent) {
+                                int32_t parent, int32_t next) {
     Node& node = nodes_[size_t(index)];
     node.parent = parent;
     node.first = begin;
@@ -258,15 +260,15 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
     std::nth_element(items.begin() + begin, items.begin() + mid, items.begin() + end, [&](int32_t a, int32_t b) {
         return (in.p0[size_t(a)][axis] + in.p1[size_t(a)][axis]) < (in.p0[size_t(b)][axis] + in.p1[size_t(b)][axis]);
     });
-    const int32_t l = index + 1, r = index + 2 * (mid - begin);
+    const int32_t l = next, r = next + 1;
     node.left = l;
-    node.right = r;
+    const int32_t next_l = next + 2, next_r = next + 2 * (mid - begin);
     if (end - begin > kParallelRange)
-        tbb::parallel_invoke([&] { build_range(in, items, begin, mid, l, index); },
-                             [&] { build_range(in, items, mid, end, r, index); });
+        tbb::parallel_invoke([&] { build_range(in, items, begin, mid, l, index, next_l); },
+                             [&] { build_range(in, items, mid, end, r, index, next_r); });
     else {
-        build_range(in, items, begin, mid, l, index);
-        build_range(in, items, mid, end, r, index);
+        build_range(in, items, begin, mid, l, index, next_l);
+        build_range(in, items, mid, end, r, index, next_r);
     }
     finish_inner(index);
     // The children are done: items [begin, end) are in the leaves' order.
@@ -283,19 +285,19 @@ void EdgeHierarchy::fit_cone(const Input& in, const std::vector<int32_t>& items,
         sum += in.n0[i] + in.n1[i];
     }
     n.cone_cos = -1.f;
-    n.cone_sin = 0.f;
+    n.cone = Cone();
     if (length(sum) > 1e-6f) {
-        n.cone_axis = normalize(sum);
+        n.cone.axis = normalize(sum);
         float lo = 1.f;
         for (int k = begin; k < end; ++k) {
             const size_t i = size_t(items[size_t(k)]);
-            lo = std::min(lo, std::min(dot(n.cone_axis, in.n0[i]), dot(n.cone_axis, in.n1[i])));
+            lo = std::min(lo, std::min(dot(n.cone.axis, in.n0[i]), dot(n.cone.axis, in.n1[i])));
         }
         // A little slack for rounding.
         n.cone_cos = std::max(-1.f, lo - 1e-5f);
-        n.cone_sin = sine(n.cone_cos);
+        n.cone.sin = sine(n.cone_cos);
     } else {
-        n.cone_axis = Vec3f(0.f, 0.f, 1.f);
+        n.cone.axis = Vec3f(0.f, 0.f, 1.f);
     }
     float plo = 1e30f, phi = -1e30f;
     for (int k = begin; k < end; ++k) {
@@ -306,13 +308,13 @@ void EdgeHierarchy::fit_cone(const Input& in, const std::vector<int32_t>& items,
         phi = std::max(phi, std::max(a, b));
     }
     const float slack = 1e-5f * (n.radius + length(n.center));
-    n.plane_lo = plo - slack;
-    n.plane_hi = phi + slack;
+    n.cone.plane_lo = plo - slack;
+    n.cone.plane_hi = phi + slack;
 }
 
 void EdgeHierarchy::finish_inner(int32_t index) {
     Node& n = nodes_[size_t(index)];
-    const Node &a = nodes_[size_t(n.left)], &b = nodes_[size_t(n.right)];
+    const Node &a = nodes_[size_t(n.left)], &b = nodes_[size_t(n.right())];
     n.lo = min(a.lo, b.lo);
     n.hi = max(a.hi, b.hi);
     n.center = (n.lo + n.hi) * 0.5f;
@@ -326,23 +328,21 @@ void EdgeHierarchy::finish_inner(int32_t index) {
     n.seam = a.seam || b.seam;
     n.dihedral = n.length > 0.f ? (a.dihedral * a.length + b.dihedral * b.length) / n.length : 0.f;
     n.cone_cos = -1.f;
-    n.cone_sin = 0.f;
 }
 
 void EdgeHierarchy::build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end,
-                                int32_t index, int32_t parent) {
+                                int32_t index, int32_t parent, int32_t next) {
     if (split == begin || split == end) {
-        build_range(in, items, begin, end, index, parent);
+        build_range(in, items, begin, end, index, parent, next);
         return;
     }
     Node& node = nodes_[size_t(index)];
     node.parent = parent;
     node.first = begin;
     node.mixed = true;  // holds discontinuities: never culled
-    node.left = index + 1;
-    node.right = index + 2 * (split - begin);
-    build_range(in, items, begin, split, node.left, index);
-    build_range(in, items, split, end, node.right, index);
+    node.left = next;
+    build_range(in, items, begin, split, next, index, next + 2);
+    build_range(in, items, split, end, next + 1, index, next + 2 * (split - begin));
     finish_inner(index);
 }
 
@@ -383,17 +383,16 @@ void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
     if (n > 0) {
         nodes_.resize(2 * n - 1);
         if (group == 0) {
-            build_kinds(in, items, 0, splits[1], int(n), 0, -1);
+            build_kinds(in, items, 0, splits[1], int(n), 0, -1, 1);
         } else {
             // The group's subtree and the others' under one root.
             const int g = int(group);
             Node& root = nodes_[0];
-            root.left = 1;
-            root.right = 2 * g;
+            root.left = 1;  // the group's subtree at 1 (group_root_), the others' at 2
             root.mixed = true;
             root.first = 0;
-            build_kinds(in, items, 0, splits[0], g, root.left, 0);
-            build_kinds(in, items, g, splits[1], int(n), root.right, 0);
+            build_kinds(in, items, 0, splits[0], g, 1, 0, 3);
+            build_kinds(in, items, g, splits[1], int(n), 2, 0, 2 * g + 1);
             finish_inner(0);
         }
     }
@@ -442,8 +441,8 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
     for (size_t i = 0; i < n && same; ++i) {
         const Node& leaf = nodes_[size_t(leaf_of_[size_t(edges[i])])];
         same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0) && leaf.seam == (in.seam[i] != 0);
-        moved = moved || !(bitwise_equal(leaf.a, in.p0[i]) && bitwise_equal(leaf.b, in.p1[i]) &&
-                           bitwise_equal(leaf.n0, in.n0[i]) && bitwise_equal(leaf.n1, in.n1[i]));
+        moved = moved || !(bitwise_equal(leaf.leaf.a, in.p0[i]) && bitwise_equal(leaf.leaf.b, in.p1[i]) &&
+                           bitwise_equal(leaf.leaf.n0, in.n0[i]) && bitwise_equal(leaf.leaf.n1, in.n1[i]));
         flags = flags || leaf.dark_behind != (in.dark_behind[i] != 0) || leaf.emissive != (in.emissive[i] != 0);
     }
     if (!same) {
@@ -495,7 +494,7 @@ void EdgeHierarchy::refresh_flags(const Input& in) {
     for (size_t k = nodes_.size(); k-- > 0;) {
         Node& node = nodes_[k];
         if (node.left < 0) continue;
-        const Node &a = nodes_[size_t(node.left)], &b = nodes_[size_t(node.right)];
+        const Node &a = nodes_[size_t(node.left)], &b = nodes_[size_t(node.right())];
         node.dark_behind = a.dark_behind && b.dark_behind;
         node.emissive = a.emissive || b.emissive;
     }
@@ -505,6 +504,13 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
     const std::vector<Edge>& all = scene.edges();
     for (size_t k = 0; k < nodes_.size(); ++k) {
         const Node& node = nodes_[k];
+        if (node.left >= 0) {  // the children: side by side after it, its edges split between them
+            if (size_t(node.left) <= k || size_t(node.right()) >= nodes_.size()) return int32_t(k);
+            const Node &l = nodes_[size_t(node.left)], &r = nodes_[size_t(node.right())];
+            if (l.parent != int32_t(k) || r.parent != int32_t(k) || l.count + r.count != node.count ||
+                l.first != node.first || r.first != node.first + l.count)
+                return int32_t(k);
+        }
         const float scale = tol * (length(node.hi - node.lo) + length(node.center) + 1e-6f);
         double total = 0.0;
         for (int32_t j = node.first; j < node.first + node.count; ++j) {
@@ -522,13 +528,15 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
                     if (x[c] < node.lo[c] - scale || x[c] > node.hi[c] + scale) return int32_t(k);
                 if (length(x - node.center) > node.radius + scale) return int32_t(k);
             }
-            if (node.cone_cos > -1.f && !node.mixed && length(leaf.n0) > 0.f) {
+            if (node.cone_cos > -1.f && !node.mixed && length(leaf.leaf.n0) > 0.f) {
                 const Vec3f n0 = normalize(m.face_normal(e.f0)), n1 = normalize(m.face_normal(e.f1));
+                // A leaf keeps no axis: its cone's is its faces' normals' mean.
+                const Vec3f axis = node.left >= 0 ? node.cone.axis : normalize(node.leaf.n0 + node.leaf.n1);
                 for (const Vec3f& nf : {n0, n1})
-                    if (dot(node.cone_axis, nf) < node.cone_cos - tol) return int32_t(k);
+                    if (dot(axis, nf) < node.cone_cos - tol) return int32_t(k);
                 if (node.left >= 0) {
                     const float pa = dot(n0, node.center - a), pb = dot(n1, node.center - a);
-                    if (std::min(pa, pb) < node.plane_lo - scale || std::max(pa, pb) > node.plane_hi + scale)
+                    if (std::min(pa, pb) < node.cone.plane_lo - scale || std::max(pa, pb) > node.cone.plane_hi + scale)
                         return int32_t(k);
                 }
             }
@@ -536,6 +544,26 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
         if (std::abs(total - double(node.length)) > double(tol) * (total + 1e-6)) return int32_t(k);
     }
     return -1;
+}
+
+int32_t EdgeHierarchy::first_difference(const EdgeHierarchy& other) const {
+    auto same = [](const auto& a, const auto& b) { return std::memcmp(&a, &b, sizeof(a)) == 0; };
+    for (size_t k = 0; k < nodes_.size(); ++k) {
+        if (k >= other.nodes_.size()) return int32_t(k);
+        const Node &a = nodes_[k], &b = other.nodes_[k];
+        bool equal = same(a.lo, b.lo) && same(a.hi, b.hi) && same(a.center, b.center) && same(a.radius, b.radius) &&
+                     same(a.length, b.length) && a.count == b.count && a.left == b.left && same(a.cone_cos, b.cone_cos) &&
+                     same(a.dihedral, b.dihedral) && a.always == b.always && a.crease == b.crease &&
+                     a.dark_behind == b.dark_behind && a.emissive == b.emissive && a.edge == b.edge &&
+                     a.parent == b.parent && a.first == b.first && a.seam == b.seam && a.mixed == b.mixed;
+        if (equal && a.left < 0) equal = same(a.leaf.a, b.leaf.a) && same(a.leaf.b, b.leaf.b) && same(a.leaf.n0, b.leaf.n0) &&
+                                         same(a.leaf.n1, b.leaf.n1);
+        else if (equal && !a.mixed && (!a.always || a.crease))  // fit_cone's
+            equal = same(a.cone.axis, b.cone.axis) && same(a.cone.sin, b.cone.sin) && same(a.cone.plane_lo, b.cone.plane_lo) &&
+                    same(a.cone.plane_hi, b.cone.plane_hi);
+        if (!equal) return int32_t(k);
+    }
+    return nodes_.size() == other.nodes_.size() ? -1 : int32_t(nodes_.size());
 }
 
 // ---- importance -------------------------------------------------------------------------------
@@ -556,8 +584,8 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     // only emission (that jumps along an emitter's seams only).
     float weight = 1.f;
     if (leaf && (n.crease || (!n.always && n.cone_cos > -1.f))) {
-        const Vec3f d = q.p - n.a;
-        const bool front0 = dot(d, n.n0) > 0.f, front1 = dot(d, n.n1) > 0.f;
+        const Vec3f d = q.p - n.leaf.a;
+        const bool front0 = dot(d, n.leaf.n0) > 0.f, front1 = dot(d, n.leaf.n1) > 0.f;
         if (front0 == front1) {
             if ((!front0 && n.dark_behind) || (q.direct_only && !(n.emissive && n.seam))) return;
             weight = n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi;
@@ -571,7 +599,7 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     const Vec3f half = (n.hi - n.lo) * 0.5f, ln = q.lobe.n;
     if (dot(ln, v) + std::abs(ln.x) * half.x + std::abs(ln.y) * half.y + std::abs(ln.z) * half.z <= 0.f) return;
     if (leaf) {  // the segment itself: both ends below, or within 1e-5 rad above, the plane
-        const Vec3f ea = n.a - q.p, eb = n.b - q.p;
+        const Vec3f ea = n.leaf.a - q.p, eb = n.leaf.b - q.p;
         if (dot(ln, ea) <= 1e-5f * length(ea) && dot(ln, eb) <= 1e-5f * length(eb)) return;
     }
     const float dc2 = length_squared(v), r2 = n.radius * n.radius;
@@ -588,7 +616,7 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         if (q.cone) {
             float lo, hi;
             EdgeArc arc;
-            const bool none = leaf ? !(arc.set(q.p, n.a, n.b) && arc.lights_part(*q.cone, q.lights, lo, hi) &&
+            const bool none = leaf ? !(arc.set(q.p, n.leaf.a, n.leaf.b) && arc.lights_part(*q.cone, q.lights, lo, hi) &&
                                        arc.param(hi) > arc.param(lo))
                                    : q.lights && q.lights->outside(n.lo, n.hi);
             out.value[1] = none ? 0.f : out.value[0];
@@ -611,10 +639,10 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     float fraction = 1.f;
     bool silhouettes_only = false;
     if (!leaf && (!n.always || n.crease) && n.cone_cos > -1.f) {
-        const float cp = -dot(n.cone_axis, dir), sp = sine(cp);
-        const float ct = n.cone_cos, st = n.cone_sin;
+        const float cp = -dot(n.cone.axis, dir), sp = sine(cp);
+        const float ct = n.cone_cos, st = n.cone.sin;
         const float lowest = ct < -cp ? -1.f : cp * ct - sp * st, highest = cp > ct ? 1.f : cp * ct + sp * st;
-        const float lo = n.plane_lo + d * lowest, hi = n.plane_hi + d * highest;
+        const float lo = n.cone.plane_lo + d * lowest, hi = n.cone.plane_hi + d * highest;
         if (n.dark_behind && !(hi > 0.f)) return;  // creases, p behind every face
         // Edges count where the range straddles 0 (silhouettes) and elsewhere too (shading jumps,
         // self-shadowing steps), except at a last bounce unless there are seams of an emitter:
@@ -635,7 +663,7 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     if (leaf) {
         // The edge's term is about the lobe's integral over the arc it subtends, over the
         // distance h to its line (the rate at which the arc sweeps as the edge moves).
-        const double integral = q.lobe.integral(q.p, n.a, n.b, &leaf_h);
+        const double integral = q.lobe.integral(q.p, n.leaf.a, n.leaf.b, &leaf_h);
         out.value[0] = weight * float(integral / std::max(leaf_h, 1e-3 * double(n.length)));
     } else {
         // The largest cosine between a lobe axis and the node's directions; for silhouettes,
@@ -647,8 +675,8 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         auto largest = [&](const Vec3f& axis) {
             float c = cos_minus(dot(axis, dir), cos_b, sin_b);
             if (band) {
-                const float x = std::abs(dot(axis, n.cone_axis));
-                if (x > n.cone_sin) c = std::min(c, sine(x) * n.cone_cos + x * n.cone_sin);
+                const float x = std::abs(dot(axis, n.cone.axis));
+                if (x > n.cone.sin) c = std::min(c, sine(x) * n.cone_cos + x * n.cone.sin);
             }
             return c;
         };
@@ -687,11 +715,12 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
             float lo, hi;
             EdgeArc arc;
             if ((wraps || cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) && !(q.lights && q.lights->outside(n.lo, n.hi)) &&
-                arc.set(q.p, n.a, n.b) && arc.lights_part(c, q.lights, lo, hi)) {
+                arc.set(q.p, n.leaf.a, n.leaf.b) && arc.lights_part(c, q.lights, lo, hi)) {
                 const float t0 = arc.param(lo), t1 = arc.param(hi);
                 if (t1 > t0) {
-                    const Vec3f e = n.b - n.a;
-                    const double part = t0 <= 0.f && t1 >= 1.f ? -1.0 : q.lobe.integral(q.p, n.a + e * t0, n.a + e * t1);
+                    const Vec3f e = n.leaf.b - n.leaf.a;
+                    const double part =
+                        t0 <= 0.f && t1 >= 1.f ? -1.0 : q.lobe.integral(q.p, n.leaf.a + e * t0, n.leaf.a + e * t1);
                     out.value[1] = part < 0.0 ? out.value[0]
                                               : weight * float(part / std::max(leaf_h, 1e-3 * double(n.length)));
                     if (!std::isfinite(out.value[1])) out.value[1] = 0.f;
@@ -753,8 +782,8 @@ void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, b
             return;
         }
         float a[2], b[2];
-        importance(q, n.left, a, 0, 0);
-        importance(q, n.right, b, 0, 0);
+        leaves_sum(q, n.left, a);
+        leaves_sum(q, n.right(), b);
         out[0] = a[0] + b[0];
         out[1] = a[1] + b[1];
         if (kept) {
@@ -776,7 +805,7 @@ void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, b
         // p inside the bounding sphere: the children's bounds are tighter (a few levels down).
         float a[2], b[2];
         importance(q, n.left, a, refine - 1, light_refine);
-        importance(q, n.right, b, refine - 1, light_refine);
+        importance(q, n.right(), b, refine - 1, light_refine);
         out[0] = a[0] + b[0];
         out[1] = a[1] + b[1];
         return;
@@ -788,9 +817,38 @@ void EdgeHierarchy::importance_of(const Query& q, int32_t index, Coarse* kept, b
         // descents then rarely end where nothing contributes.
         float a[2], b[2];
         importance(q, n.left, a, 0, light_refine - 1);
-        importance(q, n.right, b, 0, light_refine - 1);
+        importance(q, n.right(), b, 0, light_refine - 1);
         out[1] = a[1] + b[1];
     }
+}
+
+// importance(q, index, out, 0, 0) for a node of a small subtree, without its general case:
+// a leaf is scored by its own bounds (never inside nor narrow), a node by its children's sum.
+void EdgeHierarchy::leaves_sum(const Query& q, int32_t index, float out[2]) const {
+    bool found = false;
+    Coarse* const kept = q.memo ? q.memo->lookup(index, found) : nullptr;
+    if (found) {
+        out[0] = kept->value[0];
+        out[1] = kept->value[1];
+        return;
+    }
+    const Node& n = nodes_[size_t(index)];
+    Coarse scratch;
+    Coarse& c = kept ? *kept : scratch;
+    if (n.left < 0) {
+        coarse(q, n, c);  // zero for an empty leaf
+    } else {
+        c = Coarse();
+        if (n.length > 0.f) {  // else only empty leaves: never descended into
+            float a[2], b[2];
+            leaves_sum(q, n.left, a);
+            leaves_sum(q, n.right(), b);
+            c.value[0] = a[0] + b[0];
+            c.value[1] = a[1] + b[1];
+        }
+    }
+    out[0] = c.value[0];
+    out[1] = c.value[1];
 }
 
 EdgeHierarchy::Coarse* EdgeHierarchy::Memo::insert(int32_t node) {
@@ -822,11 +880,11 @@ void EdgeHierarchy::Memo::reset() {
 
 // ---- sampling ---------------------------------------------------------------------------------
 
-bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2],
+inline bool EdgeHierarchy::splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2],
                            int k, int used) const {
     if (used >= kMaxSplits || !(il[k] > 0.f) || !(ir[k] > 0.f)) return false;
     // p inside both boxes: the bounds (no better than the lobe's peak) cannot tell them apart.
-    const Node &l = nodes_[size_t(n.left)], &r = nodes_[size_t(n.right)];
+    const Node &l = nodes_[size_t(n.left)], &r = nodes_[size_t(n.right())];
     auto inside = [&](const Node& c) {
         return q.p.x >= c.lo.x && q.p.x <= c.hi.x && q.p.y >= c.lo.y && q.p.y <= c.hi.y && q.p.z >= c.lo.z &&
                q.p.z <= c.hi.z;
@@ -862,7 +920,7 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
             const Node& n = nodes_[size_t(it.at)];
             float il[2], ir[2];
             importance(q, n.left, il);
-            importance(q, n.right, ir);
+            importance(q, n.right(), ir);
             const float sum = il[s] + ir[s];
             if (!(sum > 0.f)) {
                 alive = false;
@@ -873,7 +931,7 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
             if (split[s]) {
                 // Both children, the same u in each (each descent is right on its own).
                 Item other = it;
-                other.at = n.right;
+                other.at = n.right();
                 for (int k = 0; k < 2; ++k) {
                     if (split[k]) continue;
                     const float tot = il[k] + ir[k];
@@ -897,7 +955,7 @@ int EdgeHierarchy::sample(const Query& q, Strategy s, float u, Choice out[kMaxCh
                 const float tot = il[k] + ir[k];
                 it.prob[k] *= tot > 0.f ? (left ? il[k] : ir[k]) / tot : 0.f;
             }
-            it.at = left ? n.left : n.right;
+            it.at = left ? n.left : n.right();
         }
         if (!alive || !(it.prob[s] > 0.f)) continue;
         Choice& c = out[count++];
@@ -932,7 +990,7 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge, int32_t s
         const int32_t next = path[i - 1];
         float il[2], ir[2];
         importance(q, n.left, il);
-        importance(q, n.right, ir);
+        importance(q, n.right(), ir);
         for (int k = 0; k < 2; ++k) {
             const float mine = next == n.left ? il[k] : ir[k];
             if (splits(q, n, il, ir, root, k, used[k])) {
@@ -1014,6 +1072,15 @@ void LightTriangles::set(const Vec3f& p_, const Vec3f (*corners)[3], int count_,
             n[i][k] = bounded && l > 0.f ? c * ((det > 0.f ? 1.f : -1.f) / l) : Vec3f(0.f);
             abs_n[i][k] = Vec3f(std::abs(n[i][k].x), std::abs(n[i][k].y), std::abs(n[i][k].z));
         }
+        for (int k = 0; k < 4; ++k) {
+            const Vec3f &nk = n[i][k % 3], &ak = abs_n[i][k % 3];
+            planes[i].x[k] = nk.x;
+            planes[i].y[k] = nk.y;
+            planes[i].z[k] = nk.z;
+            planes[i].ax[k] = ak.x;
+            planes[i].ay[k] = ak.y;
+            planes[i].az[k] = ak.z;
+        }
     }
 }
 
@@ -1027,11 +1094,27 @@ bool LightTriangles::outside(const Vec3f& lo, const Vec3f& hi) const {
     const Vec3f c = (lo + hi) * 0.5f - p, half = (hi - lo) * 0.5f;
     const float far = std::abs(c.x) + std::abs(c.y) + std::abs(c.z) + half.x + half.y + half.z;
     const float reach = (margin + 1e-5f) * far;
+    // Each triangle's three planes at once (Planes; lane 3 repeats lane 0), in the order of
+    // dot(n, c) + dot(abs_n, half) + reach: the same values as one plane at a time.
+#if defined(__SSE2__)
+    const __m128 cx = _mm_set1_ps(c.x), cy = _mm_set1_ps(c.y), cz = _mm_set1_ps(c.z);
+    const __m128 hx = _mm_set1_ps(half.x), hy = _mm_set1_ps(half.y), hz = _mm_set1_ps(half.z);
+    const __m128 r = _mm_set1_ps(reach), zero = _mm_setzero_ps();
+    for (int i = 0; i < count; ++i) {
+        const Planes& t = planes[i];
+        const __m128 nc = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(t.x), cx), _mm_mul_ps(_mm_load_ps(t.y), cy)),
+                                     _mm_mul_ps(_mm_load_ps(t.z), cz));
+        const __m128 ah = _mm_add_ps(_mm_add_ps(_mm_mul_ps(_mm_load_ps(t.ax), hx), _mm_mul_ps(_mm_load_ps(t.ay), hy)),
+                                     _mm_mul_ps(_mm_load_ps(t.az), hz));
+        if (_mm_movemask_ps(_mm_cmplt_ps(_mm_add_ps(_mm_add_ps(nc, ah), r), zero)) == 0) return false;
+    }
+#else
     for (int i = 0; i < count; ++i) {
         bool out = false;
         for (int k = 0; k < 3 && !out; ++k) out = dot(n[i][k], c) + dot(abs_n[i][k], half) + reach < 0.f;
         if (!out) return false;
     }
+#endif
     return true;
 }
 

@@ -106,8 +106,16 @@ struct LightTriangles {
     int count = 0;
     float margin = 0.f;
     Vec3f n[kMax][3];      // zero: no bound from that side (p in the triangle's plane, a degenerate one)
-    Vec3f abs_n[kMax][3];  // their components' absolute values (outside())
+    Vec3f abs_n[kMax][3];  // their components' absolute values
     Vec3f p;               // the point they are seen from
+    // A triangle's three planes again, lane k of each row for plane k (lane 3 repeats plane 0),
+    // for outside(): the three tests of a triangle in one pass, the same arithmetic as
+    // dot(n, c) + dot(abs_n, half) for each.
+    struct alignas(16) Planes {
+        float x[4], y[4], z[4];     // n
+        float ax[4], ay[4], az[4];  // abs_n
+    };
+    Planes planes[kMax];
     // From the triangles' corners (count <= kMax) seen from p.
     void set(const Vec3f& p, const Vec3f (*corners)[3], int count, float margin);
     // Whether the box [lo, hi] lies wholly outside every triangle's widened wedge: for each
@@ -167,9 +175,14 @@ public:
     double build_ms() const { return build_ms_; }
     // Checks (for tests) that every node's box and sphere hold its edges as `scene` has them
     // now, its length is theirs, its normal cone holds their faces' normals and its plane range
-    // their planes at its centre, within a relative tolerance `tol`; returns the first node that
-    // fails, or -1.
+    // their planes at its centre, within a relative tolerance `tol`, and that its children lie
+    // side by side after it, their parent it, their edges its own in order; returns the first
+    // node that fails, or -1.
     int32_t check_bounds(const Scene& scene, float tol) const;
+    // The first node (for tests) whose bounds, flags or links differ from `other`'s, bit for
+    // bit (a leaf's edge, an inner node's normal cone where it has one); -1 where none does and
+    // both have as many nodes.
+    int32_t first_difference(const EdgeHierarchy& other) const;
 
     // The nodes' bounds at one point, kept across the descents of one query (both strategies,
     // every split, and the levels of children that score a node): each is computed once.
@@ -208,30 +221,46 @@ public:
     Choice pdf(const Query& q, int32_t edge, int32_t start = 0) const;
 
 private:
-    struct Node {
+    // 128 bytes on a 64-byte boundary, two cache lines: the first holds what every score reads
+    // (coarse(), importance_of(), the descents), the second a leaf's edge or an inner node's
+    // normal cone (read only where there are silhouettes to bound) and what the build, refit and
+    // pdf() read. A node's two children are adjacent (left, left + 1): the descents score both.
+    struct Leaf {
+        Vec3f a, b, n0, n1;         // its ends; of a smooth edge or a crease: its faces' normals
+    };
+    struct Cone {
+        Vec3f axis;                 // the normal cone of an inner node's smooth edges
+        float sin = 0.f;
+        // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
+        float plane_lo = 0.f, plane_hi = 0.f;
+    };
+    struct alignas(64) Node {
         Vec3f lo, hi;
         Vec3f center;
         float radius = 0.f;         // of the bounding sphere
-        Vec3f cone_axis;
-        float cone_cos = -1.f, cone_sin = 0.f;  // the normal cone; cos -1: no culling
-        float dihedral = 0.f;       // mean angle between the two faces' normals (smooth edges)
-        // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
-        float plane_lo = 0.f, plane_hi = 0.f;
         float length = 0.f;
         int32_t count = 0;          // edges under it
-        int32_t left = -1;          // children left, right; leaf when left < 0
-        int32_t right = -1;
-        int32_t parent = -1;
-        int32_t edge = -1;          // leaf: index into scene.edges()
-        Vec3f a, b, n0, n1;         // leaf: its ends; of a smooth edge: its faces' normals
+        int32_t left = -1;          // children left, left + 1; leaf when left < 0
+        float cone_cos = -1.f;      // the normal cone (inner nodes: Cone); cos -1: no culling
+        float dihedral = 0.f;       // mean angle between the two faces' normals (smooth edges)
         bool always = false;        // holds a boundary edge or a crease
         bool crease = false;        // holds only creases
-        bool seam = false;          // holds a seam (Edge::seam)
         bool dark_behind = false;   // holds only edges whose two faces are black seen from behind
         bool emissive = false;      // holds an edge of an emitter
-        bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
+        // The second line: a leaf's edge, or an inner node's cone (fit_cone; cone_cos > -1).
+        union {
+            Leaf leaf;
+            Cone cone;
+        };
+        int32_t edge = -1;          // leaf: index into scene.edges()
+        int32_t parent = -1;
         int32_t first = 0;          // its edges: order_[first, first + count)
+        bool seam = false;          // holds a seam (Edge::seam)
+        bool mixed = false;         // joins the kinds' or the groups' trees: no normal cone
+        Node() : leaf() {}
+        int32_t right() const { return left + 1; }
     };
+    static_assert(sizeof(Node) == 128, "a node is two cache lines");
 public:
     // A node's own bounds at a point: its importance under both strategies; whether p lies
     // inside its bounding sphere, and whether the light cone is narrow beside it (then its
@@ -289,6 +318,9 @@ private:
     // The same, past the memo's entry (`kept`, or null; `found`: it held the node already).
     void importance_of(const Query& q, int32_t index, Coarse* kept, bool found, float out[2], int refine,
                        int light_refine) const;
+    // A small subtree's importance (at most kExactLeaves edges): the sum of its leaves' own
+    // values, each kept in the memo (what importance() with no refinement gives for it).
+    void leaves_sum(const Query& q, int32_t index, float out[2]) const;
     static constexpr int kRefine = 3, kLightRefine = 4;
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).
@@ -298,11 +330,13 @@ private:
     static void set_leaf(const Input& in, size_t i, Node& node);
     void refit(const Input& in);
     void refresh_flags(const Input& in);
-    void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent);
+    // The subtree over items [begin, end) rooted at `index`, its other nodes from `next` on.
+    void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent,
+                     int32_t next);
     // A subtree over items [begin, end): [begin, split) the discontinuities from everywhere,
     // [split, end) the smooth edges, each under a child of its own when both are there.
     void build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end, int32_t index,
-                     int32_t parent);
+                     int32_t parent, int32_t next);
     void finish_inner(int32_t index);
     void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
     // Whether a descent with strategy k that has split `used` times splits at n, whose children

@@ -1069,7 +1069,7 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     EXPECT_GT(flat, 0);  // the box's and the quad's diagonals at least
     size_t group = 0;
     const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
-    scene->edge_hierarchy(ids, group);
+    const EdgeHierarchy before = *scene->edge_hierarchy(ids, group);
     for (MeshData* m : {&hs.sphere, &hs.box, &hs.quad})
         for (float& x : m->vertices) x *= 2.f;
     // The kept hierarchy and a fresh build over the scene `d` describes: the same
@@ -1079,6 +1079,9 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
         EdgeHierarchy fresh;
         fresh.build(*fresh_scene, ids, group);
         ASSERT_EQ(kept.group_root(), fresh.group_root());
+        // Node for node, bit for bit: the same layout, bounds, cones and flags.
+        EXPECT_EQ(kept.first_difference(fresh), -1);
+        EXPECT_EQ(kept.check_bounds(*fresh_scene, 1e-5f), -1);
         Rng rng(8, 1);
         int nonzero = 0;
         for (int i = 0; i < 20; ++i) {
@@ -1097,6 +1100,7 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
     update_scene(*scene, d);
     const EdgeHierarchy& refit = *scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(refit.first_difference(before), 0);  // every bound moved: the root differs
     EXPECT_EQ(scene->hierarchy_stats().refits, 1u);
     EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
     expect_fresh(refit, d);
@@ -1201,6 +1205,51 @@ TEST(EdgeHierarchy, MemoGivesTheSameSamplesWithFlatEdges) {
     }
     EXPECT_GT(compared, 300);
 }
+
+// LightTriangles::outside() tests a triangle's three planes at once: the same answer, box for
+// box, as one plane at a time (n . c + abs_n . half + reach < 0 for some plane of each
+// triangle), over random points, triangles (some degenerate, some behind or edge-on) and boxes
+// that hold the point, touch the wedges or lie far off; both answers occur many times.
+TEST(LightTriangles, OutsideIsThePlaneByPlaneTest) {
+    Rng rng(21, 5);
+    auto uniform = [&](float lo, float hi) { return lo + (hi - lo) * rng.next_float(); };
+    int outside = 0, inside = 0;
+    for (int round = 0; round < 400; ++round) {
+        const Vec3f p(uniform(-1, 1), uniform(-1, 1), uniform(-1, 1));
+        const int count = 1 + round % LightTriangles::kMax;
+        Vec3f corners[LightTriangles::kMax][3];
+        for (int i = 0; i < count; ++i) {
+            const Vec3f c(uniform(-2, 2), uniform(2, 3), uniform(-2, 2));
+            for (int k = 0; k < 3; ++k) corners[i][k] = c + Vec3f(uniform(-0.5f, 0.5f), uniform(-0.2f, 0.2f), uniform(-0.5f, 0.5f));
+            if (round % 7 == 3 && i == 0) corners[i][2] = corners[i][1];                 // degenerate
+            if (round % 11 == 5 && i == 0) corners[i][0].y = corners[i][1].y = corners[i][2].y = p.y;  // edge-on
+        }
+        LightTriangles lights;
+        lights.set(p, corners, count, round % 5 == 0 ? 0.f : uniform(0.f, 0.05f));
+        for (int b = 0; b < 25; ++b) {
+            const Vec3f c(uniform(-4, 4), uniform(-4, 5), uniform(-4, 4)), e(uniform(0, 1), uniform(0, 1), uniform(0, 1));
+            const Vec3f lo = b % 6 == 0 ? min(c, p) : c - e, hi = b % 6 == 0 ? max(c, p) : c + e;
+            // Plane by plane, as the sums are written in outside().
+            const Vec3f mid = (lo + hi) * 0.5f - p, half = (hi - lo) * 0.5f;
+            const float far = std::abs(mid.x) + std::abs(mid.y) + std::abs(mid.z) + half.x + half.y + half.z;
+            const float reach = (lights.margin + 1e-5f) * far;
+            bool want = true;
+            for (int i = 0; i < lights.count && want; ++i) {
+                bool out = false;
+                for (int k = 0; k < 3; ++k) out = out || dot(lights.n[i][k], mid) + dot(lights.abs_n[i][k], half) + reach < 0.f;
+                want = out;
+            }
+            const bool got = lights.outside(lo, hi);
+            ASSERT_EQ(got, want) << "round " << round << " box " << b;
+            (got ? outside : inside) += 1;
+        }
+    }
+    EXPECT_GT(outside, 1000);
+    EXPECT_GT(inside, 1000);
+    LightTriangles none;
+    EXPECT_FALSE(none.outside(Vec3f(5.f), Vec3f(6.f)));  // no triangles: not known
+}
+
 
 }  // namespace
 }  // namespace edgepath
