@@ -1130,15 +1130,29 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
     if (!arc_.set(p, v0, v1)) return false;
     // The lobe bound along the edge, in angle, and its integral.
     all_.build(arc_.a, arc_.b, lobe, arc_.phi0, arc_.phi1);
-    // The part strategy Lights takes (EdgeArc::lights_part).
-    cone0_ = cone1_ = 0.f;
+    // The part strategy Lights takes (EdgeArc::lights_part), and its ends in t (both the
+    // sample and the density need them).
+    cone0_ = cone1_ = t0_ = t1_ = 0.f;
     lights_uniform_ = 1.f;
-    if (cone && arc_.lights_part(*cone, lights, cone0_, cone1_) && lobe.specular > 0.f) {
-        // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it.
-        lights_.build(arc_.a, arc_.b, lobe, cone0_, cone1_);
-        if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
+    lights_pending_ = false;
+    if (cone && arc_.lights_part(*cone, lights, cone0_, cone1_)) {
+        t0_ = param(cone0_);
+        t1_ = param(cone1_);
+        // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it
+        // (build_lights()).
+        if (lobe.specular > 0.f) {
+            lobe_ = lobe;
+            lights_pending_ = true;
+        }
     }
     return true;
+}
+
+void EdgePointSampler::build_lights() const {
+    if (!lights_pending_) return;
+    lights_pending_ = false;
+    lights_.build(arc_.a, arc_.b, lobe_, cone0_, cone1_);
+    if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
 }
 
 float EdgePointSampler::angle(float t) const { return arc_.angle(t); }
@@ -1151,8 +1165,9 @@ float EdgePointSampler::dphi_dt(float t) const {
 bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return false;
-        const float t0 = param(cone0_), t1 = param(cone1_);
+        const float t0 = t0_, t1 = t1_;
         if (!(t1 > t0)) return false;
+        build_lights();
         if (u < lights_uniform_) {
             t = t0 + u / lights_uniform_ * (t1 - t0);
             return true;
@@ -1169,17 +1184,33 @@ bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) cons
     return true;
 }
 
+float EdgePointSampler::lights_pdf(float t, float phi) const {
+    build_lights();
+    const float t0 = t0_, t1 = t1_;
+    if (!(lights_uniform_ < 1.f)) return 1.f / (t1 - t0);
+    return lights_uniform_ / (t1 - t0) + (1.f - lights_uniform_) * lights_.value(phi) / lights_.total * dphi_dt(t);
+}
+
 float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
     if (!(t >= 0.f && t <= 1.f)) return 0.f;
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return 0.f;
-        const float t0 = param(cone0_), t1 = param(cone1_);
-        if (!(t1 > t0 && t >= t0 && t <= t1)) return 0.f;
-        if (!(lights_uniform_ < 1.f)) return 1.f / (t1 - t0);
-        return lights_uniform_ / (t1 - t0) + (1.f - lights_uniform_) * lights_.value(angle(t)) / lights_.total * dphi_dt(t);
+        if (!(t1_ > t0_ && t >= t0_ && t <= t1_)) return 0.f;
+        return lights_pdf(t, angle(t));
     }
     if (all_.total <= 0.f) return 1.f;
     return kUniform + (1.f - kUniform) * all_.value(angle(t)) / all_.total * dphi_dt(t);
+}
+
+void EdgePointSampler::pdfs(float t, bool lights, float& all, float& lights_out) const {
+    all = lights_out = 0.f;
+    if (!(t >= 0.f && t <= 1.f)) return;
+    // The angle where a density needs it, once.
+    const bool in_part = lights && cone1_ > cone0_ && t1_ > t0_ && t >= t0_ && t <= t1_;
+    const bool lobe_all = all_.total > 0.f;
+    const float phi = lobe_all || (in_part && (lights_pending_ || lights_uniform_ < 1.f)) ? angle(t) : 0.f;
+    all = lobe_all ? kUniform + (1.f - kUniform) * all_.value(phi) / all_.total * dphi_dt(t) : 1.f;
+    if (in_part) lights_out = lights_pdf(t, phi);
 }
 
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or

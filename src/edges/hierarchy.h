@@ -342,6 +342,9 @@ public:
     bool sample(EdgeHierarchy::Strategy s, float u, float& t) const;
     // The density of t, per unit t, under each strategy.
     float pdf(EdgeHierarchy::Strategy s, float t) const;
+    // Both strategies' densities of t, as pdf() gives them, with one angle of t for the two
+    // (strategy Lights' only where `lights`; 0 otherwise).
+    void pdfs(float t, bool lights, float& all, float& lights_pdf) const;
     // The angle of parameter t and back.
     float angle(float t) const;
     float param(float phi) const;
@@ -367,13 +370,22 @@ private:
         float value(float phi) const;
     };
     float dphi_dt(float t) const;
+    // Strategy Lights' density at t inside its part [t0_, t1_], phi the angle of t.
+    float lights_pdf(float t, float phi) const;
+    // The table over the part inside the cone, built the first time a sample or a density needs
+    // it: a point strategy All takes outside that part needs neither it nor its total.
+    void build_lights() const;
     EdgeArc arc_;
     // The part strategy Lights samples: inside the light cone (and near a light triangle, with
-    // LightTriangles); empty when cone1 <= cone0.
-    float cone0_ = 0.f, cone1_ = 0.f;
+    // LightTriangles); empty when cone1 <= cone0. [t0_, t1_]: the same in t (param()).
+    float cone0_ = 0.f, cone1_ = 0.f, t0_ = 0.f, t1_ = 0.f;
     Table all_;                        // over the whole edge [phi0, phi1]
-    Table lights_;                     // over the part inside the cone, where lights_uniform_ < 1
-    float lights_uniform_ = 1.f;
+    // Over the part inside the cone, where lights_uniform_ < 1 (a glossy lobe): built lazily
+    // (build_lights(); lights_pending_ until then, with the lobe it is built from).
+    mutable Table lights_;
+    mutable float lights_uniform_ = 1.f;
+    mutable bool lights_pending_ = false;
+    LobeBound lobe_;
 };
 
 }  // namespace edgepath

@@ -211,8 +211,9 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         EdgePointSampler points;
         float t;
         if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, q.lights) || !points.sample(s, ut, t)) continue;
-        const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
-                    joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
+        float pdf_all, pdf_lights;
+        points.pdfs(t, q.cone != nullptr, pdf_all, pdf_lights);
+        const float joint_all = choice.prob[0] * pdf_all, joint_lights = q.cone ? choice.prob[1] * pdf_lights : 0.f;
         const float mixture = c_all * joint_all + c_lights * joint_lights;
         if (!(mixture > 0.f) || !std::isfinite(mixture)) continue;
         // scale: the inverse of the mixture's density per unit length.
