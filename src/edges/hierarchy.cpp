@@ -547,6 +547,13 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
     if (!(n.length > 0.f)) return;  // empty leaves only (Edge::flat): nothing to sample
     const bool leaf = n.left < 0;
+    // A leaf's arc and Lights part (ArcPart::compute), kept for the point sampler where the
+    // query keeps them (Query::arcs).
+    auto leaf_part = [&](ArcPart& arc) {
+        const bool part = arc.compute(q.p, n.a, n.b, *q.cone, q.lights);
+        if (q.arcs) q.arcs->keep(n.edge, n.a, n.b, arc);
+        return part;
+    };
     // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
     // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
     // them, and a smooth edge's at the steps where the mesh shadows itself along it (the light
@@ -586,11 +593,8 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         // where the box lies outside every light triangle's wedge.
         out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
         if (q.cone) {
-            float lo, hi;
-            EdgeArc arc;
-            const bool none = leaf ? !(arc.set(q.p, n.a, n.b) && arc.lights_part(*q.cone, q.lights, lo, hi) &&
-                                       arc.param(hi) > arc.param(lo))
-                                   : q.lights && q.lights->outside(n.lo, n.hi);
+            ArcPart arc;
+            const bool none = leaf ? !(leaf_part(arc) && arc.t1 > arc.t0) : q.lights && q.lights->outside(n.lo, n.hi);
             out.value[1] = none ? 0.f : out.value[0];
         }
         out.inside = !leaf;
@@ -684,11 +688,10 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
             // A leaf: the same integral over the part of its arc the point sampler takes
             // (EdgeArc::lights_part: inside the cone, near a light triangle), zero where that is
             // empty (or where the cones are apart).
-            float lo, hi;
-            EdgeArc arc;
+            ArcPart arc;
             if ((wraps || cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) && !(q.lights && q.lights->outside(n.lo, n.hi)) &&
-                arc.set(q.p, n.a, n.b) && arc.lights_part(c, q.lights, lo, hi)) {
-                const float t0 = arc.param(lo), t1 = arc.param(hi);
+                leaf_part(arc)) {
+                const float t0 = arc.t0, t1 = arc.t1;
                 if (t1 > t0) {
                     const Vec3f e = n.b - n.a;
                     const double part = t0 <= 0.f && t1 >= 1.f ? -1.0 : q.lobe.integral(q.p, n.a + e * t0, n.a + e * t1);
@@ -955,14 +958,33 @@ void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBo
     // (cos, sin) of the bins' ends by rotation, one step at a time.
     const float step = (hi - lo) / float(kBins), cs = std::cos(step), ss = std::sin(step);
     float c = std::cos(lo), sn = std::sin(lo);
-    cdf[0] = 0.f;
+    float cv[kBins + 1], sv[kBins + 1];
     for (int k = 0; k <= kBins; ++k) {
-        g[k] = lobe.eval(a * c + b * sn);
-        if (k > 0) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
+        cv[k] = c;
+        sv[k] = sn;
         const float next_c = c * cs - sn * ss;
         sn = sn * cs + c * ss;
         c = next_c;
     }
+    // The lobe bound there: LobeBound::eval's arithmetic, without branches (the ends are
+    // independent: the loops run in vector lanes, each rounding as eval does).
+    const float kd = lobe.diffuse, ks = lobe.specular, sharp = lobe.sharpness;
+    const Vec3f n = lobe.n, r = lobe.r;
+    if (ks > 0.f) {
+        for (int k = 0; k <= kBins; ++k) {
+            const Vec3f w = a * cv[k] + b * sv[k];
+            const float cn = dot(n, w), q = 1.f + sharp * (1.f - dot(r, w));
+            const float v = kd * cn + ks / (q * q);
+            g[k] = cn > 0.f ? v : 0.f;
+        }
+    } else {
+        for (int k = 0; k <= kBins; ++k) {
+            const float cn = dot(n, a * cv[k] + b * sv[k]);
+            g[k] = cn > 0.f ? kd * cn : 0.f;
+        }
+    }
+    cdf[0] = 0.f;
+    for (int k = 1; k <= kBins; ++k) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
     total = cdf[kBins];
     if (!(total > 0.f) || !std::isfinite(total)) total = 0.f;
 }
@@ -1125,9 +1147,28 @@ bool EdgeArc::lights_part(const BoundsCone& cone, const LightTriangles* lights, 
     return true;
 }
 
+bool ArcPart::compute(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const BoundsCone& cone,
+                      const LightTriangles* lights) {
+    arc_ok = arc.set(p, v0, v1);
+    part = arc_ok && arc.lights_part(cone, lights, lo, hi);
+    if (part) {
+        t0 = arc.param(lo);
+        t1 = arc.param(hi);
+    }
+    return part;
+}
+
 bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
                              const BoundsCone* cone, const LightTriangles* lights) {
-    if (!arc_.set(p, v0, v1)) return false;
+    ArcPart known;
+    if (cone) known.compute(p, v0, v1, *cone, lights);
+    else known.arc_ok = known.arc.set(p, v0, v1);
+    return setup(known, lobe, cone);
+}
+
+bool EdgePointSampler::setup(const ArcPart& known, const LobeBound& lobe, const BoundsCone* cone) {
+    if (!known.arc_ok) return false;
+    arc_ = known.arc;
     // The lobe bound along the edge, in angle, and its integral.
     all_.build(arc_.a, arc_.b, lobe, arc_.phi0, arc_.phi1);
     // The part strategy Lights takes (EdgeArc::lights_part), and its ends in t (both the
@@ -1135,9 +1176,11 @@ bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, c
     cone0_ = cone1_ = t0_ = t1_ = 0.f;
     lights_uniform_ = 1.f;
     lights_pending_ = false;
-    if (cone && arc_.lights_part(*cone, lights, cone0_, cone1_)) {
-        t0_ = param(cone0_);
-        t1_ = param(cone1_);
+    if (cone && known.part) {
+        cone0_ = known.lo;
+        cone1_ = known.hi;
+        t0_ = known.t0;
+        t1_ = known.t1;
         // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it
         // (build_lights()).
         if (lobe.specular > 0.f) {

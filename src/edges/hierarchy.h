@@ -135,6 +135,59 @@ struct EdgeArc {
     float angle(float t) const { return std::atan((t * len - s_foot) / h); }
 };
 
+// An edge's arc seen from p and the part strategy Lights takes of it (EdgeArc::lights_part), with
+// that part's ends in t (EdgeArc::param), as a leaf's Lights importance (EdgeHierarchy) and the
+// point sampler on the edge (EdgePointSampler) both need them.
+struct ArcPart {
+    EdgeArc arc;
+    bool arc_ok = false;  // EdgeArc::set succeeded
+    bool part = false;    // lights_part found a part (lo, hi); its ends t0, t1 in t
+    float lo = 0.f, hi = 0.f, t0 = 0.f, t1 = 0.f;
+    // From p to (v0, v1) under the cone and triangles: set, then lights_part, then the ends' t.
+    // False unless both succeed.
+    bool compute(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const BoundsCone& cone, const LightTriangles* lights);
+};
+
+// The arcs and parts a query's leaf scoring computed (EdgeHierarchy::Query::arcs), the latest
+// kSize of them, for the point sampler on the edges the descent then chooses, which would compute
+// the same again: the chosen leaf was scored a few leaves before the descent ended there.
+// reset() before each query (the same p, cone and triangles throughout one).
+class LeafArcs {
+public:
+    static constexpr int kSize = 32;
+    void reset() { count_ = 0; }
+    void keep(int32_t edge, const Vec3f& v0, const Vec3f& v1, const ArcPart& part) {
+        Entry& e = entries_[next_];
+        e.edge = edge;
+        e.v0 = v0;
+        e.v1 = v1;
+        e.part = part;
+        next_ = (next_ + 1) % kSize;
+        count_ = std::min(count_ + 1, kSize);
+    }
+    // The latest kept for this edge with exactly these ends, or null.
+    const ArcPart* find(int32_t edge, const Vec3f& v0, const Vec3f& v1) const {
+        for (int i = 1; i <= count_; ++i) {
+            const Entry& e = entries_[(next_ + kSize - i) % kSize];
+            if (e.edge == edge)
+                return e.v0.x == v0.x && e.v0.y == v0.y && e.v0.z == v0.z && e.v1.x == v1.x && e.v1.y == v1.y &&
+                               e.v1.z == v1.z
+                           ? &e.part
+                           : nullptr;
+        }
+        return nullptr;
+    }
+
+private:
+    struct Entry {
+        int32_t edge = -1;
+        Vec3f v0, v1;
+        ArcPart part;
+    };
+    Entry entries_[kSize];
+    int next_ = 0, count_ = 0;
+};
+
 class EdgeHierarchy {
 public:
     // Builds over the edges of `scene` listed in `edges` (indices into scene.edges()). The first
@@ -188,6 +241,8 @@ public:
         // of a mesh that does not emit, seen with both faces on one side, has the same (no)
         // emission either side and adds nothing.
         bool direct_only = false;
+        // Optional: where the leaves' arcs and Lights parts are kept for the point sampler.
+        LeafArcs* arcs = nullptr;
     };
     enum Strategy { All = 0, Lights = 1 };
     struct Choice {
@@ -337,6 +392,10 @@ public:
     // margin of some light triangle (the hull of those parts over the triangles).
     bool setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe, const BoundsCone* cone,
                const LightTriangles* lights = nullptr);
+    // The same, from the edge's arc and Lights part as ArcPart::compute found them for the same
+    // p, edge, cone and triangles (the leaf's scoring kept them: LeafArcs); with `cone` null,
+    // without strategy Lights (its density zero), as setup() without a cone.
+    bool setup(const ArcPart& known, const LobeBound& lobe, const BoundsCone* cone);
     // A parameter t in [0, 1] (x = v0 + t (v1 - v0)) by strategy `s`; false if the strategy
     // cannot sample this edge (Lights: no part of it inside the cone).
     bool sample(EdgeHierarchy::Strategy s, float u, float& t) const;
