@@ -955,10 +955,12 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge, int32_t s
 void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo_, float hi_) {
     lo = lo_;
     hi = hi_;
-    // (cos, sin) of the bins' ends by rotation, one step at a time.
+    // (cos, sin) of the bins' ends by rotation, one step at a time (padded with zeros to whole
+    // groups of four).
     const float step = (hi - lo) / float(kBins), cs = std::cos(step), ss = std::sin(step);
     float c = std::cos(lo), sn = std::sin(lo);
-    float cv[kBins + 1], sv[kBins + 1];
+    constexpr int kPadded = (kBins + 1 + 3) / 4 * 4;
+    float cv[kPadded] = {}, sv[kPadded] = {}, gv[kPadded];
     for (int k = 0; k <= kBins; ++k) {
         cv[k] = c;
         sv[k] = sn;
@@ -966,23 +968,43 @@ void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBo
         sn = sn * cs + c * ss;
         c = next_c;
     }
-    // The lobe bound there: LobeBound::eval's arithmetic, without branches (the ends are
-    // independent: the loops run in vector lanes, each rounding as eval does).
+    // The lobe bound there: LobeBound::eval's arithmetic in the same order, four ends at a time
+    // where the compiler has vector types (each lane rounds as the scalar code), without
+    // branches (the padding gives zeros).
     const float kd = lobe.diffuse, ks = lobe.specular, sharp = lobe.sharpness;
-    const Vec3f n = lobe.n, r = lobe.r;
-    if (ks > 0.f) {
-        for (int k = 0; k <= kBins; ++k) {
-            const Vec3f w = a * cv[k] + b * sv[k];
-            const float cn = dot(n, w), q = 1.f + sharp * (1.f - dot(r, w));
-            const float v = kd * cn + ks / (q * q);
-            g[k] = cn > 0.f ? v : 0.f;
+    const float ax = a.x, ay = a.y, az = a.z, bx = b.x, by = b.y, bz = b.z;
+    const float nx = lobe.n.x, ny = lobe.n.y, nz = lobe.n.z, rx = lobe.r.x, ry = lobe.r.y, rz = lobe.r.z;
+    const bool glossy = ks > 0.f;
+#if defined(__GNUC__)
+    typedef float F4 __attribute__((vector_size(16)));
+    for (int k = 0; k < kPadded; k += 4) {
+        F4 cc, sk;
+        std::memcpy(&cc, cv + k, sizeof(F4));
+        std::memcpy(&sk, sv + k, sizeof(F4));
+        const F4 wx = ax * cc + bx * sk, wy = ay * cc + by * sk, wz = az * cc + bz * sk;
+        const F4 cn = nx * wx + ny * wy + nz * wz;
+        F4 v = kd * cn;
+        if (glossy) {
+            const F4 q = 1.f + sharp * (1.f - (rx * wx + ry * wy + rz * wz));
+            v = v + ks / (q * q);
         }
-    } else {
-        for (int k = 0; k <= kBins; ++k) {
-            const float cn = dot(n, a * cv[k] + b * sv[k]);
-            g[k] = cn > 0.f ? kd * cn : 0.f;
-        }
+        const F4 zero = {0.f, 0.f, 0.f, 0.f};
+        const F4 out = cn > 0.f ? v : zero;
+        std::memcpy(gv + k, &out, sizeof(F4));
     }
+#else
+    for (int k = 0; k < kPadded; ++k) {
+        const float wx = ax * cv[k] + bx * sv[k], wy = ay * cv[k] + by * sv[k], wz = az * cv[k] + bz * sv[k];
+        const float cn = nx * wx + ny * wy + nz * wz;
+        float v = kd * cn;
+        if (glossy) {
+            const float q = 1.f + sharp * (1.f - (rx * wx + ry * wy + rz * wz));
+            v += ks / (q * q);
+        }
+        gv[k] = cn > 0.f ? v : 0.f;
+    }
+#endif
+    std::memcpy(g, gv, sizeof(g));
     cdf[0] = 0.f;
     for (int k = 1; k <= kBins; ++k) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
     total = cdf[kBins];
