@@ -155,35 +155,43 @@ struct ArcPart {
 class LeafArcs {
 public:
     static constexpr int kSize = 32;
-    void reset() { count_ = 0; }
+    void reset() {
+        count_ = 0;
+        next_ = 0;
+    }
     void keep(int32_t edge, const Vec3f& v0, const Vec3f& v1, const ArcPart& part) {
+        ids_[next_] = edge;
         Entry& e = entries_[next_];
-        e.edge = edge;
         e.v0 = v0;
         e.v1 = v1;
         e.part = part;
-        next_ = (next_ + 1) % kSize;
-        count_ = std::min(count_ + 1, kSize);
+        next_ = (next_ + 1) & (kSize - 1);
+        count_ += count_ < kSize;
     }
     // The latest kept for this edge with exactly these ends, or null.
     const ArcPart* find(int32_t edge, const Vec3f& v0, const Vec3f& v1) const {
-        for (int i = 1; i <= count_; ++i) {
-            const Entry& e = entries_[(next_ + kSize - i) % kSize];
-            if (e.edge == edge)
-                return e.v0.x == v0.x && e.v0.y == v0.y && e.v0.z == v0.z && e.v1.x == v1.x && e.v1.y == v1.y &&
-                               e.v1.z == v1.z
-                           ? &e.part
-                           : nullptr;
+        // Newest first: from next_ - 1 down, then (once full) from the end of the ring down.
+        int i = next_ - 1;
+        while (i >= 0 && ids_[i] != edge) --i;
+        if (i < 0 && count_ == kSize) {
+            i = kSize - 1;
+            while (i >= next_ && ids_[i] != edge) --i;
+            if (i < next_) i = -1;
         }
-        return nullptr;
+        if (i < 0) return nullptr;
+        const Entry& e = entries_[i];
+        return e.v0.x == v0.x && e.v0.y == v0.y && e.v0.z == v0.z && e.v1.x == v1.x && e.v1.y == v1.y && e.v1.z == v1.z
+                   ? &e.part
+                   : nullptr;
     }
 
 private:
+    static_assert((kSize & (kSize - 1)) == 0, "a power of two");
     struct Entry {
-        int32_t edge = -1;
         Vec3f v0, v1;
         ArcPart part;
     };
+    int32_t ids_[kSize];
     Entry entries_[kSize];
     int next_ = 0, count_ = 0;
 };
@@ -418,8 +426,10 @@ private:
     // and its integral up to the bins' ends.
     struct Table {
         float lo = 0.f, hi = 0.f;
-        float g[kBins + 1] = {};    // the lobe bound at the bins' ends
-        float cdf[kBins + 1] = {};  // its integral (in angle) up to them
+        // (Written by build() before anything reads them: not zeroed first, a sampler is made
+        // per edge sample.)
+        float g[kBins + 1];    // the lobe bound at the bins' ends
+        float cdf[kBins + 1];  // its integral (in angle) up to them
         float total = 0.f;          // 0 where the integral is zero or not finite
         // Over the directions a cos(phi) + b sin(phi), phi in [lo, hi].
         void build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo, float hi);
