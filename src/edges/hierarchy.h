@@ -392,6 +392,8 @@ private:
     Stats stats_;
 };
 
+// One sampler per edge sample: its const calls may build the light part's table (lazily), so
+// one sampler is not for concurrent use.
 class EdgePointSampler {
 public:
     // The edge (v0, v1) seen from p. False when it is degenerate seen from p (p on its line, or
