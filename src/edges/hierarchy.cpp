@@ -551,7 +551,9 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     // query keeps them (Query::arcs).
     auto leaf_part = [&](ArcPart& arc) {
         const bool part = arc.compute(q.p, n.a, n.b, *q.cone, q.lights);
-        if (q.arcs) q.arcs->keep(n.edge, n.a, n.b, arc);
+        // (Only with a part: without one the leaf scores zero for strategy Lights, which then
+        // cannot pick the edge, and the point sampler takes no part.)
+        if (q.arcs && part) q.arcs->keep(n.edge, n.a, n.b, arc);
         return part;
     };
     // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
@@ -1005,8 +1007,11 @@ void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBo
     }
 #endif
     std::memcpy(g, gv, sizeof(g));
+    // The bins' trapezoids (independent: vector lanes), then their running sum in order.
+    float area[kBins + 1];
+    for (int k = 1; k <= kBins; ++k) area[k] = 0.5f * (gv[k - 1] + gv[k]) * step;
     cdf[0] = 0.f;
-    for (int k = 1; k <= kBins; ++k) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
+    for (int k = 1; k <= kBins; ++k) cdf[k] = cdf[k - 1] + area[k];
     total = cdf[kBins];
     if (!(total > 0.f) || !std::isfinite(total)) total = 0.f;
 }
