@@ -575,6 +575,15 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     out = Coarse();
     if (!(n.length > 0.f)) return;  // empty leaves only (Edge::flat): nothing to sample
     const bool leaf = n.left < 0;
+    // A leaf's arc and Lights part (ArcPart::compute), kept for the point sampler where the
+    // query keeps them (Query::arcs).
+    auto leaf_part = [&](ArcPart& arc) {
+        const bool part = arc.compute(q.p, n.leaf.a, n.leaf.b, *q.cone, q.lights);
+        // (Only with a part: without one the leaf scores zero for strategy Lights, which then
+        // cannot pick the edge, and the point sampler takes no part.)
+        if (q.arcs && part) q.arcs->keep(n.edge, n.leaf.a, n.leaf.b, arc);
+        return part;
+    };
     // A smooth edge or a crease is a silhouette where p is in front of exactly one of its faces.
     // Elsewhere a crease's faces meet at a shading jump, about as large as the angle between
     // them, and a smooth edge's at the steps where the mesh shadows itself along it (the light
@@ -614,11 +623,8 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
         // where the box lies outside every light triangle's wedge.
         out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
         if (q.cone) {
-            float lo, hi;
-            EdgeArc arc;
-            const bool none = leaf ? !(arc.set(q.p, n.leaf.a, n.leaf.b) && arc.lights_part(*q.cone, q.lights, lo, hi) &&
-                                       arc.param(hi) > arc.param(lo))
-                                   : q.lights && q.lights->outside(n.lo, n.hi);
+            ArcPart arc;
+            const bool none = leaf ? !(leaf_part(arc) && arc.t1 > arc.t0) : q.lights && q.lights->outside(n.lo, n.hi);
             out.value[1] = none ? 0.f : out.value[0];
         }
         out.inside = !leaf;
@@ -712,11 +718,10 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
             // A leaf: the same integral over the part of its arc the point sampler takes
             // (EdgeArc::lights_part: inside the cone, near a light triangle), zero where that is
             // empty (or where the cones are apart).
-            float lo, hi;
-            EdgeArc arc;
+            ArcPart arc;
             if ((wraps || cos_g >= cos_b * c.cos_half - sin_b * sine(c.cos_half)) && !(q.lights && q.lights->outside(n.lo, n.hi)) &&
-                arc.set(q.p, n.leaf.a, n.leaf.b) && arc.lights_part(c, q.lights, lo, hi)) {
-                const float t0 = arc.param(lo), t1 = arc.param(hi);
+                leaf_part(arc)) {
+                const float t0 = arc.t0, t1 = arc.t1;
                 if (t1 > t0) {
                     const Vec3f e = n.leaf.b - n.leaf.a;
                     const double part =
@@ -1010,17 +1015,61 @@ EdgeHierarchy::Choice EdgeHierarchy::pdf(const Query& q, int32_t edge, int32_t s
 void EdgePointSampler::Table::build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo_, float hi_) {
     lo = lo_;
     hi = hi_;
-    // (cos, sin) of the bins' ends by rotation, one step at a time.
+    // (cos, sin) of the bins' ends by rotation, one step at a time (padded with zeros to whole
+    // groups of four).
     const float step = (hi - lo) / float(kBins), cs = std::cos(step), ss = std::sin(step);
     float c = std::cos(lo), sn = std::sin(lo);
-    cdf[0] = 0.f;
+    constexpr int kPadded = (kBins + 1 + 3) / 4 * 4;
+    float cv[kPadded] = {}, sv[kPadded] = {}, gv[kPadded];
     for (int k = 0; k <= kBins; ++k) {
-        g[k] = lobe.eval(a * c + b * sn);
-        if (k > 0) cdf[k] = cdf[k - 1] + 0.5f * (g[k - 1] + g[k]) * step;
+        cv[k] = c;
+        sv[k] = sn;
         const float next_c = c * cs - sn * ss;
         sn = sn * cs + c * ss;
         c = next_c;
     }
+    // The lobe bound there: LobeBound::eval's arithmetic in the same order, four ends at a time
+    // where the compiler has vector types (each lane rounds as the scalar code), without
+    // branches (the padding gives zeros).
+    const float kd = lobe.diffuse, ks = lobe.specular, sharp = lobe.sharpness;
+    const float ax = a.x, ay = a.y, az = a.z, bx = b.x, by = b.y, bz = b.z;
+    const float nx = lobe.n.x, ny = lobe.n.y, nz = lobe.n.z, rx = lobe.r.x, ry = lobe.r.y, rz = lobe.r.z;
+    const bool glossy = ks > 0.f;
+#if defined(__GNUC__)
+    typedef float F4 __attribute__((vector_size(16)));
+    for (int k = 0; k < kPadded; k += 4) {
+        F4 cc, sk;
+        std::memcpy(&cc, cv + k, sizeof(F4));
+        std::memcpy(&sk, sv + k, sizeof(F4));
+        const F4 wx = ax * cc + bx * sk, wy = ay * cc + by * sk, wz = az * cc + bz * sk;
+        const F4 cn = nx * wx + ny * wy + nz * wz;
+        F4 v = kd * cn;
+        if (glossy) {
+            const F4 q = 1.f + sharp * (1.f - (rx * wx + ry * wy + rz * wz));
+            v = v + ks / (q * q);
+        }
+        const F4 zero = {0.f, 0.f, 0.f, 0.f};
+        const F4 out = cn > 0.f ? v : zero;
+        std::memcpy(gv + k, &out, sizeof(F4));
+    }
+#else
+    for (int k = 0; k < kPadded; ++k) {
+        const float wx = ax * cv[k] + bx * sv[k], wy = ay * cv[k] + by * sv[k], wz = az * cv[k] + bz * sv[k];
+        const float cn = nx * wx + ny * wy + nz * wz;
+        float v = kd * cn;
+        if (glossy) {
+            const float q = 1.f + sharp * (1.f - (rx * wx + ry * wy + rz * wz));
+            v += ks / (q * q);
+        }
+        gv[k] = cn > 0.f ? v : 0.f;
+    }
+#endif
+    std::memcpy(g, gv, sizeof(g));
+    // The bins' trapezoids (independent: vector lanes), then their running sum in order.
+    float area[kBins + 1];
+    for (int k = 1; k <= kBins; ++k) area[k] = 0.5f * (gv[k - 1] + gv[k]) * step;
+    cdf[0] = 0.f;
+    for (int k = 1; k <= kBins; ++k) cdf[k] = cdf[k - 1] + area[k];
     total = cdf[kBins];
     if (!(total > 0.f) || !std::isfinite(total)) total = 0.f;
 }
@@ -1208,20 +1257,55 @@ bool EdgeArc::lights_part(const BoundsCone& cone, const LightTriangles* lights, 
     return true;
 }
 
+bool ArcPart::compute(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const BoundsCone& cone,
+                      const LightTriangles* lights) {
+    arc_ok = arc.set(p, v0, v1);
+    part = arc_ok && arc.lights_part(cone, lights, lo, hi);
+    if (part) {
+        t0 = arc.param(lo);
+        t1 = arc.param(hi);
+    }
+    return part;
+}
+
 bool EdgePointSampler::setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe,
                              const BoundsCone* cone, const LightTriangles* lights) {
-    if (!arc_.set(p, v0, v1)) return false;
+    ArcPart known;
+    if (cone) known.compute(p, v0, v1, *cone, lights);
+    else known.arc_ok = known.arc.set(p, v0, v1);
+    return setup(known, lobe, cone);
+}
+
+bool EdgePointSampler::setup(const ArcPart& known, const LobeBound& lobe, const BoundsCone* cone) {
+    if (!known.arc_ok) return false;
+    arc_ = known.arc;
     // The lobe bound along the edge, in angle, and its integral.
     all_.build(arc_.a, arc_.b, lobe, arc_.phi0, arc_.phi1);
-    // The part strategy Lights takes (EdgeArc::lights_part).
-    cone0_ = cone1_ = 0.f;
+    // The part strategy Lights takes (EdgeArc::lights_part), and its ends in t (both the
+    // sample and the density need them).
+    cone0_ = cone1_ = t0_ = t1_ = 0.f;
     lights_uniform_ = 1.f;
-    if (cone && arc_.lights_part(*cone, lights, cone0_, cone1_) && lobe.specular > 0.f) {
-        // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it.
-        lights_.build(arc_.a, arc_.b, lobe, cone0_, cone1_);
-        if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
+    lights_pending_ = false;
+    if (cone && known.part) {
+        cone0_ = known.lo;
+        cone1_ = known.hi;
+        t0_ = known.t0;
+        t1_ = known.t1;
+        // A glossy lobe may be narrower than the cone: the lobe bound over the part inside it
+        // (build_lights()).
+        if (lobe.specular > 0.f) {
+            lobe_ = lobe;
+            lights_pending_ = true;
+        }
     }
     return true;
+}
+
+void EdgePointSampler::build_lights() const {
+    if (!lights_pending_) return;
+    lights_pending_ = false;
+    lights_.build(arc_.a, arc_.b, lobe_, cone0_, cone1_);
+    if (lights_.total > 0.f) lights_uniform_ = kLightsUniform;
 }
 
 float EdgePointSampler::angle(float t) const { return arc_.angle(t); }
@@ -1234,8 +1318,9 @@ float EdgePointSampler::dphi_dt(float t) const {
 bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) const {
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return false;
-        const float t0 = param(cone0_), t1 = param(cone1_);
+        const float t0 = t0_, t1 = t1_;
         if (!(t1 > t0)) return false;
+        build_lights();
         if (u < lights_uniform_) {
             t = t0 + u / lights_uniform_ * (t1 - t0);
             return true;
@@ -1252,17 +1337,33 @@ bool EdgePointSampler::sample(EdgeHierarchy::Strategy s, float u, float& t) cons
     return true;
 }
 
+float EdgePointSampler::lights_pdf(float t, float phi) const {
+    build_lights();
+    const float t0 = t0_, t1 = t1_;
+    if (!(lights_uniform_ < 1.f)) return 1.f / (t1 - t0);
+    return lights_uniform_ / (t1 - t0) + (1.f - lights_uniform_) * lights_.value(phi) / lights_.total * dphi_dt(t);
+}
+
 float EdgePointSampler::pdf(EdgeHierarchy::Strategy s, float t) const {
     if (!(t >= 0.f && t <= 1.f)) return 0.f;
     if (s == EdgeHierarchy::Lights) {
         if (!(cone1_ > cone0_)) return 0.f;
-        const float t0 = param(cone0_), t1 = param(cone1_);
-        if (!(t1 > t0 && t >= t0 && t <= t1)) return 0.f;
-        if (!(lights_uniform_ < 1.f)) return 1.f / (t1 - t0);
-        return lights_uniform_ / (t1 - t0) + (1.f - lights_uniform_) * lights_.value(angle(t)) / lights_.total * dphi_dt(t);
+        if (!(t1_ > t0_ && t >= t0_ && t <= t1_)) return 0.f;
+        return lights_pdf(t, angle(t));
     }
     if (all_.total <= 0.f) return 1.f;
     return kUniform + (1.f - kUniform) * all_.value(angle(t)) / all_.total * dphi_dt(t);
+}
+
+void EdgePointSampler::pdfs(float t, bool lights, float& all, float& lights_out) const {
+    all = lights_out = 0.f;
+    if (!(t >= 0.f && t <= 1.f)) return;
+    // The angle where a density needs it, once.
+    const bool in_part = lights && cone1_ > cone0_ && t1_ > t0_ && t >= t0_ && t <= t1_;
+    const bool lobe_all = all_.total > 0.f;
+    const float phi = lobe_all || (in_part && (lights_pending_ || lights_uniform_ < 1.f)) ? angle(t) : 0.f;
+    all = lobe_all ? kUniform + (1.f - kUniform) * all_.value(phi) / all_.total * dphi_dt(t) : 1.f;
+    if (in_part) lights_out = lights_pdf(t, phi);
 }
 
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or

@@ -143,6 +143,67 @@ struct EdgeArc {
     float angle(float t) const { return std::atan((t * len - s_foot) / h); }
 };
 
+// An edge's arc seen from p and the part strategy Lights takes of it (EdgeArc::lights_part), with
+// that part's ends in t (EdgeArc::param), as a leaf's Lights importance (EdgeHierarchy) and the
+// point sampler on the edge (EdgePointSampler) both need them.
+struct ArcPart {
+    EdgeArc arc;
+    bool arc_ok = false;  // EdgeArc::set succeeded
+    bool part = false;    // lights_part found a part (lo, hi); its ends t0, t1 in t
+    float lo = 0.f, hi = 0.f, t0 = 0.f, t1 = 0.f;
+    // From p to (v0, v1) under the cone and triangles: set, then lights_part, then the ends' t.
+    // False unless both succeed.
+    bool compute(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const BoundsCone& cone, const LightTriangles* lights);
+};
+
+// The arcs and parts a query's leaf scoring computed (EdgeHierarchy::Query::arcs), the latest
+// kSize of them, for the point sampler on the edges the descent then chooses, which would compute
+// the same again: the chosen leaf was scored a few leaves before the descent ended there.
+// reset() before each query (the same p, cone and triangles throughout one).
+class LeafArcs {
+public:
+    static constexpr int kSize = 32;
+    void reset() {
+        count_ = 0;
+        next_ = 0;
+    }
+    void keep(int32_t edge, const Vec3f& v0, const Vec3f& v1, const ArcPart& part) {
+        ids_[next_] = edge;
+        Entry& e = entries_[next_];
+        e.v0 = v0;
+        e.v1 = v1;
+        e.part = part;
+        next_ = (next_ + 1) & (kSize - 1);
+        count_ += count_ < kSize;
+    }
+    // The latest kept for this edge with exactly these ends, or null.
+    const ArcPart* find(int32_t edge, const Vec3f& v0, const Vec3f& v1) const {
+        // Newest first: from next_ - 1 down, then (once full) from the end of the ring down.
+        int i = next_ - 1;
+        while (i >= 0 && ids_[i] != edge) --i;
+        if (i < 0 && count_ == kSize) {
+            i = kSize - 1;
+            while (i >= next_ && ids_[i] != edge) --i;
+            if (i < next_) i = -1;
+        }
+        if (i < 0) return nullptr;
+        const Entry& e = entries_[i];
+        return e.v0.x == v0.x && e.v0.y == v0.y && e.v0.z == v0.z && e.v1.x == v1.x && e.v1.y == v1.y && e.v1.z == v1.z
+                   ? &e.part
+                   : nullptr;
+    }
+
+private:
+    static_assert((kSize & (kSize - 1)) == 0, "a power of two");
+    struct Entry {
+        Vec3f v0, v1;
+        ArcPart part;
+    };
+    int32_t ids_[kSize];
+    Entry entries_[kSize];
+    int next_ = 0, count_ = 0;
+};
+
 class EdgeHierarchy {
 public:
     // Builds over the edges of `scene` listed in `edges` (indices into scene.edges()). The first
@@ -201,6 +262,8 @@ public:
         // of a mesh that does not emit, seen with both faces on one side, has the same (no)
         // emission either side and adds nothing.
         bool direct_only = false;
+        // Optional: where the leaves' arcs and Lights parts are kept for the point sampler.
+        LeafArcs* arcs = nullptr;
     };
     enum Strategy { All = 0, Lights = 1 };
     struct Choice {
@@ -363,6 +426,8 @@ private:
     Stats stats_;
 };
 
+// One sampler per edge sample: its const calls may build the light part's table (lazily), so
+// one sampler is not for concurrent use.
 class EdgePointSampler {
 public:
     // The edge (v0, v1) seen from p. False when it is degenerate seen from p (p on its line, or
@@ -371,11 +436,18 @@ public:
     // margin of some light triangle (the hull of those parts over the triangles).
     bool setup(const Vec3f& p, const Vec3f& v0, const Vec3f& v1, const LobeBound& lobe, const BoundsCone* cone,
                const LightTriangles* lights = nullptr);
+    // The same, from the edge's arc and Lights part as ArcPart::compute found them for the same
+    // p, edge, cone and triangles (the leaf's scoring kept them: LeafArcs); with `cone` null,
+    // without strategy Lights (its density zero), as setup() without a cone.
+    bool setup(const ArcPart& known, const LobeBound& lobe, const BoundsCone* cone);
     // A parameter t in [0, 1] (x = v0 + t (v1 - v0)) by strategy `s`; false if the strategy
     // cannot sample this edge (Lights: no part of it inside the cone).
     bool sample(EdgeHierarchy::Strategy s, float u, float& t) const;
     // The density of t, per unit t, under each strategy.
     float pdf(EdgeHierarchy::Strategy s, float t) const;
+    // Both strategies' densities of t, as pdf() gives them, with one angle of t for the two
+    // (strategy Lights' only where `lights`; 0 otherwise).
+    void pdfs(float t, bool lights, float& all, float& lights_pdf) const;
     // The angle of parameter t and back.
     float angle(float t) const;
     float param(float phi) const;
@@ -390,8 +462,10 @@ private:
     // and its integral up to the bins' ends.
     struct Table {
         float lo = 0.f, hi = 0.f;
-        float g[kBins + 1] = {};    // the lobe bound at the bins' ends
-        float cdf[kBins + 1] = {};  // its integral (in angle) up to them
+        // (Written by build() before anything reads them: not zeroed first, a sampler is made
+        // per edge sample.)
+        float g[kBins + 1];    // the lobe bound at the bins' ends
+        float cdf[kBins + 1];  // its integral (in angle) up to them
         float total = 0.f;          // 0 where the integral is zero or not finite
         // Over the directions a cos(phi) + b sin(phi), phi in [lo, hi].
         void build(const Vec3f& a, const Vec3f& b, const LobeBound& lobe, float lo, float hi);
@@ -401,13 +475,22 @@ private:
         float value(float phi) const;
     };
     float dphi_dt(float t) const;
+    // Strategy Lights' density at t inside its part [t0_, t1_], phi the angle of t.
+    float lights_pdf(float t, float phi) const;
+    // The table over the part inside the cone, built the first time a sample or a density needs
+    // it: a point strategy All takes outside that part needs neither it nor its total.
+    void build_lights() const;
     EdgeArc arc_;
     // The part strategy Lights samples: inside the light cone (and near a light triangle, with
-    // LightTriangles); empty when cone1 <= cone0.
-    float cone0_ = 0.f, cone1_ = 0.f;
+    // LightTriangles); empty when cone1 <= cone0. [t0_, t1_]: the same in t (param()).
+    float cone0_ = 0.f, cone1_ = 0.f, t0_ = 0.f, t1_ = 0.f;
     Table all_;                        // over the whole edge [phi0, phi1]
-    Table lights_;                     // over the part inside the cone, where lights_uniform_ < 1
-    float lights_uniform_ = 1.f;
+    // Over the part inside the cone, where lights_uniform_ < 1 (a glossy lobe): built lazily
+    // (build_lights(); lights_pending_ until then, with the lobe it is built from).
+    mutable Table lights_;
+    mutable float lights_uniform_ = 1.f;
+    mutable bool lights_pending_ = false;
+    LobeBound lobe_;
 };
 
 }  // namespace edgepath

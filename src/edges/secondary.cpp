@@ -139,6 +139,11 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     thread_local EdgeHierarchy::Memo memo;
     memo.reset();
     q.memo = &memo;
+    // The leaves' arcs and Lights parts as the descent scores them: the point sampler on a
+    // chosen edge takes them from there.
+    thread_local LeafArcs arcs;
+    arcs.reset();
+    q.arcs = &arcs;
     q.p = sp.p;
     q.direct_only = bounces_left == 0;
     // The smooth plastic's coating reflects into one direction: no lobe for edges to meet.
@@ -210,9 +215,16 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
         const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
         EdgePointSampler points;
         float t;
-        if (!points.setup(sp.p, v0, v1, q.lobe, q.cone, q.lights) || !points.sample(s, ut, t)) continue;
-        const float joint_all = choice.prob[0] * points.pdf(EdgeHierarchy::All, t),
-                    joint_lights = q.cone ? choice.prob[1] * points.pdf(EdgeHierarchy::Lights, t) : 0.f;
+        // Strategy Lights' density matters only where it can pick the edge (choice.prob[1] > 0;
+        // always so where it did): elsewhere the sampler skips the light part.
+        const BoundsCone* cone = choice.prob[1] > 0.f ? q.cone : nullptr;
+        const ArcPart* known = cone ? arcs.find(choice.edge, v0, v1) : nullptr;
+        if (!(known ? points.setup(*known, q.lobe, cone) : points.setup(sp.p, v0, v1, q.lobe, cone, q.lights)) ||
+            !points.sample(s, ut, t))
+            continue;
+        float pdf_all, pdf_lights;
+        points.pdfs(t, cone != nullptr, pdf_all, pdf_lights);
+        const float joint_all = choice.prob[0] * pdf_all, joint_lights = q.cone ? choice.prob[1] * pdf_lights : 0.f;
         const float mixture = c_all * joint_all + c_lights * joint_lights;
         if (!(mixture > 0.f) || !std::isfinite(mixture)) continue;
         // scale: the inverse of the mixture's density per unit length.

@@ -1250,6 +1250,180 @@ TEST(LightTriangles, OutsideIsThePlaneByPlaneTest) {
     EXPECT_FALSE(none.outside(Vec3f(5.f), Vec3f(6.f)));  // no triangles: not known
 }
 
+// The point sampler set up from a kept arc and Lights part (ArcPart, as a leaf's scoring keeps
+// them) is bit for bit the one setup() computes from the edge's ends; pdfs() gives pdf()'s two
+// densities bit for bit, and with strategy Lights left out, All's alone; the lazily built light
+// table gives the same densities whichever call builds it first. Random points, edges, lobes
+// (diffuse and glossy), light cones and triangles.
+TEST(EdgePointSampler, KeptArcAndBothDensitiesAreBitForBitTheSame) {
+    Rng rng(21, 4);
+    auto bits = [](float x) {
+        uint32_t u;
+        std::memcpy(&u, &x, 4);
+        return u;
+    };
+    const Vec3f sq[4] = {Vec3f(-0.4f, 3, -0.4f), Vec3f(0.4f, 3, -0.4f), Vec3f(0.4f, 3, 0.4f), Vec3f(-0.4f, 3, 0.4f)};
+    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
+    int with_part = 0, compared = 0;
+    for (int i = 0; i < 400; ++i) {
+        const Vec3f p(2.f * rng.next_float() - 1.f, 0.5f * rng.next_float(), 2.f * rng.next_float() - 1.f);
+        const Vec3f v0(4.f * rng.next_float() - 2.f, 0.6f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+        const Vec3f v1(4.f * rng.next_float() - 2.f, 0.6f + 2.f * rng.next_float(), 4.f * rng.next_float() - 2.f);
+        BoundsCone cone = cone_towards(p, Vec3f(0, 3, 0), 0.4f * std::sqrt(2.f));
+        LightTriangles lights;
+        lights.set(p, tris, 2, 4e-4f);
+        const LightTriangles* tri = i % 3 == 0 ? nullptr : &lights;
+        const LobeBound lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, rng.next_float() - 0.5f)),
+                                               0.5f, i % 2 ? 0.8f : 0.f, 0.05f + 0.3f * rng.next_float());
+        EdgePointSampler ref, kept, first_pdf;
+        const bool ok = ref.setup(p, v0, v1, lobe, &cone, tri);
+        ArcPart known;
+        const bool part = known.compute(p, v0, v1, cone, tri);
+        EXPECT_EQ(known.arc_ok, ok);
+        ASSERT_EQ(kept.setup(known, lobe, &cone), ok);
+        ASSERT_EQ(first_pdf.setup(known, lobe, &cone), ok);
+        if (!ok) continue;
+        with_part += part;
+        // Without a cone: strategy All's density alone, the same as setup() without a cone.
+        EdgePointSampler plain_ref, plain;
+        ASSERT_TRUE(plain_ref.setup(p, v0, v1, lobe, nullptr));
+        ASSERT_TRUE(plain.setup(known, lobe, nullptr));
+        for (int j = 0; j < 24; ++j) {
+            const float u = rng.next_float(), v = (float(j) + 0.5f) / 24.f;
+            // first_pdf builds its light table from a density, kept from a sample.
+            float a0, l0;
+            first_pdf.pdfs(v, true, a0, l0);
+            for (int s = 0; s < 2; ++s) {
+                const auto st = EdgeHierarchy::Strategy(s);
+                float tr = -1.f, tk = -2.f;
+                const bool sr = ref.sample(st, u, tr), sk = kept.sample(st, u, tk);
+                ASSERT_EQ(sr, sk);
+                if (sr) EXPECT_EQ(bits(tr), bits(tk)) << "query " << i << " u " << u;
+                if (!sr) tr = v;
+                float all, lt, alone, none;
+                kept.pdfs(tr, true, all, lt);
+                EXPECT_EQ(bits(all), bits(ref.pdf(EdgeHierarchy::All, tr)));
+                EXPECT_EQ(bits(lt), bits(ref.pdf(EdgeHierarchy::Lights, tr)));
+                EXPECT_EQ(bits(first_pdf.pdf(EdgeHierarchy::Lights, tr)), bits(lt));
+                kept.pdfs(tr, false, alone, none);
+                EXPECT_EQ(bits(alone), bits(all));
+                EXPECT_EQ(none, 0.f);
+                plain.pdfs(tr, true, alone, none);
+                EXPECT_EQ(bits(alone), bits(plain_ref.pdf(EdgeHierarchy::All, tr)));
+                EXPECT_EQ(bits(alone), bits(all));  // the cone changes strategy Lights only
+                EXPECT_EQ(none, 0.f);
+                ++compared;
+            }
+            EXPECT_EQ(bits(a0), bits(ref.pdf(EdgeHierarchy::All, v)));
+            EXPECT_EQ(bits(l0), bits(ref.pdf(EdgeHierarchy::Lights, v)));
+        }
+    }
+    EXPECT_GT(with_part, 40);
+    EXPECT_GT(compared, 10000);
+}
+
+// LeafArcs keeps the latest kSize arcs: finds the latest entry of an edge with the same ends,
+// nothing for ends that differ, an entry pushed out or one from before reset().
+TEST(LeafArcs, FindsTheLatestWithTheSameEnds) {
+    LeafArcs arcs;
+    const Vec3f p(0.1f, -1.f, 0.2f);
+    auto part_of = [&](int i, ArcPart& a) {
+        const Vec3f v0(float(i), 0.f, 1.f), v1(float(i), 1.f, 1.f);
+        a.arc_ok = a.arc.set(p, v0, v1);
+        a.lo = float(i);
+        return std::make_pair(v0, v1);
+    };
+    const int n = LeafArcs::kSize + 5;
+    for (int i = 0; i < n; ++i) {
+        ArcPart a;
+        const auto [v0, v1] = part_of(i, a);
+        arcs.keep(int32_t(i % (n - 2)), v0, v1, a);  // edges 0 and 1 kept twice
+    }
+    for (int i = 0; i < n; ++i) {
+        ArcPart a;
+        const auto [v0, v1] = part_of(i, a);
+        const ArcPart* f = arcs.find(int32_t(i % (n - 2)), v0, v1);
+        if (i < n - LeafArcs::kSize) {
+            // Pushed out, or (edges 0 and 1) replaced by a later entry with other ends.
+            EXPECT_EQ(f, nullptr) << i;
+            continue;
+        }
+        ASSERT_NE(f, nullptr) << i;
+        EXPECT_EQ(f->lo, float(i));
+        EXPECT_EQ(f->arc.h, a.arc.h);
+        EXPECT_EQ(arcs.find(int32_t(i % (n - 2)), v0, v1 + Vec3f(0.f, 1e-6f, 0.f)), nullptr);
+    }
+    arcs.reset();
+    ArcPart a;
+    const auto [v0, v1] = part_of(n - 1, a);
+    EXPECT_EQ(arcs.find(int32_t((n - 1) % (n - 2)), v0, v1), nullptr);
+}
+
+// A query that keeps its leaves' arcs (Query::arcs) samples the same edges with the same
+// expected counts, and holds the arc and Lights part of nearly every chosen edge strategy
+// Lights can pick, bit for bit those ArcPart::compute gives.
+TEST(EdgeHierarchy, KeptLeafArcsAreTheChosenEdgesArcs) {
+    HierarchyScene hs;
+    const Scene& scene = *hs.scene;
+    const EdgeHierarchy h = hierarchy_of_all(scene);
+    const float margin = 4e-4f;
+    const Vec3f sq[4] = {Vec3f(-0.2f, 3, -0.5f), Vec3f(0.8f, 3, -0.5f), Vec3f(0.8f, 3, 0.5f), Vec3f(-0.2f, 3, 0.5f)};
+    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
+    Rng rng(8, 1);
+    int lights_choices = 0, found = 0;
+    for (int i = 0; i < 200; ++i) {
+        const Vec3f p(4.f * rng.next_float() - 2.f, 0.01f, 4.f * rng.next_float() - 2.f);
+        BoundsCone cone = cone_towards(p, Vec3f(0.3f, 3, 0), 0.5f * std::sqrt(2.f));
+        cone.half += margin;
+        cone.cos_half = std::cos(cone.half);
+        LightTriangles lights;
+        lights.set(p, tris, 2, margin);
+        EdgeHierarchy::Query q;
+        q.p = p;
+        q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, rng.next_float() - 0.5f)), 0.5f,
+                                 i % 2 ? 0.8f : 0.f, 0.1f);
+        q.cone = &cone;
+        q.lights = i % 4 == 3 ? nullptr : &lights;
+        EdgeHierarchy::Memo memo, memo_kept;
+        LeafArcs arcs;
+        const auto s = EdgeHierarchy::Strategy(i % 2);
+        const float u = rng.next_float();
+        memo.reset();
+        q.memo = &memo;
+        EdgeHierarchy::Choice plain[EdgeHierarchy::kMaxChoices], kept[EdgeHierarchy::kMaxChoices];
+        const int n = h.sample(q, s, u, plain);
+        memo_kept.reset();
+        q.memo = &memo_kept;
+        q.arcs = &arcs;
+        ASSERT_EQ(h.sample(q, s, u, kept), n);
+        for (int c = 0; c < n; ++c) {
+            ASSERT_EQ(kept[c].edge, plain[c].edge);
+            EXPECT_EQ(kept[c].prob[0], plain[c].prob[0]);
+            EXPECT_EQ(kept[c].prob[1], plain[c].prob[1]);
+            if (!(kept[c].prob[1] > 0.f)) continue;
+            ++lights_choices;
+            const Edge& e = scene.edges()[size_t(kept[c].edge)];
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            const Vec3f v0 = m.vertex(e.v0), v1 = m.vertex(e.v1);
+            const ArcPart* f = arcs.find(kept[c].edge, v0, v1);
+            if (!f) continue;
+            ++found;
+            ArcPart ref;
+            const bool part = ref.compute(p, v0, v1, cone, q.lights);
+            EXPECT_EQ(f->part, part);
+            EXPECT_EQ(f->arc_ok, ref.arc_ok);
+            if (ref.arc_ok) EXPECT_EQ(std::memcmp(&f->arc, &ref.arc, sizeof(EdgeArc)), 0);
+            if (part) {
+                EXPECT_EQ(f->lo, ref.lo);
+                EXPECT_EQ(f->hi, ref.hi);
+                EXPECT_EQ(f->t0, ref.t0);
+                EXPECT_EQ(f->t1, ref.t1);
+            }
+        }
+    }
+    EXPECT_GT(lights_choices, 50);
+    EXPECT_GT(found, 0.9 * lights_choices);
+}
 
 }  // namespace
 }  // namespace edgepath
