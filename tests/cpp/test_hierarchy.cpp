@@ -705,6 +705,21 @@ TEST(EdgePointSampler, LightStrategyKeepsToTheLightTriangles) {
     }
 }
 
+// The square light (two triangles, 1 x 1 at height 3) of the light strategy's tests, seen from a
+// point p: the cone towards it widened by the margin, and its triangles.
+struct SquareLightSeen {
+    static constexpr float kMargin = 4e-4f;
+    static inline const Vec3f kSquare[4] = {Vec3f(-0.2f, 3, -0.5f), Vec3f(0.8f, 3, -0.5f), Vec3f(0.8f, 3, 0.5f), Vec3f(-0.2f, 3, 0.5f)};
+    static inline const Vec3f kTriangles[2][3] = {{kSquare[0], kSquare[2], kSquare[1]}, {kSquare[0], kSquare[3], kSquare[2]}};
+    BoundsCone cone;
+    LightTriangles lights;
+    explicit SquareLightSeen(const Vec3f& p) : cone(cone_towards(p, Vec3f(0.3f, 3, 0), 0.5f * std::sqrt(2.f))) {
+        cone.half += kMargin;
+        cone.cos_half = std::cos(cone.half);
+        lights.set(p, kTriangles, 2, kMargin);
+    }
+};
+
 // The descent's strategy Lights kept to the light triangles (Query::lights): a square light
 // (two triangles) over the sphere, box and floor, seen from points on the floor. For every edge:
 // where the part of it the point sampler would take (EdgeArc::lights_part) is empty, the
@@ -717,18 +732,14 @@ TEST(EdgeHierarchy, LightStrategyKeepsToTheLightTriangles) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
     const EdgeHierarchy h = hierarchy_of_all(scene);
-    const float margin = 4e-4f;
-    const Vec3f sq[4] = {Vec3f(-0.2f, 3, -0.5f), Vec3f(0.8f, 3, -0.5f), Vec3f(0.8f, 3, 0.5f), Vec3f(-0.2f, 3, 0.5f)};
-    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
+    const float margin = SquareLightSeen::kMargin;
     Rng rng(5, 3);
     int zeroed = 0, kept = 0, checked = 0, sampled = 0;
     for (int i = 0; i < 60; ++i) {
         const Vec3f p(4.f * rng.next_float() - 2.f, 0.01f, 4.f * rng.next_float() - 2.f);
-        BoundsCone cone = cone_towards(p, Vec3f(0.3f, 3, 0), 0.5f * std::sqrt(2.f));
-        cone.half += margin;
-        cone.cos_half = std::cos(cone.half);
-        LightTriangles lights;
-        lights.set(p, tris, 2, margin);
+        SquareLightSeen seen(p);
+        const BoundsCone& cone = seen.cone;
+        const LightTriangles& lights = seen.lights;
         EdgeHierarchy::Query coned, q;
         coned.p = p;
         const bool glossy = i % 2 == 1;
@@ -792,7 +803,7 @@ TEST(EdgeHierarchy, LightStrategyKeepsToTheLightTriangles) {
     // around the light's wedge seen from the origin, random segments inside each.
     const Vec3f p(0.f, 0.f, 0.f);
     LightTriangles lights;
-    lights.set(p, tris, 2, margin);
+    lights.set(p, SquareLightSeen::kTriangles, 2, margin);
     const BoundsCone everywhere;
     int out = 0, in = 0;
     for (int i = 0; i < 4000; ++i) {
@@ -1298,8 +1309,11 @@ TEST(EdgePointSampler, KeptArcAndBothDensitiesAreBitForBitTheSame) {
                 float tr = -1.f, tk = -2.f;
                 const bool sr = ref.sample(st, u, tr), sk = kept.sample(st, u, tk);
                 ASSERT_EQ(sr, sk);
-                if (sr) EXPECT_EQ(bits(tr), bits(tk)) << "query " << i << " u " << u;
-                if (!sr) tr = v;
+                if (sr) {
+                    EXPECT_EQ(bits(tr), bits(tk)) << "query " << i << " u " << u;
+                } else {
+                    tr = v;
+                }
                 float all, lt, alone, none;
                 kept.pdfs(tr, true, all, lt);
                 EXPECT_EQ(bits(all), bits(ref.pdf(EdgeHierarchy::All, tr)));
@@ -1366,18 +1380,13 @@ TEST(EdgeHierarchy, KeptLeafArcsAreTheChosenEdgesArcs) {
     HierarchyScene hs;
     const Scene& scene = *hs.scene;
     const EdgeHierarchy h = hierarchy_of_all(scene);
-    const float margin = 4e-4f;
-    const Vec3f sq[4] = {Vec3f(-0.2f, 3, -0.5f), Vec3f(0.8f, 3, -0.5f), Vec3f(0.8f, 3, 0.5f), Vec3f(-0.2f, 3, 0.5f)};
-    const Vec3f tris[2][3] = {{sq[0], sq[2], sq[1]}, {sq[0], sq[3], sq[2]}};
     Rng rng(8, 1);
     int lights_choices = 0, found = 0;
     for (int i = 0; i < 200; ++i) {
         const Vec3f p(4.f * rng.next_float() - 2.f, 0.01f, 4.f * rng.next_float() - 2.f);
-        BoundsCone cone = cone_towards(p, Vec3f(0.3f, 3, 0), 0.5f * std::sqrt(2.f));
-        cone.half += margin;
-        cone.cos_half = std::cos(cone.half);
-        LightTriangles lights;
-        lights.set(p, tris, 2, margin);
+        SquareLightSeen seen(p);
+        const BoundsCone& cone = seen.cone;
+        const LightTriangles& lights = seen.lights;
         EdgeHierarchy::Query q;
         q.p = p;
         q.lobe = LobeBound::make(Vec3f(0, 1, 0), normalize(Vec3f(rng.next_float() - 0.5f, 1.f, rng.next_float() - 0.5f)), 0.5f,
@@ -1412,7 +1421,9 @@ TEST(EdgeHierarchy, KeptLeafArcsAreTheChosenEdgesArcs) {
             const bool part = ref.compute(p, v0, v1, cone, q.lights);
             EXPECT_EQ(f->part, part);
             EXPECT_EQ(f->arc_ok, ref.arc_ok);
-            if (ref.arc_ok) EXPECT_EQ(std::memcmp(&f->arc, &ref.arc, sizeof(EdgeArc)), 0);
+            if (ref.arc_ok) {
+                EXPECT_EQ(std::memcmp(&f->arc, &ref.arc, sizeof(EdgeArc)), 0);
+            }
             if (part) {
                 EXPECT_EQ(f->lo, ref.lo);
                 EXPECT_EQ(f->hi, ref.hi);
