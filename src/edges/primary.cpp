@@ -406,10 +406,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
         auto finish = [&](Pending& pd, const Vec3f& L) {
             float* value_u = pd.value_u;
-            const float* value_l = pd.value_l;
+            float* value_l = pd.value_l;
             float delta[kMaxChannelValues];
             if (radiance)
-                for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], pd.value_l[ro + c] = 0.f;
+                for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], value_l[ro + c] = 0.f;
             bool jump = false;
             for (int c = 0; c < nv; ++c) {
                 delta[c] = value_u[c] - value_l[c];
