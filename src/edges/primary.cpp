@@ -2,13 +2,19 @@
 
 #include <algorithm>
 #include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <string>
 #include <tbb/enumerable_thread_specific.h>
 #include "edges/sides.h"
 #include "sampling/warp.h"
+#include "render/batch.h"
 #include "render/path.h"
 #include "render/tiles.h"
 
 namespace edgepath {
+
+static_assert(2 * kPrimaryEdgeBatch <= kBatchSize, "a batch's side paths fit a PathBatch");
 
 namespace {
 
@@ -263,7 +269,10 @@ bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const Sc
 }
 
 void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const SceneGradients& slots,
-                       const ChannelLayout& layout, const float* adjoint, float* out) {
+                       const ChannelLayout& layout, const float* adjoint, float* out, int batch) {
+    if (!(batch >= 1 && batch <= kPrimaryEdgeBatch))
+        throw std::invalid_argument("primary_edge_pass: batch " + std::to_string(batch) + " is not in [1, " +
+                                    std::to_string(kPrimaryEdgeBatch) + "]");
     if (!primary_edges_wanted(scene, opt, slots)) return;
     const Camera& cam = scene.camera;
     const bool camera_wanted = slots.camera.wanted();
@@ -368,13 +377,108 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     centre.position = cam.position;
     const uint64_t seed = mix64(opt.seed ^ 0x70726d6564676573ull);
     tbb::enumerable_thread_specific<GradSink> sinks([&] { return GradSink(adjoint == nullptr); });
+    // An edge sample's splat in three steps: its two sides and their channel values (found at
+    // once), then its two side paths, traced with those of up to batch - 1 other samples by a
+    // PathBatch (render/batch.h: trace_path's radiance, bit for bit), then the jump and its splat,
+    // sample by sample in the samples' order: the sink gets the same additions in the same order
+    // whatever the batch size.
+    struct Pending {
+        const Edge* edge;
+        float x, y, lu, lv;  // the film point, the lens sample
+        EdgeSideGradient g;
+        float weight;  // the film length the sample stands for over the film gradient's norm
+        float value_u[kMaxChannelValues], value_l[kMaxChannelValues];
+    };
     for_each_chunk(opt, n, 4096, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
         RayCounters counters;
+        std::vector<Pending> pending(static_cast<size_t>(batch));
+        int npending = 0;
+        // The side paths of the pending samples (upper, lower, upper, ...) and their radiance.
+        std::unique_ptr<PathBatch> side_paths;
+        std::vector<CameraSample> sides;
+        std::vector<Vec3f> side_L;
+        if (radiance) {
+            side_paths = std::make_unique<PathBatch>(scene, opt);
+            sides.resize(size_t(2 * batch));
+            side_L.resize(size_t(2 * batch));
+        }
+        // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
+        auto finish = [&](Pending& pd, const Vec3f& L) {
+            float* value_u = pd.value_u;
+            float* value_l = pd.value_l;
+            float delta[kMaxChannelValues];
+            if (radiance)
+                for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], value_l[ro + c] = 0.f;
+            bool jump = false;
+            for (int c = 0; c < nv; ++c) {
+                delta[c] = value_u[c] - value_l[c];
+                jump = jump || delta[c] != 0.f;
+            }
+            if (!jump) return;
+            const Edge& edge = *pd.edge;
+            const EdgeSideGradient& g = pd.g;
+            const float x = pd.x, y = pd.y, weight = pd.weight;
+
+            // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
+            const float ox = x - float(scene.crop_x) - 0.5f, oy = y - float(scene.crop_y) - 0.5f;
+            const int px0 = std::max(0, int(std::ceil(ox - radius))), px1 = std::min(scene.out_width - 1, int(std::floor(ox + radius)));
+            const int py0 = std::max(0, int(std::ceil(oy - radius))), py1 = std::min(scene.out_height - 1, int(std::floor(oy + radius)));
+            auto for_each_pixel = [&](auto&& fn) {
+                for (int py = py0; py <= py1; ++py) {
+                    const float ky = scene.filter.eval(oy - float(py));
+                    if (ky == 0.f) return;
+                    for (int px = px0; px <= px1; ++px) {
+                        const float k = ky * scene.filter.eval(ox - float(px));
+                        if (k != 0.f) fn(int64_t(py) * scene.out_width + px, k);
+                    }
+                }
+            };
+            // Adds s * dg/d(parameter) to the sink.
+            auto add_side_gradient = [&](float s) {
+                if (vertices_wanted(slots, edge.mesh)) {
+                    const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
+                    sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
+                    sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
+                }
+                if (camera_wanted) {
+                    float cg[kCameraParams] = {};
+                    d_camera_ray(scene.camera_params, x, y, pd.lu, pd.lv, g.d_o * s, g.d_d * s, cg);
+                    for (int k = 0; k < kCameraParams; ++k) sink.add(slots.camera, k, cg[k]);
+                }
+            };
+            if (adjoint) {
+                double s = 0.0;
+                for_each_pixel([&](int64_t p, float k) {
+                    const float* a = adjoint + nv * p;
+                    float ad = 0.f;
+                    for (int c = 0; c < nv; ++c) ad += a[c] * delta[c];
+                    s += double(k) * ad;
+                });
+                if (s != 0.0) add_side_gradient(float(s * weight));
+            } else {
+                add_side_gradient(1.f);
+                const float dg = float(sink.take_projection()) * weight;
+                if (dg == 0.f) return;
+                for_each_pixel([&](int64_t p, float k) {
+                    for (int c = 0; c < nv; ++c)
+                        if (delta[c] != 0.f) atomic_add(out + nv * p + c, k * dg * delta[c]);
+                });
+            }
+        };
+        // Traces the pending samples' side paths and finishes them, in order.
+        auto flush = [&] {
+            if (npending == 0) return;
+            if (radiance) side_paths->trace(sides.data(), 2 * npending, side_L.data(), counters);
+            for (int k = 0; k < npending; ++k)
+                finish(pending[size_t(k)], radiance ? side_L[size_t(2 * k)] - side_L[size_t(2 * k + 1)] : Vec3f(0.f));
+            npending = 0;
+        };
         // The boundary term of edge `edge` at film point (x, y): the side function's film gradient,
         // the two sides and the splat of the jump through the pixel filter. `point_weight`: the
         // film length the sample stands for (fisheye and panorama: per unit of the edge point's
-        // world length, given as edge_point).
+        // world length, given as edge_point). Its side paths are traced, and the jump splatted, at
+        // the next flush.
         auto splat = [&](int64_t i, const Eye& eye, const Edge& edge, const Vec3f& p0, const Vec3f& p1,
                          float x, float y, double point_weight, const Vec3f* edge_point) {
             EdgeEye side_eye = camera_eye;
@@ -427,70 +531,32 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             EdgeSide first_u, first_l;
             if (!edge_sides(scene, side_eye, edge, ray, edge_t, t_x, first_u, first_l)) return;
             // The channels' values on both sides.
-            float value_u[kMaxChannelValues], value_l[kMaxChannelValues], delta[kMaxChannelValues];
+            Pending& pd = pending[size_t(npending)];
             if (hit_values) {
-                eval_hit_channels(scene, layout, first_u.ray, first_u.found, first_u.hit, value_u);
-                eval_hit_channels(scene, layout, first_l.ray, first_l.found, first_l.hit, value_l);
+                eval_hit_channels(scene, layout, first_u.ray, first_u.found, first_u.hit, pd.value_u);
+                eval_hit_channels(scene, layout, first_l.ray, first_l.found, first_l.hit, pd.value_l);
             }
+            pd.edge = &edge;
+            pd.x = x;
+            pd.y = y;
+            pd.lu = eye.lu;
+            pd.lv = eye.lv;
+            pd.g = g;
+            pd.weight = float(point_weight / glen);
             if (radiance) {
-                Rng path_u = Rng::for_sample(seed, uint64_t(i), 1), path_l = path_u;
-                const Vec3f L = trace_path(scene, opt, first_u.ray, path_u, counters, nullptr, &first_u) -
-                                trace_path(scene, opt, first_l.ray, path_l, counters, nullptr, &first_l);
-                for (int c = 0; c < 3; ++c) value_u[ro + c] = L[c], value_l[ro + c] = 0.f;
-            }
-            bool jump = false;
-            for (int c = 0; c < nv; ++c) {
-                delta[c] = value_u[c] - value_l[c];
-                jump = jump || delta[c] != 0.f;
-            }
-            if (!jump) return;
-            const float weight = float(point_weight / glen);
-
-            // Output pixels the filter reaches from the sample (pixel centres at i + 0.5).
-            const float ox = x - float(scene.crop_x) - 0.5f, oy = y - float(scene.crop_y) - 0.5f;
-            const int px0 = std::max(0, int(std::ceil(ox - radius))), px1 = std::min(scene.out_width - 1, int(std::floor(ox + radius)));
-            const int py0 = std::max(0, int(std::ceil(oy - radius))), py1 = std::min(scene.out_height - 1, int(std::floor(oy + radius)));
-            auto for_each_pixel = [&](auto&& fn) {
-                for (int py = py0; py <= py1; ++py) {
-                    const float ky = scene.filter.eval(oy - float(py));
-                    if (ky == 0.f) return;
-                    for (int px = px0; px <= px1; ++px) {
-                        const float k = ky * scene.filter.eval(ox - float(px));
-                        if (k != 0.f) fn(int64_t(py) * scene.out_width + px, k);
-                    }
+                // Both side paths with the same stream: trace_path's radiance from each side's
+                // ray and hit.
+                const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
+                const EdgeSide* side[2] = {&first_u, &first_l};
+                for (int s = 0; s < 2; ++s) {
+                    CameraSample& cs = sides[size_t(2 * npending + s)];
+                    cs.rng = stream;
+                    cs.ray = side[s]->ray;
+                    cs.first = *side[s];
+                    cs.outside = false;
                 }
-            };
-            // Adds s * dg/d(parameter) to the sink.
-            auto add_side_gradient = [&](float s) {
-                if (vertices_wanted(slots, edge.mesh)) {
-                    const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
-                    sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
-                    sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
-                }
-                if (camera_wanted) {
-                    float cg[kCameraParams] = {};
-                    d_camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, g.d_o * s, g.d_d * s, cg);
-                    for (int k = 0; k < kCameraParams; ++k) sink.add(slots.camera, k, cg[k]);
-                }
-            };
-            if (adjoint) {
-                double s = 0.0;
-                for_each_pixel([&](int64_t p, float k) {
-                    const float* a = adjoint + nv * p;
-                    float ad = 0.f;
-                    for (int c = 0; c < nv; ++c) ad += a[c] * delta[c];
-                    s += double(k) * ad;
-                });
-                if (s != 0.0) add_side_gradient(float(s * weight));
-            } else {
-                add_side_gradient(1.f);
-                const float dg = float(sink.take_projection()) * weight;
-                if (dg == 0.f) return;
-                for_each_pixel([&](int64_t p, float k) {
-                    for (int c = 0; c < nv; ++c)
-                        if (delta[c] != 0.f) atomic_add(out + nv * p + c, k * dg * delta[c]);
-                });
             }
+            if (++npending == batch) flush();
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
@@ -561,6 +627,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             splat(i, eye, edge, p0, p1, x, y, point_weight, nullptr);
         }
+        flush();
     });
     for (GradSink& s : sinks) s.flush();
 }

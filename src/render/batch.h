@@ -8,7 +8,8 @@
 // Each path keeps its own random stream and adds to its radiance in the order trace_path does:
 // the radiance of every path is trace_path's, bit for bit (Render.BatchedPathsMatchTracePath),
 // so an image does not depend on how the paths are grouped. The gradient pass, which records
-// its paths, stays with trace_path.
+// its paths, stays with trace_path; the primary edge pass traces its side paths (not recorded)
+// here (edges/primary.cpp).
 #pragma once
 #include <memory>
 #include <vector>

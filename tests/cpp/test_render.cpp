@@ -8,10 +8,12 @@
 #include <vector>
 
 #include "edgepath.h"
+#include "edges/primary.h"
 #include "moved_scene.h"
 #include "render/packet.h"
 #include "render/path.h"
 #include "render/shade_lanes.h"
+#include "scene/gradients.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
@@ -1163,6 +1165,117 @@ TEST(Render, SphericalTriangleLightSides) {
         const double mean = sum / N, se = std::sqrt(std::max(0.0, sum2 / N - mean * mean) / N);
         EXPECT_NEAR(mean, 2.0 * polygon_irradiance(Vec3d(p), Vec3d(n), poly), 5 * se + 1e-9);
     }
+}
+
+// The primary edge pass traces the side paths of up to kPrimaryEdgeBatch edge samples together
+// (render/batch.h) and splats the samples' jumps in their order afterwards: its gradients and
+// derivative images are the same, bit for bit, as with every sample's paths traced on their own
+// (batches of 1), for a pinhole, a thin lens, a fisheye and a panorama (several images of an edge
+// point per sample), on the radiance alone and with a hit channel beside it, with diffuse
+// (vectorised) and glossy vertices, an area light, a point light and an environment.
+TEST(Render, PrimaryEdgeBatchesMatchOneByOne) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.6f, -0.4f, 0.4f), 0.5f, 8, 16);
+    MeshData box = make_box(Vec3f(-0.9f, -1, -0.6f), Vec3f(-0.2f, -0.3f, 0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), ks({0.3f, 0.3f, 0.3f}), r({0.3f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
+    std::vector<float> sky(4 * 8 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7);
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, -0.3f, 0), 24, 18, 60);
+    d.materials.push_back(material(kd, black, r));  // 0: diffuse (the vectors shade it)
+    d.materials.push_back(material(kd, ks, r));     // 1: glossy
+    d.materials.push_back(material(black, black, r));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(1));
+    d.meshes.push_back(box.desc(0));
+    d.meshes.push_back(lamp.desc(2));
+    d.meshes[3].emission = le.desc();
+    d.has_envmap = true;
+    d.envmap.values = {sky.data(), 4, 8, 3};
+    PointLightDesc bulb;
+    bulb.position[0] = 1.5f;
+    bulb.position[1] = 1.f;
+    bulb.position[2] = 1.f;
+    d.point_lights = {bulb};
+    auto scene = build_scene(d);
+    const int W = image_width(*scene), H = image_height(*scene);
+
+    RenderOptions opt;
+    opt.spp = 2;
+    opt.seed = 3;
+    opt.max_bounces = 3;
+    opt.num_threads = 1;  // one sink: its sums in one order
+    int checked = 0;
+    for (CameraType type : {CameraType::Perspective, CameraType::ThinLens, CameraType::Fisheye, CameraType::Panorama}) {
+        CameraDesc c = d.camera;
+        c.type = type;
+        if (type == CameraType::ThinLens) {
+            c.aperture_radius = 0.15f;
+            c.focus_distance = 4.f;
+        }
+        if (type == CameraType::Fisheye || type == CameraType::Panorama) c.fov = 180.f;
+        scene->set_camera(c);
+        for (bool with_depth : {false, true}) {
+            const ChannelLayout layout = with_depth ? ChannelLayout({Channel::Radiance, Channel::Depth})
+                                                    : ChannelLayout::radiance();
+            const size_t nv = size_t(layout.num_values), pixels = size_t(W) * size_t(H);
+            std::vector<float> adjoint(pixels * nv);
+            for (size_t i = 0; i < adjoint.size(); ++i) adjoint[i] = float(std::sin(0.31 * double(i)) + 0.3);
+            // Every vertex of every mesh and the camera; directions for the forward mode.
+            std::vector<std::vector<float>> dirs(scene->meshes.size());
+            std::vector<float> camera_dir(kCameraParams);
+            for (size_t k = 0; k < camera_dir.size(); ++k) camera_dir[k] = float(std::cos(1.7 * double(k)));
+            auto run = [&](int batch, bool reverse) {
+                std::vector<std::vector<float>> grads(scene->meshes.size());
+                std::vector<float> camera_grad(kCameraParams, 0.f), image(pixels * nv, 0.f);
+                SceneGradients slots;
+                slots.meshes.resize(scene->meshes.size());
+                for (size_t m = 0; m < scene->meshes.size(); ++m) {
+                    const size_t n3 = size_t(scene->meshes[m].num_vertices) * 3;
+                    grads[m].assign(n3, 0.f);
+                    dirs[m].resize(n3);
+                    for (size_t k = 0; k < n3; ++k) dirs[m][k] = float(std::sin(0.7 * double(k) + double(m)));
+                    if (reverse)
+                        slots.meshes[m].vertices.grad = grads[m].data();
+                    else
+                        slots.meshes[m].vertices.dir = dirs[m].data();
+                }
+                if (reverse)
+                    slots.camera.grad = camera_grad.data();
+                else
+                    slots.camera.dir = camera_dir.data();
+                number_slots(slots);
+                primary_edge_pass(*scene, opt, slots, layout, reverse ? adjoint.data() : nullptr,
+                                  reverse ? nullptr : image.data(), batch);
+                std::vector<float> all = camera_grad;
+                for (const auto& g : grads) all.insert(all.end(), g.begin(), g.end());
+                return reverse ? all : image;
+            };
+            for (bool reverse : {true, false}) {
+                const std::string what = "camera " + std::to_string(int(type)) + (with_depth ? ", depth" : "") +
+                                         (reverse ? ", gradients" : ", derivative image");
+                const std::vector<float> one = run(1, reverse), batched = run(kPrimaryEdgeBatch, reverse),
+                                         some = run(5, reverse);
+                ASSERT_EQ(one.size(), batched.size());
+                int differing = 0, nonzero = 0;
+                for (size_t i = 0; i < one.size(); ++i) {
+                    differing += std::memcmp(&one[i], &batched[i], sizeof(float)) != 0;
+                    differing += std::memcmp(&one[i], &some[i], sizeof(float)) != 0;
+                    nonzero += one[i] != 0.f;
+                }
+                EXPECT_EQ(differing, 0) << what;
+                EXPECT_GT(nonzero, 10) << what << ": the pass found no edge";
+                ++checked;
+            }
+        }
+    }
+    EXPECT_EQ(checked, 16);
+    SceneGradients none;
+    EXPECT_THROW(primary_edge_pass(*scene, opt, none, ChannelLayout::radiance(), nullptr, nullptr, 0),
+                 std::invalid_argument);
+    EXPECT_THROW(primary_edge_pass(*scene, opt, none, ChannelLayout::radiance(), nullptr, nullptr, kPrimaryEdgeBatch + 1),
+                 std::invalid_argument);
 }
 
 }  // namespace
