@@ -64,12 +64,9 @@ void calibrate_survival(const Scene& scene, const RenderOptions& opt, const Scen
                 a = Vec3f(ap[0], ap[1], ap[2]);
                 if (is_black(a)) continue;
             }
-            CameraSample c = camera_sample(scene, seed, x, y, 0);
+            const CameraSample c = camera_sample(scene, seed, x, y, 0);
             if (c.outside) continue;
-            rec.film = c.film;
-            rec.lens = c.lens;
-            rec.stream = mix64(seed ^ c.pixel);
-            trace_path(scene, opt, c.ray, c.rng, counters, &rec, nullptr);
+            record_camera_path(scene, opt, seed, c, rec, counters);
             if (rec.camera_missed) continue;
             log.replaying = false;
             backprop_path(scene, slots, rec, a, discard, &secondary, &log);

@@ -67,6 +67,17 @@ inline CameraSample camera_sample(const Scene& scene, uint64_t seed, int x, int 
     return c;
 }
 
+// The whole path of camera sample c (camera_sample(scene, seed, ...)) traced by trace_path and
+// recorded into rec, with the path's own stream mix64(seed ^ pixel): a sample taken alone, as
+// the survival pilot and tests take them.
+inline void record_camera_path(const Scene& scene, const RenderOptions& opt, uint64_t seed, CameraSample c,
+                               PathRecord& rec, RayCounters& counters) {
+    rec.film = c.film;
+    rec.lens = c.lens;
+    rec.stream = mix64(seed ^ c.pixel);
+    trace_path(scene, opt, c.ray, c.rng, counters, &rec, nullptr);
+}
+
 // Calls fn(samples, n) for the camera samples of the output pixels [x0, x1) x [y0, y1), in
 // order (rows, pixels, samples), `capacity` (a multiple of kPacketSize) at a time in `samples`
 // (n <= capacity; fewer at the end), with the random numbers of Rng::for_sample(opt.seed, pixel,

@@ -46,11 +46,7 @@ int compare(const Scene& scene, const AllAdjointsScene& s, const Group& grp, con
     for (int y = 0; y < s.desc.camera.height; ++y)
         for (int x = 0; x < s.desc.camera.width; ++x)
             for (int k = 0; k < opt.spp; ++k) {
-                CameraSample c = camera_sample(scene, opt.seed, x, y, k);
-                rec.film = c.film;
-                rec.lens = c.lens;
-                rec.stream = mix64(opt.seed ^ c.pixel);
-                trace_path(scene, opt, c.ray, c.rng, counters, &rec, nullptr);
+                record_camera_path(scene, opt, opt.seed, camera_sample(scene, opt.seed, x, y, k), rec, counters);
                 if (rec.camera_missed) continue;
                 const PathVertexRecord& v = rec.vertices[0];
                 Ray ray;

@@ -43,11 +43,7 @@ TEST(ColourSweep, EqualsThreeSweepsForEveryParameter) {
         for (int y = 0; y < s.desc.camera.height; ++y)
             for (int x = 0; x < s.desc.camera.width; ++x)
                 for (int k = 0; k < opt.spp; ++k) {
-                    CameraSample c = camera_sample(*scene, opt.seed, x, y, k);
-                    rec.film = c.film;
-                    rec.lens = c.lens;
-                    rec.stream = mix64(opt.seed ^ c.pixel);
-                    trace_path(*scene, opt, c.ray, c.rng, counters, &rec, nullptr);
+                    record_camera_path(*scene, opt, opt.seed, camera_sample(*scene, opt.seed, x, y, k), rec, counters);
                     // The three sweeps derivative images made before: colour by colour, the
                     // edge terms sampled by the first and replayed by the others.
                     log.replaying = false;
