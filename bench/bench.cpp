@@ -31,8 +31,7 @@
 //   edgepath_bench --digest [--size N] [--spp N] [--threads N] [--bounces 1,3] [--secondary-survival P]
 //                  (one gradient pass and one derivative image per bounce count on the benchmark
 //                  scene, and one of each on the single triangle: a hash of every output value,
-//                  for bit-for-bit comparisons of two builds; one thread gives the same sums
-//                  whatever the timing)
+//                  for bit-for-bit comparisons of two builds; the same whatever --threads)
 //
 // --render-only skips the Embree-only measurements, so that a profiler run (perf record) sees
 // the renderer alone. --forward-only stops after the forward tables (A/B runs of two builds).

@@ -115,7 +115,10 @@ void channel_gradients(const Scene& scene, const RenderOptions& opt, const Chann
     SecondaryEdges secondary(scene, opt, radiance ? grads : none);
     if (radiance) calibrate_survival(scene, opt, grads, secondary, adjoint, nv, ro);
     const SecondaryEdges* sec = secondary.active() ? &secondary : nullptr;
-    tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(false); });
+    // Each tile's additions in the tiles' order: the same gradients, bit for bit, whatever the
+    // thread count.
+    tbb::enumerable_thread_specific<GradSink> sinks([] { return GradSink(false, true); });
+    OrderedAdds adds;
     for_each_sample(
         scene, opt, radiance,
         [&](int x, int y, const PathRecord& rec) {
@@ -138,7 +141,7 @@ void channel_gradients(const Scene& scene, const RenderOptions& opt, const Chann
                 if (any) d_hit_channels(scene, layout, grads, rec.film, rec.lens, ray, v.hit, ah, sinks.local());
             }
         },
-        [&] { sinks.local().flush(); });
+        [&](int64_t tile) { sinks.local().commit(adds, tile); });
     primary_edge_pass(scene, opt, grads, layout, adjoint, nullptr);
 }
 
@@ -186,7 +189,7 @@ void channel_derivative_image(const Scene& scene, const RenderOptions& opt, cons
                 }
             }
         },
-        [] {});
+        [](int64_t) {});
     primary_edge_pass(scene, opt, dirs, layout, nullptr, out);
 }
 

@@ -376,7 +376,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     Eye centre;
     centre.position = cam.position;
     const uint64_t seed = mix64(opt.seed ^ 0x70726d6564676573ull);
-    tbb::enumerable_thread_specific<GradSink> sinks([&] { return GradSink(adjoint == nullptr); });
+    // Each chunk's additions (the gradients' or the derivative image's) in the chunks' order: the
+    // same sums, bit for bit, whatever the thread count.
+    tbb::enumerable_thread_specific<GradSink> sinks([&] { return GradSink(adjoint == nullptr, true); });
+    OrderedAdds adds;
     // An edge sample's splat in three steps: its two sides and their channel values (found at
     // once), then its two side paths, traced with those of up to batch - 1 other samples by a
     // PathBatch (render/batch.h: trace_path's radiance, bit for bit), then the jump and its splat,
@@ -389,7 +392,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         float weight;  // the film length the sample stands for over the film gradient's norm
         float value_u[kMaxChannelValues], value_l[kMaxChannelValues];
     };
-    for_each_chunk(opt, n, 4096, [&](int64_t begin, int64_t end) {
+    constexpr int64_t kSampleChunk = 4096;
+    for_each_chunk(opt, n, kSampleChunk, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
         RayCounters counters;
         std::vector<Pending> pending(static_cast<size_t>(batch));
@@ -462,7 +466,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 if (dg == 0.f) return;
                 for_each_pixel([&](int64_t p, float k) {
                     for (int c = 0; c < nv; ++c)
-                        if (delta[c] != 0.f) atomic_add(out + nv * p + c, k * dg * delta[c]);
+                        if (delta[c] != 0.f) sink.add_out(out + nv * p + c, k * dg * delta[c]);
                 });
             }
         };
@@ -628,8 +632,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             splat(i, eye, edge, p0, p1, x, y, point_weight, nullptr);
         }
         flush();
+        sink.commit(adds, begin / kSampleChunk);
     });
-    for (GradSink& s : sinks) s.flush();
 }
 
 }  // namespace edgepath

@@ -41,7 +41,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
     RayTally tally;
-    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
+    for_each_tile(scene, opt, [&](int64_t, int x0, int y0, int x1, int y1) {
         RayCounters c;
         float v[kMaxChannelValues];
         double sum[kMaxChannelValues] = {};

@@ -1,12 +1,12 @@
 // Parallel loop over the output image in tiles (oneTBB), shared by every pass.
 #pragma once
 #include <algorithm>
+#include <atomic>
 #include <map>
 #include <memory>
 #include <mutex>
 #include <stdexcept>
 #include <string>
-#include <tbb/blocked_range.h>
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
@@ -56,49 +56,61 @@ inline void throw_if_cancelled(const RenderOptions& opt) {
     if (opt.cancelled()) throw Cancelled();
 }
 
-// Calls tile_fn(x0, y0, x1, y1) for tiles of the output image, in parallel on opt.num_threads.
-// Once opt is cancelled no tile starts (tile_fn should stop early too) and this throws Cancelled.
-template <class TileFn>
-void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_fn) {
-    constexpr int kTileSize = 16;
-    const int W = scene.out_width, H = scene.out_height;
-    const int tiles_x = (W + kTileSize - 1) / kTileSize, tiles_y = (H + kTileSize - 1) / kTileSize;
-    pass_arena(thread_count(opt)).execute([&] {
-        tbb::parallel_for(tbb::blocked_range<int>(0, tiles_x * tiles_y, 1), [&](const tbb::blocked_range<int>& range) {
-            for (int tile = range.begin(); tile < range.end(); ++tile) {
+// Calls fn(i) for i in [0, count) on opt.num_threads threads, each taking the next index not
+// yet taken, so that the indices start in increasing order (work items finish close to their
+// order: OrderedAdds, scene/gradients.h, then holds few of them at a time). Once opt is
+// cancelled no item starts (fn should stop early too) and this throws Cancelled.
+template <class Fn>
+void parallel_indices(const RenderOptions& opt, int64_t count, Fn&& fn) {
+    const int threads = thread_count(opt);
+    std::atomic<int64_t> next{0};
+    pass_arena(threads).execute([&] {
+        tbb::parallel_for(0, threads, [&](int) {
+            for (int64_t i = next.fetch_add(1, std::memory_order_relaxed); i < count;
+                 i = next.fetch_add(1, std::memory_order_relaxed)) {
                 if (opt.cancelled()) return;
-                int x0 = (tile % tiles_x) * kTileSize, y0 = (tile / tiles_x) * kTileSize;
-                tile_fn(x0, y0, std::min(x0 + kTileSize, W), std::min(y0 + kTileSize, H));
+                fn(i);
             }
         });
     });
     throw_if_cancelled(opt);
 }
 
-// Calls fn(begin, end) over [0, n) in chunks, in parallel on opt.num_threads; once opt is
-// cancelled no chunk starts and this throws Cancelled.
+constexpr int kTileSize = 16;
+
+// The number of tiles of the output image, and the index for_each_tile gives each.
+inline int64_t tile_count(const Scene& scene) {
+    return int64_t((scene.out_width + kTileSize - 1) / kTileSize) * ((scene.out_height + kTileSize - 1) / kTileSize);
+}
+
+// Calls tile_fn(tile, x0, y0, x1, y1) for the tiles of the output image (tile: its index, in
+// [0, tile_count(scene)), row by row), in parallel on opt.num_threads. Once opt is cancelled no
+// tile starts (tile_fn should stop early too) and this throws Cancelled.
+template <class TileFn>
+void for_each_tile(const Scene& scene, const RenderOptions& opt, TileFn&& tile_fn) {
+    const int W = scene.out_width, H = scene.out_height;
+    const int tiles_x = (W + kTileSize - 1) / kTileSize;
+    parallel_indices(opt, tile_count(scene), [&](int64_t tile) {
+        const int x0 = int(tile % tiles_x) * kTileSize, y0 = int(tile / tiles_x) * kTileSize;
+        tile_fn(tile, x0, y0, std::min(x0 + kTileSize, W), std::min(y0 + kTileSize, H));
+    });
+}
+
+// Calls fn(begin, end) over [0, n) in chunks of `chunk` (chunk c: [c chunk, (c + 1) chunk)), in
+// parallel on opt.num_threads; once opt is cancelled no chunk starts and this throws Cancelled.
 template <class ChunkFn>
 void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&& fn) {
-    pass_arena(thread_count(opt)).execute([&] {
-        tbb::parallel_for(tbb::blocked_range<int64_t>(0, (n + chunk - 1) / chunk, 1),
-                          [&](const tbb::blocked_range<int64_t>& range) {
-                              for (int64_t c = range.begin(); c < range.end(); ++c) {
-                                  if (opt.cancelled()) return;
-                                  fn(c * chunk, std::min(n, (c + 1) * chunk));
-                              }
-                          });
-    });
-    throw_if_cancelled(opt);
+    parallel_indices(opt, (n + chunk - 1) / chunk, [&](int64_t c) { fn(c * chunk, std::min(n, (c + 1) * chunk)); });
 }
 
 // Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
-// the random numbers of render() for the same options; tile_end() after each tile, on the thread
-// that ran it. With `full_paths` the whole path is traced and recorded (the radiance's gradient);
+// the random numbers of render() for the same options; tile_end(tile) after each tile, on the
+// thread that ran it (tile: for_each_tile's index). With `full_paths` the whole path is traced and recorded (the radiance's gradient);
 // without, only the camera ray's first hit (record.vertices holds it, or record.camera_missed).
 template <class SampleFn, class TileEnd>
 void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_paths, SampleFn&& fn,
                      TileEnd&& tile_end) {
-    for_each_tile(scene, opt, [&](int x0, int y0, int x1, int y1) {
+    for_each_tile(scene, opt, [&](int64_t tile, int x0, int y0, int x1, int y1) {
         RayCounters c;
         PathRecord rec;
         // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
@@ -128,7 +140,7 @@ void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_pat
             fn(cs.x, cs.y, rec);
         });
         if (!done) return;
-        tile_end();
+        tile_end(tile);
     });
 }
 

@@ -4,6 +4,8 @@
 // Null slots are parameters nobody asked about: the sweep skips their work.
 #pragma once
 #include <cstdint>
+#include <map>
+#include <mutex>
 #include <vector>
 #include "math/adjoint.h"
 #include "scene/camera.h"
@@ -60,12 +62,61 @@ inline void atomic_add(float* p, float v) {
     } while (!__atomic_compare_exchange(p, &old, &desired, true, __ATOMIC_RELAXED, __ATOMIC_RELAXED));
 }
 
+// One float addition of a gradient pass: *p += v.
+struct GradAdd {
+    float* p;
+    float v;
+};
+using GradLog = std::vector<GradAdd>;
+
+// The additions of a pass's work items (tiles, chunks of samples), made in the items' order
+// whatever the thread that made each and whenever it finished: item i's additions, in the order
+// it made them, once every earlier item's are. Each item's additions are the same whatever the
+// thread count, so the sums are the same bit for bit. An item that finishes early is held until
+// the items before it are in (parallel_indices, render/tiles.h, starts them in order, so few are
+// held at a time). Every item in [0, count) must be committed, empty or not.
+class OrderedAdds {
+public:
+    // Item `index`'s additions, taken out of `log` (left empty).
+    void commit(int64_t index, GradLog& log) {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (index != next_) {
+            pending_[index].swap(log);
+            log.clear();
+            return;
+        }
+        apply(log);
+        log.clear();
+        ++next_;
+        for (auto it = pending_.find(next_); it != pending_.end(); it = pending_.find(next_)) {
+            apply(it->second);
+            pending_.erase(it);
+            ++next_;
+        }
+    }
+    // Items committed in order so far, and the most held at once (for the tests).
+    int64_t applied() const { return next_; }
+    size_t held() const { return pending_.size(); }
+
+private:
+    static void apply(const GradLog& log) {
+        for (const GradAdd& a : log) *a.p += a.v;
+    }
+    std::mutex mutex_;
+    int64_t next_ = 0;
+    std::map<int64_t, GradLog> pending_;
+};
+
 // Receives d(sample value)/d(parameter) contributions. Reverse mode buffers them in a small
 // direct-mapped cache (constant textures and the camera get hit by every sample) and flushes
-// with atomic adds; forward mode sums value * direction.
+// them to the buffers; forward mode sums value * direction. A sink made `ordered` keeps its
+// flushes (and the additions given to add_out) in a log that commit() hands to an OrderedAdds,
+// once per work item: the sink's cache is empty between items, so an item's additions do not
+// depend on which items the same thread ran before. Otherwise they are atomic additions, in an
+// order that depends on the threads' timing.
 class GradSink {
 public:
-    explicit GradSink(bool project) : project_(project) {
+    explicit GradSink(bool project, bool ordered = false) : project_(project), ordered_(ordered) {
         for (auto& e : cache_) e = {nullptr, 0.0};
     }
     ~GradSink() { flush(); }
@@ -95,7 +146,7 @@ public:
         Entry* e = free_entry;
         if (!e) {
             e = &cache_[(home + (evict_++ % kWays)) & (kCacheSize - 1)];
-            atomic_add(e->ptr, float(e->value));
+            add_out(e->ptr, float(e->value));
         }
         e->ptr = p;
         e->value = v;
@@ -150,12 +201,25 @@ public:
         }
     }
 
+    // *p += v: into the log of an ordered sink, else at once (an atomic addition).
+    void add_out(float* p, float v) {
+        if (ordered_)
+            log_.push_back({p, v});
+        else
+            atomic_add(p, v);
+    }
     void flush() {
         for (auto& e : cache_)
             if (e.ptr) {
-                atomic_add(e.ptr, float(e.value));
+                add_out(e.ptr, float(e.value));
                 e.ptr = nullptr;
             }
+        evict_ = 0;
+    }
+    // An ordered sink's additions since the last commit, flushed, as work item `index`'s.
+    void commit(OrderedAdds& adds, int64_t index) {
+        flush();
+        adds.commit(index, log_);
     }
     double take_projection() {
         double p = projection_;
@@ -187,6 +251,8 @@ private:
         double value;
     };
     bool project_;
+    bool ordered_;
+    GradLog log_;
     double projection_ = 0.0;
     double colour_projection_[3] = {0.0, 0.0, 0.0};
     double lane_projection_[kMaxAdjLanes] = {};

@@ -1,6 +1,7 @@
 // The gradient pass against finite differences of the renderer, and reverse mode against
 // forward mode, on a scene with no visibility change (interior term only).
 #include <gtest/gtest.h>
+#include <algorithm>
 
 #include <cmath>
 #include <cstdio>
@@ -345,6 +346,66 @@ TEST(GradSink, CollidingParametersKeepDoublePrecision) {
     // Float sums of 200000 terms of 0.1 drift by far more than this.
     EXPECT_NEAR(buffer[0], 200000 * double(0.1f), 0.01);
     EXPECT_NEAR(buffer[256], -200000 * double(0.1f), 0.01);
+}
+
+
+// Work items committed out of order are applied in their order: the float sums are those of the
+// items in order, which rounding tells apart from any other order here.
+TEST(OrderedAdds, AppliesItemsInTheirOrderWhateverTheOrderOfCommits) {
+    // Item i adds x_i to the one value; 1e8 + 1 - 1e8 is 0 in float, 1e8 - 1e8 + 1 is 1.
+    const float x[4] = {1e8f, 1.f, -1e8f, 1.f};
+    auto run = [&](const std::vector<int>& order) {
+        float value = 0.f;
+        OrderedAdds adds;
+        size_t held = 0;
+        for (int i : order) {
+            GradLog log{{&value, x[i]}};
+            adds.commit(i, log);
+            EXPECT_TRUE(log.empty());
+            held = std::max(held, adds.held());
+        }
+        EXPECT_EQ(adds.applied(), 4);
+        EXPECT_EQ(adds.held(), 0u);
+        return std::make_pair(value, held);
+    };
+    const float in_order = ((0.f + 1e8f) + 1.f) + -1e8f + 1.f;
+    EXPECT_EQ(run({0, 1, 2, 3}).first, in_order);
+    EXPECT_EQ(run({0, 1, 2, 3}).second, 0u);
+    for (const std::vector<int>& order : {std::vector<int>{3, 2, 1, 0}, {2, 0, 3, 1}, {1, 3, 2, 0}}) {
+        const auto r = run(order);
+        EXPECT_EQ(r.first, in_order);
+        EXPECT_GT(r.second, 0u);
+    }
+    // The other orders' sums differ: the test would see a wrong order.
+    EXPECT_NE(((0.f + 1e8f) + -1e8f) + 1.f + 1.f, in_order);
+}
+
+// An ordered sink adds nothing to the buffers before its commit, and a work item's additions do
+// not depend on what the sink saw before (its cache, and which entry it evicts next, start
+// afresh after each commit).
+TEST(GradSink, OrderedSinkCommitsTheSameAdditionsForAnItemWhateverCameBefore) {
+    std::vector<float> a(4096, 0.f), b(4096, 0.f);
+    GradSlot slot_a, slot_b;
+    slot_a.grad = a.data();
+    slot_b.grad = b.data();
+    // One item: more parameters than the cache holds, each added to many times, so that which
+    // entries are evicted when changes the partial sums.
+    auto item = [](GradSink& sink, const GradSlot& slot, int seed, int n) {
+        for (int i = 0; i < n; ++i) sink.add(slot, (i * 7919 + seed) % 700, 0.1f + 1e-3f * float(i % 13));
+    };
+    OrderedAdds adds_a, adds_b;
+    GradSink first(false, true), second(false, true);
+    // Sink `first` runs another item before; `second` runs this one alone.
+    item(first, slot_a, 1, 19999);
+    EXPECT_EQ(*std::max_element(a.begin(), a.end()), 0.f);  // nothing before the commit
+    first.commit(adds_a, 0);
+    std::fill(a.begin(), a.end(), 0.f);
+    item(first, slot_a, 2, 20000);
+    first.commit(adds_a, 1);
+    item(second, slot_b, 2, 20000);
+    second.commit(adds_b, 0);
+    EXPECT_EQ(a, b);
+    EXPECT_GT(*std::max_element(b.begin(), b.end()), 0.f);
 }
 
 }  // namespace

@@ -10,9 +10,8 @@ gradients.
     the interior term of the texture sliding over the pixels; the rotation must come back within
     a degree and the translation within 1% of the cube's edge length.
 
-Both are seeded (a new seed per iteration). The images are reproducible bit for bit; the
-gradients only up to float rounding (the threads' sums), which leaves the final errors far
-inside the tolerances.
+Both are seeded (a new seed per iteration): the images and the gradients are reproducible bit
+for bit.
 ``pytest -s`` prints the timing and the final errors.
 """
 

@@ -1,6 +1,6 @@
 """The core scene kept across renders (``Scene._core_cache``): whatever changes between calls,
-the image and the gradients equal those of a scene built afresh, bit for bit (one thread: the
-gradient sums are then in a fixed order), and only what changed is rebuilt (``build_counts``).
+the image and the gradients equal those of a scene built afresh, bit for bit, and only what
+changed is rebuilt (``build_counts``).
 Once its vertices have moved, the kept scene's edge hierarchy is its refittable form (with the
 nearly flat edges as empty leaves), refit at each move: the gradients that edge samples reach
 then equal those of a twin with the same history, and of a scene built afresh in that form.
