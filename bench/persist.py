@@ -194,7 +194,7 @@ def main():
         print(f"    ratio {args.views} calls / one call: {t['fresh'] / t['one']:.2f}x (a scene each), "
               f"{t['kept'] / t['one']:.2f}x (kept scene); in CPU time {c['fresh'] / c['one']:.2f}x, "
               f"{c['kept'] / c['one']:.2f}x")
-        view_ratios.append((label.split()[0], t['fresh'] / t['one']))
+        view_ratios.append(("render + backward" if backward else "forward", t['fresh'] / t['one']))
     print(f"  kept scene: builds {kept.build_counts()}, edge hierarchy {kept.edge_hierarchy_counts()}")
     # Issue 18's target: the views in one call at least 1.5x faster than as many calls (each on a
     # scene of its own), in wall time.
