@@ -60,16 +60,23 @@ inline void throw_if_cancelled(const RenderOptions& opt) {
 // yet taken, so that the indices start in increasing order (work items finish close to their
 // order: OrderedAdds, scene/gradients.h, then holds few of them at a time). Once opt is
 // cancelled no item starts (fn should stop early too) and this throws Cancelled.
+// An item that throws stops the others from starting new items; the exception then propagates.
 template <class Fn>
 void parallel_indices(const RenderOptions& opt, int64_t count, Fn&& fn) {
     const int threads = thread_count(opt);
     std::atomic<int64_t> next{0};
+    std::atomic<bool> failed{false};
     pass_arena(threads).execute([&] {
         tbb::parallel_for(0, threads, [&](int) {
             for (int64_t i = next.fetch_add(1, std::memory_order_relaxed); i < count;
                  i = next.fetch_add(1, std::memory_order_relaxed)) {
-                if (opt.cancelled()) return;
-                fn(i);
+                if (opt.cancelled() || failed.load(std::memory_order_relaxed)) return;
+                try {
+                    fn(i);
+                } catch (...) {
+                    failed.store(true, std::memory_order_relaxed);
+                    throw;
+                }
             }
         });
     });

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <thread>
+#include <chrono>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -14,6 +16,7 @@
 #include "edgepath.h"
 #include "math/ray.h"
 #include "sampling/rng.h"
+#include "render/tiles.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
@@ -209,6 +212,29 @@ TEST(Robust, CancelledCallsStopAndThrow) {
     cancel = false;
     opt.spp = 1;
     EXPECT_NO_THROW(render(*scene, opt, image.data()));
+}
+
+
+// The passes' parallel loop: every index once, each started in increasing order; an item that
+// throws stops the others from starting new items, and the exception reaches the caller.
+TEST(Robust, ParallelIndicesRunEachOnceAndStopAtAnException) {
+    RenderOptions opt;
+    opt.num_threads = 2;
+    const int64_t n = 20000;
+    std::vector<std::atomic<int>> runs(static_cast<size_t>(n));
+    parallel_indices(opt, n, [&](int64_t i) { runs[size_t(i)].fetch_add(1); });
+    for (int64_t i = 0; i < n; ++i) ASSERT_EQ(runs[size_t(i)].load(), 1) << i;
+    std::atomic<int64_t> done{0};
+    EXPECT_THROW(parallel_indices(opt, n,
+                                  [&](int64_t i) {
+                                      if (i == 200) throw std::runtime_error("item 200");
+                                      std::this_thread::sleep_for(std::chrono::microseconds(50));
+                                      done.fetch_add(1);
+                                  }),
+                 std::runtime_error);
+    // (Item 200: by then both threads are in the loop.) The other stops within an item or two
+    // of the failure, not after all 20000 at 50 us each.
+    EXPECT_LT(done.load(), 400);
 }
 
 }  // namespace
