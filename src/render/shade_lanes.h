@@ -30,9 +30,14 @@ struct ShadeLanes {
     // set: true) of a two-sided material and of a reflectance with luminance above 0.
     alignas(64) float p[3][N], p_error[3][N], ng[3][N], ns[3][N], dir[3][N], beta[3][N], diffuse[3][N];
     alignas(64) float two_sided[N], reflects[N];
-    // The BSDF sample's two numbers, made by shade_lanes into the cosine-weighted sample's point
-    // on the unit disk (square_to_disk; its cosine and sine per path, the rest in vectors).
-    alignas(64) float disk[2][N];
+    // The GGX lobe (Scene::bsdf_params' specular and alpha; black where the material has none)
+    // and the probability of sampling it (specular_lobe_probability: 0 without it).
+    alignas(64) float specular[3][N], alpha[N], lobe_p[N];
+    // The BSDF sample's three numbers: the lobe's choice (the GGX lobe where below lobe_p) and
+    // the two of the direction (the cosine-weighted sample's point on the unit disk,
+    // square_to_disk, or the GGX visible normal's: their cosine and sine per path, the rest in
+    // vectors).
+    alignas(64) float u_lobe[N], disk[2][N];
     // The area light's sample (mask light_on): the barycentrics on the triangle picked, its
     // vertices, unit normal and largest edge component, the probability of its pick and its
     // area, its emission (constant) and whether it emits on both sides.
