@@ -82,17 +82,15 @@ inline F ggx_pdf_lanes(const V& wo, const GgxTerms<F, V>& t) {
     return select(dot(wo, t.h) <= F(0.f), F(0.f), t.G1o * t.D / (F(4.f) * wo.z));
 }
 
-// The material's f cos (bsdf_eval) and density (bsdf_pdf) for wi, with the two-sided
-// material's mirroring (orient); `flip`: two-sided and wo below the surface. `glossy`: whether
-// any lane of the vector has a GGX lobe (a non-black specular): without one, its terms are not
-// computed (each lane would discard them).
-template <class F, class M, class V>
-inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, const V& specular, F alpha, F lobe_p,
-                       bool glossy, V& f, F& pdf) {
-    const V o(wo.x, wo.y, select(flip, -wo.z, wo.z)), i(wi.x, wi.y, select(flip, -wi.z, wi.z));
-    const M up = (o.z > F(0.f)) & (i.z > F(0.f));
-    V value = diffuse * (i.z * F(kInvPi));
-    F density = (F(1.f) - lobe_p) * i.z * F(kInvPi);
+// The material's f cos (bsdf_eval) and density (bsdf_pdf, and bsdf_sample's) for the pair
+// (wo, wi) already oriented (on the front of a two-sided material) and not yet tested to be
+// above the surface. `glossy`: whether any lane of the vector has a GGX lobe (a non-black
+// specular): without one, its terms are not computed (each lane would discard them).
+template <class F, class V>
+inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, const V& specular, F alpha, F lobe_p, bool glossy,
+                          V& value, F& density) {
+    value = diffuse * (i.z * F(kInvPi));
+    density = (F(1.f) - lobe_p) * i.z * F(kInvPi);
     if (glossy) {
         const GgxTerms<F, V> t = ggx_terms(o, i, alpha);
         // fresnel_schlick(specular, wi . h): std::clamp(1 - cos, 0, 1) as min(max(., 0), 1).
@@ -106,6 +104,18 @@ inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, const
         value = select(!is_black(specular), with, value);
         density = select(lobe_p > F(0.f), density + lobe_p * ggx_pdf_lanes(o, t), density);
     }
+}
+
+// bsdf_eval and bsdf_pdf for wi, with the two-sided material's mirroring (orient); `flip`:
+// two-sided and wo below the surface.
+template <class F, class M, class V>
+inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, const V& specular, F alpha, F lobe_p,
+                       bool glossy, V& f, F& pdf) {
+    const V o(wo.x, wo.y, select(flip, -wo.z, wo.z)), i(wi.x, wi.y, select(flip, -wi.z, wi.z));
+    const M up = (o.z > F(0.f)) & (i.z > F(0.f));
+    V value;
+    F density;
+    bsdf_oriented(o, i, diffuse, specular, alpha, lobe_p, glossy, value, density);
     f = select(up, value, V(F(0.f)));
     pdf = select(up, density, F(0.f));
 }
@@ -198,26 +208,25 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const bool glossy = (!is_black(specular)).bits() != 0;
 
         // bsdf_sample: wo mirrored for a two-sided material seen from below; the GGX lobe's
-        // visible normal reflected, or the cosine-weighted hemisphere; its density (both lobes'
-        // mixture); the direction mirrored back.
+        // visible normal reflected, or the cosine-weighted hemisphere; the direction's density
+        // (both lobes' mixture) and bsdf_eval's value, whose terms are the same (bsdf_eval
+        // mirrors the pair back to where the sample made it); the direction mirrored back.
         {
             const V wo_up(wo.x, wo.y, select(flip, -wo.z, wo.z));
             const F dx = F::load(disk_x + k), dy = F::load(disk_y + k);
             V wi(dx, dy, sqrt(max_std(zero, one - dx * dx - dy * dy)));
-            F pdf = (one - lobe_p) * wi.z * F(kInvPi);
             if (glossy) {
                 const M ggx = F::load(L.u_lobe + k) < lobe_p;
                 const V h = ggx_visible_normal_lanes(wo_up, alpha, F::load(L.disk[0] + k), F::load(cosine + k),
                                                      F::load(sine + k));
                 wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
-                pdf = (one - lobe_p) * wi.z * F(kInvPi);
-                pdf = select(lobe_p > zero, pdf + lobe_p * ggx_pdf_lanes(wo_up, ggx_terms(wo_up, wi, alpha)), pdf);
             }
+            V value;
+            F pdf;
+            bsdf_oriented(wo_up, wi, diffuse, specular, alpha, lobe_p, glossy, value, pdf);
             const M ok = M::load(L.reflects + k) & !(wo_up.z <= zero) & !(wi.z <= zero) & (pdf > zero);
+            const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
             wi.z = select(flip, -wi.z, wi.z);
-            V f;
-            F unused;
-            bsdf_lanes(flip, wo, wi, diffuse, specular, alpha, lobe_p, glossy, f, unused);
             const V nb = select(ok, beta * (f / pdf), V(zero));
             const M goes_on = ok & !is_black(nb);
             goes_on.store(L.goes_on + k);
