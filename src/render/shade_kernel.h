@@ -84,11 +84,12 @@ inline F ggx_pdf_lanes(const V& wo, const GgxTerms<F, V>& t) {
 
 // The material's f cos (bsdf_eval) and density (bsdf_pdf, and bsdf_sample's) for the pair
 // (wo, wi) already oriented (on the front of a two-sided material) and not yet tested to be
-// above the surface. `glossy`: whether any lane of the vector has a GGX lobe (a non-black
-// specular): without one, its terms are not computed (each lane would discard them).
-template <class F, class V>
-inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, const V& specular, F alpha, F lobe_p, bool glossy,
-                          V& value, F& density) {
+// above the surface. `glossy`: whether any lane of the vector has a GGX lobe (has_spec, a
+// specular that is not black: specular and alpha are read there only); without one, its
+// terms are not computed (each lane would discard them).
+template <class F, class M, class V>
+inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, M has_spec, const V& specular, F alpha, F lobe_p,
+                          bool glossy, V& value, F& density) {
     value = diffuse * (i.z * F(kInvPi));
     density = (F(1.f) - lobe_p) * i.z * F(kInvPi);
     if (glossy) {
@@ -101,7 +102,7 @@ inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, const V& spe
         const V fresnel = specular + (V(F(1.f)) - specular) * m5;
         const F G = t.G1o * t.G1i;
         const V with = value + fresnel * (t.D * G / (F(4.f) * o.z));
-        value = select(!is_black(specular), with, value);
+        value = select(has_spec, with, value);
         density = select(lobe_p > F(0.f), density + lobe_p * ggx_pdf_lanes(o, t), density);
     }
 }
@@ -109,13 +110,13 @@ inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, const V& spe
 // bsdf_eval and bsdf_pdf for wi, with the two-sided material's mirroring (orient); `flip`:
 // two-sided and wo below the surface.
 template <class F, class M, class V>
-inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, const V& specular, F alpha, F lobe_p,
-                       bool glossy, V& f, F& pdf) {
+inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, M has_spec, const V& specular, F alpha,
+                       F lobe_p, bool glossy, V& f, F& pdf) {
     const V o(wo.x, wo.y, select(flip, -wo.z, wo.z)), i(wi.x, wi.y, select(flip, -wi.z, wi.z));
     const M up = (o.z > F(0.f)) & (i.z > F(0.f));
     V value;
     F density;
-    bsdf_oriented(o, i, diffuse, specular, alpha, lobe_p, glossy, value, density);
+    bsdf_oriented(o, i, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, density);
     f = select(up, value, V(F(0.f)));
     pdf = select(up, density, F(0.f));
 }
@@ -149,8 +150,9 @@ inline F mis_power_lanes(F a, F b) {
 
 // Lanes [0, n) of L (n rounded up to whole vectors; the lanes past n are computed and ignored),
 // F::width at a time: F a vector of floats, M its mask, V three of them (math/simd4.h's F, M,
-// V or math/simd8.h's F8, M8, V8).
-template <class F, class M, class V, int N>
+// V or math/simd8.h's F8, M8, V8). Glossy: whether any lane may have a GGX lobe (if not, the
+// Lambertian lobe alone, L.has_specular not read).
+template <class F, class M, class V, bool Glossy, int N>
 inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     using namespace lanes;
     constexpr int W = F::width;
@@ -164,10 +166,14 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const F u2 = F::load(L.disk[1] + k);
         const F a = F(2.f) * F::load(L.disk[0] + k) - one, b = F(2.f) * u2 - one;
         const M wide = abs(a) > abs(b);
-        const M ggx = F::load(L.u_lobe + k) < F::load(L.lobe_p + k);
         select(wide, a, b).store(radius + k);
-        select(ggx, F(2.f * kPi) * u2, select(wide, F(kPi / 4.f) * (b / a), F(kPi / 2.f) - F(kPi / 4.f) * (a / b)))
-            .store(angle + k);
+        const F disk_angle = select(wide, F(kPi / 4.f) * (b / a), F(kPi / 2.f) - F(kPi / 4.f) * (a / b));
+        if constexpr (Glossy) {
+            const M ggx = M::load(L.has_specular + k) & (F::load(L.u_lobe + k) < F::load(L.lobe_p + k));
+            select(ggx, F(2.f * kPi) * u2, disk_angle).store(angle + k);
+        } else {
+            disk_angle.store(angle + k);
+        }
     }
     for (int k = 0; k < n; ++k) {
         cosine[k] = std::cos(angle[k]);
@@ -202,10 +208,21 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const V wo = to_local(wo_world);
         const M flip = M::load(L.two_sided + k) & (wo.z < zero);
 
-        // The material's lobes, and whether any lane of the vector has the GGX lobe.
-        const V specular = load3<V>(L.specular, k);
-        const F alpha = F::load(L.alpha + k), lobe_p = F::load(L.lobe_p + k);
-        const bool glossy = (!is_black(specular)).bits() != 0;
+        // The GGX lobe, where any lane of the vector has it (its specular and alpha read there
+        // only: elsewhere the lanes' own select them away).
+        M has_spec = zero < zero;  // none
+        V specular(zero);
+        F alpha = zero, lobe_p = zero;
+        bool glossy = false;
+        if constexpr (Glossy) {
+            has_spec = M::load(L.has_specular + k);
+            lobe_p = select(has_spec, F::load(L.lobe_p + k), zero);
+            glossy = has_spec.bits() != 0;
+            if (glossy) {
+                specular = load3<V>(L.specular, k);
+                alpha = F::load(L.alpha + k);
+            }
+        }
 
         // bsdf_sample: wo mirrored for a two-sided material seen from below; the GGX lobe's
         // visible normal reflected, or the cosine-weighted hemisphere; the direction's density
@@ -216,14 +233,14 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             const F dx = F::load(disk_x + k), dy = F::load(disk_y + k);
             V wi(dx, dy, sqrt(max_std(zero, one - dx * dx - dy * dy)));
             if (glossy) {
-                const M ggx = F::load(L.u_lobe + k) < lobe_p;
+                const M ggx = has_spec & (F::load(L.u_lobe + k) < lobe_p);
                 const V h = ggx_visible_normal_lanes(wo_up, alpha, F::load(L.disk[0] + k), F::load(cosine + k),
                                                      F::load(sine + k));
                 wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
             }
             V value;
             F pdf;
-            bsdf_oriented(wo_up, wi, diffuse, specular, alpha, lobe_p, glossy, value, pdf);
+            bsdf_oriented(wo_up, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, pdf);
             const M ok = M::load(L.reflects + k) & !(wo_up.z <= zero) & !(wi.z <= zero) & (pdf > zero);
             const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
             wi.z = select(flip, -wi.z, wi.z);
@@ -243,7 +260,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             const V wi = to_local(ldir);
             V f;
             F bpdf;
-            bsdf_lanes(flip, wo, wi, diffuse, specular, alpha, lobe_p, glossy, f, bpdf);
+            bsdf_lanes(flip, wo, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, f, bpdf);
             on = on & !is_black(f);
             const F w = mis ? mis_power_lanes(lpdf, bpdf) : one;
             return beta * f * radiance * (w / lpdf);
