@@ -79,6 +79,7 @@ struct PathBatch::Impl {
     };
     static constexpr size_t kMaxLightEntries = 64;
     std::vector<LightEntry> light_entries;
+    LightEntry looked_up_;  // the entry looked up last, without them (reused: not built per path)
     ShadeLanes<kBatchSize> lanes;
     int plain[kBatchSize];
     int nplain_ = 0;
@@ -208,9 +209,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     if (settings.use_nee && scene.light_distribution.valid()) {
         float u;
         const int li = scene.pick_light(ul0, u);
-        LightEntry looked_up;
-        if (light_entries.empty()) light_entry(li, looked_up);
-        const LightEntry& e = light_entries.empty() ? looked_up : light_entries[size_t(li)];
+        if (light_entries.empty()) light_entry(li, looked_up_);
+        const LightEntry& e = light_entries.empty() ? looked_up_ : light_entries[size_t(li)];
         if (e.in_vectors) {
             const Vec2f b = square_to_triangle(ul1, ul2);
             l.b1[k] = b.x;
