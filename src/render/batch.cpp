@@ -49,16 +49,21 @@ struct PathBatch::Impl {
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
-    // Per mesh, for its plain vertices: the diffuse reflectance where it is the same at every
-    // point (a constant texture, no vertex colours), and then the mask of its reflecting.
+    // Per mesh, for its plain vertices: whether they have a GGX lobe and then its specular and
+    // alpha; where the diffuse reflectance is the same at every point (a constant texture, no
+    // vertex colours), it and then the mask of its reflecting and the probability of the GGX
+    // lobe.
     struct PlainMesh {
-        // its material's vertices are plain: diffuse (MaterialKind::Standard with a constant
-        // black specular)
+        // its material's vertices are plain: MaterialKind::Standard with a constant specular
+        // and, unless the specular is black (the Lambertian lobe alone), a constant roughness
         bool plain = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
+        bool glossy = false;  // plain, and the specular is not black
         bool constant = false;
+        Vec3f specular;
+        float alpha = 0.f;
         Vec3f diffuse;
-        float reflects = 0.f;
+        float reflects = 0.f, lobe_p = 0.f;
     };
     std::vector<PlainMesh> plain_mesh;
     // What the vectors take of an entry of scene.lights: whether they sample it (a triangle
@@ -74,21 +79,30 @@ struct PathBatch::Impl {
     };
     static constexpr size_t kMaxLightEntries = 64;
     std::vector<LightEntry> light_entries;
+    LightEntry looked_up_;  // the entry looked up last, without them (reused: not built per path)
     ShadeLanes<kBatchSize> lanes;
     int plain[kBatchSize];
     int nplain_ = 0;
+    bool glossy_ = false;  // whether any of the bounce's plain vertices has a GGX lobe
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
             pm.plain = mat.kind == MaterialKind::Standard && mat.specular.is_constant() &&
-                       is_black(Vec3f::load(mat.specular.data));
+                       (is_black(Vec3f::load(mat.specular.data)) || mat.roughness.is_constant());
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
+            if (pm.plain && !is_black(Vec3f::load(mat.specular.data))) {
+                // Scene::bsdf_params'
+                pm.glossy = true;
+                pm.specular = Vec3f::load(mat.specular.data);
+                pm.alpha = std::max(mat.roughness.data[0], kMinRoughness);
+            }
             if (pm.plain && mat.diffuse.is_constant() && !m.colors) {
                 pm.constant = true;
                 pm.diffuse = Vec3f::load(mat.diffuse.data);  // Scene::diffuse_reflectance's
                 pm.reflects = plain_reflects(pm.diffuse, mat);
+                if (pm.glossy) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
             }
             plain_mesh.push_back(pm);
         }
@@ -110,6 +124,13 @@ struct PathBatch::Impl {
     // The mask of a plain vertex's reflecting (a reflectance with luminance above 0).
     static float plain_reflects(const Vec3f& diffuse, const Material& mat) {
         return lane_mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+    }
+    // specular_lobe_probability (scene/bsdf.h) of a plain vertex.
+    static float lobe_probability(const Vec3f& diffuse, const Vec3f& specular) {
+        BsdfParams bp;
+        bp.diffuse = diffuse;
+        bp.specular = specular;
+        return specular_lobe_probability(bp);
     }
     // Scene::surface_point(h), into sp.
     void surface_point(const Hit& h, SurfacePoint& sp) const {
@@ -154,10 +175,17 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.ns, ps.sp.ns);
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
-    // Scene::bsdf_params' diffuse reflectance; the specular is black.
+    // Scene::bsdf_params' reflectances and alpha, and the GGX lobe's probability.
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
     const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
+    l.has_specular[k] = lane_mask(pm.glossy);
+    if (pm.glossy) {
+        glossy_ = true;
+        put3(l.specular, pm.specular);
+        l.alpha[k] = pm.alpha;
+        l.lobe_p[k] = pm.constant ? pm.lobe_p : lobe_probability(diffuse, pm.specular);
+    }
     l.two_sided[k] = lane_mask(mat.two_sided);
     l.reflects[k] = pm.constant ? pm.reflects : plain_reflects(diffuse, mat);
 
@@ -167,7 +195,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         ue1 = rng.next_float();
         ue2 = rng.next_float();
     }
-    rng.next_float();  // the lobe's choice: the diffuse lobe is the only one
+    const float ub0 = rng.next_float();  // the lobe's choice (the diffuse lobe the only one without GGX)
+    if (pm.glossy) l.u_lobe[k] = ub0;
     const float ub1 = rng.next_float();
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();
@@ -180,9 +209,8 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     if (settings.use_nee && scene.light_distribution.valid()) {
         float u;
         const int li = scene.pick_light(ul0, u);
-        LightEntry looked_up;
-        if (light_entries.empty()) light_entry(li, looked_up);
-        const LightEntry& e = light_entries.empty() ? looked_up : light_entries[size_t(li)];
+        if (light_entries.empty()) light_entry(li, looked_up_);
+        const LightEntry& e = light_entries.empty() ? looked_up_ : light_entries[size_t(li)];
         if (e.in_vectors) {
             const Vec2f b = square_to_triangle(ul1, ul2);
             l.b1[k] = b.x;
@@ -271,6 +299,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // what each would add.
         int nshadow = 0, nnext = 0;
         nplain_ = 0;
+        glossy_ = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
         auto add_next = [&](PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
@@ -305,7 +334,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // The plain vertices, a vector of them at a time; then their rays into the packets.
         if (nplain_ > 0) {
             ShadeLanes<kBatchSize>& l = lanes;
-            shade_lanes(l, nplain_, settings.mis);
+            shade_lanes(l, nplain_, settings.mis, glossy_);
             auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
             for (int k = 0; k < nplain_; ++k) {
                 PathState& ps = paths[live[plain[k]]];
@@ -337,7 +366,12 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     const Frame frame(ps.sp.ns);
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
-                    bp.specular = Vec3f(0.f);
+                    if (lane_set(l.has_specular, k)) {
+                        bp.specular = get3(l.specular, k);
+                        bp.alpha = l.alpha[k];
+                    } else {
+                        bp.specular = Vec3f(0.f);
+                    }
                     bp.two_sided = lane_set(l.two_sided, k);
                     bp.kind = MaterialKind::Standard;
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,

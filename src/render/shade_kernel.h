@@ -45,15 +45,98 @@ inline V offset_ray_origin(const V& p, const V& p_error, const V& n, const V& w)
     return {step(offset.x, o.x), step(offset.y, o.y), step(offset.z, o.z)};
 }
 
-// The Lambertian lobe's f cos (bsdf_eval) and density (bsdf_pdf) for wi, with the two-sided
-// material's mirroring (orient); `flip`: two-sided and wo below the surface.
+// The GGX lobe's terms (scene/bsdf.h) for the oriented pair (wo, wi), a the lanes' alpha: the
+// half vector h, D(h) (ggx_D) and G1 (ggx_G1) of wo and of wi, each with the scalar code's
+// early returns as selects (a NaN compares false there as here).
+template <class F, class V>
+struct GgxTerms {
+    V h;
+    F D, G1o, G1i;
+};
+template <class F>
+inline F ggx_D_lanes(F hz, F a) {
+    const F a2 = a * a;
+    const F c2 = hz * hz;
+    const F d = c2 * (a2 - F(1.f)) + F(1.f);
+    return select(hz <= F(0.f), F(0.f), a2 / (F(kPi) * d * d));
+}
+template <class F, class V>
+inline F ggx_G1_lanes(const V& w, const V& h, F a) {
+    const F c2 = w.z * w.z;
+    const F tan2 = (F(1.f) - c2) / c2;
+    const F g = F(2.f) / (F(1.f) + sqrt(F(1.f) + a * a * tan2));
+    return select(dot(w, h) * w.z <= F(0.f), F(0.f), select(c2 >= F(1.f), F(1.f), g));
+}
+template <class F, class V>
+inline GgxTerms<F, V> ggx_terms(const V& wo, const V& wi, F a) {
+    GgxTerms<F, V> t;
+    t.h = normalize(wo + wi);
+    t.D = ggx_D_lanes(t.h.z, a);
+    t.G1o = ggx_G1_lanes(wo, t.h, a);
+    t.G1i = ggx_G1_lanes(wi, t.h, a);
+    return t;
+}
+// ggx_pdf from the terms.
+template <class F, class V>
+inline F ggx_pdf_lanes(const V& wo, const GgxTerms<F, V>& t) {
+    return select(dot(wo, t.h) <= F(0.f), F(0.f), t.G1o * t.D / (F(4.f) * wo.z));
+}
+
+// The material's f cos (bsdf_eval) and density (bsdf_pdf, and bsdf_sample's) for the pair
+// (wo, wi) already oriented (on the front of a two-sided material) and not yet tested to be
+// above the surface. `glossy`: whether any lane of the vector has a GGX lobe (has_spec, a
+// specular that is not black: specular and alpha are read there only); without one, its
+// terms are not computed (each lane would discard them).
 template <class F, class M, class V>
-inline void lambert(M flip, F wo_z, F wi_z, const V& diffuse, V& f, F& pdf) {
-    const F oz = select(flip, -wo_z, wo_z), iz = select(flip, -wi_z, wi_z);
-    const M up = (oz > F(0.f)) & (iz > F(0.f));
-    f = select(up, diffuse * (iz * F(kInvPi)), V(F(0.f)));
-    // (1 - ps) cos / pi with the specular lobe's probability ps = 0.
-    pdf = select(up, F(1.f) * iz * F(kInvPi), F(0.f));
+inline void bsdf_oriented(const V& o, const V& i, const V& diffuse, M has_spec, const V& specular, F alpha, F lobe_p,
+                          bool glossy, V& value, F& density) {
+    value = diffuse * (i.z * F(kInvPi));
+    density = (F(1.f) - lobe_p) * i.z * F(kInvPi);
+    if (glossy) {
+        const GgxTerms<F, V> t = ggx_terms(o, i, alpha);
+        // fresnel_schlick(specular, wi . h): std::clamp(1 - cos, 0, 1) as min(max(., 0), 1).
+        const F m0 = F(1.f) - dot(i, t.h);
+        const F m1 = max_std(m0, F(0.f));
+        const F m = min_std(m1, F(1.f));
+        const F m5 = (m * m) * (m * m) * m;
+        const V fresnel = specular + (V(F(1.f)) - specular) * m5;
+        const F G = t.G1o * t.G1i;
+        const V with = value + fresnel * (t.D * G / (F(4.f) * o.z));
+        value = select(has_spec, with, value);
+        density = select(lobe_p > F(0.f), density + lobe_p * ggx_pdf_lanes(o, t), density);
+    }
+}
+
+// bsdf_eval and bsdf_pdf for wi, with the two-sided material's mirroring (orient); `flip`:
+// two-sided and wo below the surface.
+template <class F, class M, class V>
+inline void bsdf_lanes(M flip, const V& wo, const V& wi, const V& diffuse, M has_spec, const V& specular, F alpha,
+                       F lobe_p, bool glossy, V& f, F& pdf) {
+    const V o(wo.x, wo.y, select(flip, -wo.z, wo.z)), i(wi.x, wi.y, select(flip, -wi.z, wi.z));
+    const M up = (o.z > F(0.f)) & (i.z > F(0.f));
+    V value;
+    F density;
+    bsdf_oriented(o, i, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, density);
+    f = select(up, value, V(F(0.f)));
+    pdf = select(up, density, F(0.f));
+}
+
+// ggx_sample_visible_normal(wo, a, u1, u2) with the cosine and sine of 2 pi u2 given.
+template <class F, class V>
+inline V ggx_visible_normal_lanes(const V& wo, F a, F u1, F cos_phi, F sin_phi) {
+    const V vh = normalize(V(a * wo.x, a * wo.y, wo.z));
+    const F lensq = vh.x * vh.x + vh.y * vh.y;
+    const F inv = F(1.f) / sqrt(lensq);
+    const auto has = lensq > F(0.f);
+    const V t1(select(has, -vh.y * inv, F(1.f)), select(has, vh.x * inv, F(0.f)), select(has, F(0.f) * inv, F(0.f)));
+    const V t2(vh.y * t1.z - vh.z * t1.y, vh.z * t1.x - vh.x * t1.z, vh.x * t1.y - vh.y * t1.x);
+    const F r = sqrt(u1);
+    const F p1 = r * cos_phi;
+    F p2 = r * sin_phi;
+    const F s = F(0.5f) * (F(1.f) + vh.z);
+    p2 = (F(1.f) - s) * sqrt(max_std(F(0.f), F(1.f) - p1 * p1)) + s * p2;
+    const V nh = t1 * p1 + t2 * p2 + vh * sqrt(max_std(F(0.f), F(1.f) - p1 * p1 - p2 * p2));
+    return normalize(V(a * nh.x, a * nh.y, max_std(F(1e-7f), nh.z)));
 }
 
 template <class F>
@@ -67,20 +150,30 @@ inline F mis_power_lanes(F a, F b) {
 
 // Lanes [0, n) of L (n rounded up to whole vectors; the lanes past n are computed and ignored),
 // F::width at a time: F a vector of floats, M its mask, V three of them (math/simd4.h's F, M,
-// V or math/simd8.h's F8, M8, V8).
-template <class F, class M, class V, int N>
+// V or math/simd8.h's F8, M8, V8). Glossy: whether any lane may have a GGX lobe (if not, the
+// Lambertian lobe alone, L.has_specular not read).
+template <class F, class M, class V, bool Glossy, int N>
 inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     using namespace lanes;
     constexpr int W = F::width;
     static_assert(N % W == 0, "whole vectors");
     const F zero(0.f), one(1.f);
-    // square_to_disk (sampling/warp.h): the radius and angle, their cosine and sine, the point.
-    alignas(64) float radius[N], angle[N], cosine[N], sine[N];
+    // The BSDF sample's angle: square_to_disk's (sampling/warp.h) for the cosine-weighted lobe
+    // or 2 pi u2 for the GGX visible normal, whichever lobe the path's number chose (u_lobe <
+    // lobe_p: the GGX lobe); its cosine and sine; the disk's radius and point.
+    alignas(64) float radius[N], angle[N], cosine[N], sine[N], disk_x[N], disk_y[N];
     for (int k = 0; k < n; k += W) {
-        const F a = F(2.f) * F::load(L.disk[0] + k) - one, b = F(2.f) * F::load(L.disk[1] + k) - one;
+        const F u2 = F::load(L.disk[1] + k);
+        const F a = F(2.f) * F::load(L.disk[0] + k) - one, b = F(2.f) * u2 - one;
         const M wide = abs(a) > abs(b);
         select(wide, a, b).store(radius + k);
-        select(wide, F(kPi / 4.f) * (b / a), F(kPi / 2.f) - F(kPi / 4.f) * (a / b)).store(angle + k);
+        const F disk_angle = select(wide, F(kPi / 4.f) * (b / a), F(kPi / 2.f) - F(kPi / 4.f) * (a / b));
+        if constexpr (Glossy) {
+            const M ggx = M::load(L.has_specular + k) & (F::load(L.u_lobe + k) < F::load(L.lobe_p + k));
+            select(ggx, F(2.f * kPi) * u2, disk_angle).store(angle + k);
+        } else {
+            disk_angle.store(angle + k);
+        }
     }
     for (int k = 0; k < n; ++k) {
         cosine[k] = std::cos(angle[k]);
@@ -90,8 +183,8 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const F a = F(2.f) * F::load(L.disk[0] + k) - one, b = F(2.f) * F::load(L.disk[1] + k) - one;
         const M centre = (a == zero) & (b == zero);
         const F r = F::load(radius + k);
-        select(centre, zero, r * F::load(cosine + k)).store(L.disk[0] + k);
-        select(centre, zero, r * F::load(sine + k)).store(L.disk[1] + k);
+        select(centre, zero, r * F::load(cosine + k)).store(disk_x + k);
+        select(centre, zero, r * F::load(sine + k)).store(disk_y + k);
     }
     for (int k = 0; k < n; k += W) {
         const V p = load3<V>(L.p, k), p_error = load3<V>(L.p_error, k), ng = load3<V>(L.ng, k);
@@ -115,18 +208,42 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const V wo = to_local(wo_world);
         const M flip = M::load(L.two_sided + k) & (wo.z < zero);
 
-        // bsdf_sample: the cosine-weighted hemisphere, mirrored for a two-sided material seen
-        // from below.
+        // The GGX lobe, where any lane of the vector has it (its specular and alpha read there
+        // only: elsewhere the lanes' own select them away).
+        M has_spec = zero < zero;  // none
+        V specular(zero);
+        F alpha = zero, lobe_p = zero;
+        bool glossy = false;
+        if constexpr (Glossy) {
+            has_spec = M::load(L.has_specular + k);
+            lobe_p = select(has_spec, F::load(L.lobe_p + k), zero);
+            glossy = has_spec.bits() != 0;
+            if (glossy) {
+                specular = load3<V>(L.specular, k);
+                alpha = F::load(L.alpha + k);
+            }
+        }
+
+        // bsdf_sample: wo mirrored for a two-sided material seen from below; the GGX lobe's
+        // visible normal reflected, or the cosine-weighted hemisphere; the direction's density
+        // (both lobes' mixture) and bsdf_eval's value, whose terms are the same (bsdf_eval
+        // mirrors the pair back to where the sample made it); the direction mirrored back.
         {
-            const F wo_z = select(flip, -wo.z, wo.z);
-            const F dx = F::load(L.disk[0] + k), dy = F::load(L.disk[1] + k);
-            const F z = sqrt(max_std(zero, one - dx * dx - dy * dy));
-            const F pdf = one * z * F(kInvPi);
-            const M ok = M::load(L.reflects + k) & !(wo_z <= zero) & !(z <= zero) & (pdf > zero);
-            const V wi(dx, dy, select(flip, -z, z));
-            V f;
-            F unused;
-            lambert(flip, wo.z, wi.z, diffuse, f, unused);
+            const V wo_up(wo.x, wo.y, select(flip, -wo.z, wo.z));
+            const F dx = F::load(disk_x + k), dy = F::load(disk_y + k);
+            V wi(dx, dy, sqrt(max_std(zero, one - dx * dx - dy * dy)));
+            if (glossy) {
+                const M ggx = has_spec & (F::load(L.u_lobe + k) < lobe_p);
+                const V h = ggx_visible_normal_lanes(wo_up, alpha, F::load(L.disk[0] + k), F::load(cosine + k),
+                                                     F::load(sine + k));
+                wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
+            }
+            V value;
+            F pdf;
+            bsdf_oriented(wo_up, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, pdf);
+            const M ok = M::load(L.reflects + k) & !(wo_up.z <= zero) & !(wi.z <= zero) & (pdf > zero);
+            const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
+            wi.z = select(flip, -wi.z, wi.z);
             const V nb = select(ok, beta * (f / pdf), V(zero));
             const M goes_on = ok & !is_black(nb);
             goes_on.store(L.goes_on + k);
@@ -143,7 +260,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             const V wi = to_local(ldir);
             V f;
             F bpdf;
-            lambert(flip, wo.z, wi.z, diffuse, f, bpdf);
+            bsdf_lanes(flip, wo, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, f, bpdf);
             on = on & !is_black(f);
             const F w = mis ? mis_power_lanes(lpdf, bpdf) : one;
             return beta * f * radiance * (w / lpdf);

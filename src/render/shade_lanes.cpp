@@ -11,7 +11,7 @@ namespace edgepath {
 
 // render/shade_lanes_avx2.cpp: whether it was compiled with its AVX2 code, and that code.
 bool shade_lanes_avx2_compiled();
-void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis);
+void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
 
 namespace {
 
@@ -48,16 +48,20 @@ void force_shade_width(ShadeWidth w) {
     forced.store(int(w), std::memory_order_relaxed);
 }
 
-void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w) {
+void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, ShadeWidth w) {
     if (w == ShadeWidth::Auto) w = shade_width();
     if (w == ShadeWidth::Avx2) {
         if (!shade_width_available(w)) throw std::invalid_argument("shade_lanes: AVX2 is not available");
-        shade_lanes_avx2(L, n, mis);
+        shade_lanes_avx2(L, n, mis, glossy);
+    } else if (glossy) {
+        shade_lanes_kernel<F4, M4, V4, true>(L, n, mis);
     } else {
-        shade_lanes_kernel<F4, M4, V4>(L, n, mis);
+        shade_lanes_kernel<F4, M4, V4, false>(L, n, mis);
     }
 }
 
-void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis) { shade_lanes(L, n, mis, shade_width()); }
+void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy) {
+    shade_lanes(L, n, mis, glossy, shade_width());
+}
 
 }  // namespace edgepath

@@ -1,16 +1,21 @@
-// shade_vertex (render/path.h) for the plain case, a vector of paths at a time: a diffuse
-// material (MaterialKind::Standard with a black specular: the Lambertian lobe alone). PathBatch
+// shade_vertex (render/path.h) for the plain case, a vector of paths at a time: the standard
+// material (MaterialKind::Standard) with a constant specular and, unless that is black (the
+// Lambertian lobe alone), a constant roughness (the Lambertian and GGX lobes). PathBatch
 // (render/batch.cpp) gathers such vertices into the arrays of ShadeLanes (one entry a path:
 // structure of arrays), with the random numbers and what needs a table or a branch per path
-// computed beforehand path by path: the light picked and, for a triangle sampled by area with
-// a constant emission and no spot, its vertices (any other light's sample is taken there by
-// Scene::sample_area_light and handed over whole), the numbers of the cosine-weighted sample,
-// the environment's sample. Then shade_lanes does the arithmetic over all of them in vectors:
-// the disk point (its cosine and sine per path), the bent shading normal, the frame, the BSDF
-// sample, its ray, the light sample's point, both light samples' values, MIS weights and
-// shadow rays. (The point lights are left to the gathering code, path by path.) Every lane
-// performs scalar shade_vertex's floating-point operations in its order (render/shade_kernel.h),
-// so the samples are the same bit for bit (Render.BatchedPlainPathsMatchTracePath).
+// computed beforehand path by path: the reflectances, alpha and the GGX lobe's probability,
+// the light picked and, for a triangle sampled by area with a constant emission and no spot,
+// its vertices (any other light's sample is taken there by Scene::sample_area_light and
+// handed over whole), the BSDF sample's numbers, the environment's sample. Then shade_lanes
+// does the arithmetic over all of them in vectors: the lobe's choice, the disk point or the
+// GGX visible normal (the cosine and sine of either's angle per path, the rest in vectors),
+// the bent shading normal, the frame, the BSDF sample, its ray, the light sample's point, both
+// light samples' values (bsdf_eval), MIS weights (bsdf_pdf) and shadow rays; the GGX terms only
+// in a vector where some path has the lobe. (The point lights are left to the gathering code,
+// path by path.) Every lane performs scalar shade_vertex's floating-point operations in its
+// order (render/shade_kernel.h; the scalar code's early returns, std::max and std::clamp as
+// selects with the same NaN semantics), so the samples are the same bit for bit
+// (Render.BatchedPlainPathsMatchTracePath, Render.BatchedGlossyPathsMatchTracePath).
 //
 // The vectors are eight floats (AVX2, render/shade_lanes_avx2.cpp) on a processor that has
 // AVX2 and four (SSE2, math/simd4.h) otherwise, chosen at run time: the same samples bit for
@@ -30,8 +35,14 @@ struct ShadeLanes {
     // set: true) of a two-sided material and of a reflectance with luminance above 0.
     alignas(64) float p[3][N], p_error[3][N], ng[3][N], ns[3][N], dir[3][N], beta[3][N], diffuse[3][N];
     alignas(64) float two_sided[N], reflects[N];
-    // The BSDF sample's two numbers, made by shade_lanes into the cosine-weighted sample's point
-    // on the unit disk (square_to_disk; its cosine and sine per path, the rest in vectors).
+    // The mask of a GGX lobe (a specular that is not black); where it is set, the probability
+    // of sampling the lobe (specular_lobe_probability), its specular and alpha
+    // (Scene::bsdf_params') and the number that chooses it (the GGX lobe where below lobe_p).
+    // Elsewhere these are not written (what is there is never used: the probability is 0).
+    alignas(64) float has_specular[N], lobe_p[N], specular[3][N], alpha[N], u_lobe[N];
+    // The BSDF sample's two numbers for its direction: the cosine-weighted sample's point on
+    // the unit disk (square_to_disk) or the GGX visible normal's (their angle's cosine and sine
+    // per path, the rest in vectors).
     alignas(64) float disk[2][N];
     // The area light's sample (mask light_on): the barycentrics on the triangle picked, its
     // vertices, unit normal and largest edge component, the probability of its pick and its
@@ -81,9 +92,11 @@ constexpr int kShadeBatch = 64;
 enum class ShadeWidth { Auto, Sse2, Avx2 };
 
 // Lanes [0, n) of L shaded (render/shade_kernel.h), in vectors of the width in force.
-void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis);
+// `glossy`: whether any of them has a GGX lobe (if not, has_specular is not read: the
+// Lambertian lobe alone).
+void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
 // The same in vectors of width w (Auto: the width in force); w must be available.
-void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w);
+void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, ShadeWidth w);
 // Whether this build and processor can run width w (Sse2 and Auto always).
 bool shade_width_available(ShadeWidth w);
 // The width shade_lanes uses: the widest available unless another was forced.

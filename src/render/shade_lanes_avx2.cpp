@@ -30,8 +30,11 @@
 
 namespace edgepath {
 
-void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
-    shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8>(L, n, mis);
+void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy) {
+    if (glossy)
+        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, true>(L, n, mis);
+    else
+        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, false>(L, n, mis);
 }
 
 }  // namespace edgepath
@@ -49,7 +52,7 @@ namespace edgepath {
 bool shade_lanes_avx2_compiled() { return true; }
 #else
 bool shade_lanes_avx2_compiled() { return false; }
-void shade_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool) {}  // never called: not compiled
+void shade_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool, bool) {}  // never called: not compiled
 #endif
 
 }  // namespace edgepath

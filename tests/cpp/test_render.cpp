@@ -701,7 +701,8 @@ TEST(Render, BatchedPathsMatchTracePath) {
 
 // The batches shade the vertices of a diffuse material four paths at a time in vectors
 // (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
-// trace_path's bit for bit, with both kinds in one batch (a glossy box among diffuse surfaces),
+// trace_path's bit for bit, with both kinds in one batch (a glossy box with a textured
+// roughness among diffuse surfaces),
 // a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
 // seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
 // (sampled by area in the vectors), with and without an environment, then with the lights whose
@@ -727,13 +728,19 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     TextureDesc floor_tex;
     floor_tex.data = checker.data();
     floor_tex.height = floor_tex.width = floor_tex.channels = 3;
+    const float bumpy[4] = {0.1f, 0.5f, 0.3f, 0.05f};
+    TextureDesc bumpy_tex;
+    bumpy_tex.data = bumpy;
+    bumpy_tex.height = bumpy_tex.width = 2;
+    bumpy_tex.channels = 1;
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     d.materials.push_back(material(kd, black, r));     // 0: diffuse
     d.materials.push_back(material(red, black, r));    // 1: diffuse, two-sided
     d.materials[1].two_sided = true;
     d.materials.push_back(material(black, black, r));  // 2: black (the lamps', the soot's)
-    d.materials.push_back(material(kd, ks, r));        // 3: glossy: shaded one by one
+    d.materials.push_back(material(kd, ks, r));        // 3: glossy, textured roughness: shaded one by one
+    d.materials[3].roughness = bumpy_tex;
     d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
     d.materials[4].diffuse = floor_tex;
     d.meshes.push_back(floor.desc(4));
@@ -811,6 +818,104 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
 }
 
+// The batches shade glossy vertices (the standard material with a constant specular and
+// roughness: the diffuse and GGX lobes) in the vectors too: each path's radiance is still
+// trace_path's bit for bit, on 1 and 2 threads. Glossy surfaces of roughness 0 (alpha clamped
+// to kMinRoughness), 0.05, 0.2 and 1, a grey, a weak (0.04) and a coloured specular, a black
+// diffuse under a specular (the GGX lobe alone), a textured diffuse (the lobe's probability
+// per point) and vertex colours, one two-sided surface seen from both sides, among a diffuse
+// wall and a textured roughness (shaded one by one); a lamp sampled by area in the vectors,
+// then a sky, then lights whose samples are given whole (a sphere light by solid angle, a
+// quad by spherical triangles) and point lights; each sampling strategy, 0 to 12 bounces.
+TEST(Render, BatchedGlossyPathsMatchTracePath) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
+    MeshData matte_ball = make_sphere(Vec3f(-0.9f, -0.5f, 0.9f), 0.45f, 10, 20);
+    MeshData wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
+    MeshData panel = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
+    MeshData sheen = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
+    MeshData box = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
+    ConstTex weak({0.04f, 0.04f, 0.04f}), gold({0.9f, 0.6f, 0.2f}), grey({0.5f, 0.5f, 0.5f}), bright({0.8f, 0.8f, 0.8f});
+    ConstTex r0({0.f}), r005({0.05f}), r02({0.2f}), r1({1.f}), r03({0.3f}), le2({1.f, 2.f, 3.f});
+    std::vector<float> sky(4 * 8 * 3), tint(size_t(ball.num_vertices()) * 3), checker(3 * 3 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
+    for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
+    TextureDesc floor_tex;
+    floor_tex.data = checker.data();
+    floor_tex.height = floor_tex.width = floor_tex.channels = 3;
+    const float bumpy[4] = {0.1f, 0.5f, 0.3f, 0.05f};
+    TextureDesc bumpy_tex;
+    bumpy_tex.data = bumpy;
+    bumpy_tex.height = bumpy_tex.width = 2;
+    bumpy_tex.channels = 1;
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
+    d.materials.push_back(material(kd, weak, r005));   // 0: textured diffuse, weak specular
+    d.materials[0].diffuse = floor_tex;
+    d.materials.push_back(material(kd, gold, r0));     // 1: coloured specular, alpha clamped
+    d.materials.push_back(material(kd, grey, r1));     // 2: the roughest
+    d.materials.push_back(material(red, black, r03));  // 3: diffuse
+    d.materials.push_back(material(kd, grey, r02));    // 4: two-sided
+    d.materials[4].two_sided = true;
+    d.materials.push_back(material(black, bright, r02));  // 5: the GGX lobe alone
+    d.materials.push_back(material(kd, grey, r03));       // 6: textured roughness: one by one
+    d.materials[6].roughness = bumpy_tex;
+    d.materials.push_back(material(black, black, r03));   // 7: the lamps'
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(1));
+    d.meshes[1].colors = tint.data();
+    d.meshes.push_back(matte_ball.desc(2));
+    d.meshes.push_back(wall.desc(3));
+    d.meshes.push_back(panel.desc(4));
+    d.meshes.push_back(sheen.desc(5));
+    d.meshes.push_back(box.desc(6));
+    d.meshes.push_back(lamp.desc(7));
+    d.meshes.back().emission = le.desc();
+    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
+    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
+    PointLightDesc bulb;
+    bulb.position[0] = -1.2f;
+    bulb.position[1] = 1.f;
+    bulb.position[2] = 1.5f;
+    RenderOptions opt;
+    opt.spp = 3;
+    opt.seed = 13;
+    int compared = 0;
+    for (int variant = 0; variant < 3; ++variant) {
+        const bool env = variant > 0;
+        d.has_envmap = env;
+        if (env) d.envmap.values = {sky.data(), 4, 8, 3};
+        if (variant == 2) {
+            d.meshes.push_back(bulb_mesh.desc(7));
+            d.meshes.back().emission = le2.desc();
+            d.meshes.back().sample_solid_angle = true;
+            d.meshes.push_back(tri_lamp.desc(7));
+            d.meshes.back().emission = le.desc();
+            d.meshes.back().sample_spherical_triangle = true;
+            d.point_lights = {bulb};
+        }
+        auto scene = build_scene(d);
+        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
+            for (int bounces : {0, 1, 3, 12}) {
+                if (sampling != LightSampling::MIS && bounces == 12) continue;
+                opt.sampling = sampling;
+                opt.max_bounces = bounces;
+                RayCounters counters;
+                const std::vector<float> reference = trace_path_image(*scene, opt, counters);
+                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
+                                         std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
+                double total = 0;
+                for (float v : reference) total += v;
+                EXPECT_GT(total, 0.0) << what;
+                compared += expect_render_matches(*scene, opt, reference, counters, what);
+            }
+    }
+    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+}
+
 // shade_lanes' widths in force for the life of a test, then the processor's widest again.
 struct ForcedShadeWidth {
     explicit ForcedShadeWidth(ShadeWidth w) { force_shade_width(w); }
@@ -818,9 +923,12 @@ struct ForcedShadeWidth {
 };
 
 // ShadeLanes' inputs for n paths, drawn from `rng`: unit normals and directions, small error
-// bounds, the disk's numbers with its centre (0.5, 0.5) and its diagonals among them, masks on
-// and off, light samples by area (some at the shading point itself, some seen edge on or from
-// behind) and given ones, sky samples, with a black reflectance or throughput here and there.
+// bounds, a GGX lobe on half of them (a grey or coloured specular, alpha from the smallest,
+// kMinRoughness, to 1) with specular_lobe_probability's probability and lobe choices on both
+// sides of it, the disk's numbers with its centre (0.5, 0.5) and its diagonals among them,
+// masks on and off, light samples by area (some at the shading point itself, some seen edge on
+// or from behind) and given ones, sky samples, with a black reflectance or throughput here and
+// there.
 void random_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng) {
     auto u = [&] { return rng.next_float(); };
     auto unit = [&] {
@@ -838,9 +946,25 @@ void random_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng) {
         put(L.ns, k, u() < 0.3f ? ng : normalize(ng + 0.8f * unit()));
         put(L.dir, k, unit());
         put(L.beta, k, u() < 0.05f ? Vec3f(0.f) : Vec3f(u(), u(), u()));
-        put(L.diffuse, k, u() < 0.05f ? Vec3f(0.f) : Vec3f(u(), u(), u()));
+        BsdfParams bp;
+        bp.diffuse = u() < 0.05f ? Vec3f(0.f) : Vec3f(u(), u(), u());
+        const float g = u();
+        bp.specular = g < 0.5f ? Vec3f(0.f) : g < 0.65f ? Vec3f(0.04f) : Vec3f(u(), u(), u());
+        const float a = u();
+        bp.alpha = a < 0.15f ? kMinRoughness : a < 0.3f ? 1.f : a < 0.45f ? 0.05f : std::max(u(), kMinRoughness);
+        put(L.diffuse, k, bp.diffuse);
+        put(L.specular, k, bp.specular);
+        L.alpha[k] = bp.alpha;
+        L.has_specular[k] = lane_mask(!is_black(bp.specular));
+        L.lobe_p[k] = specular_lobe_probability(bp);
+        L.u_lobe[k] = u();
+        if (is_black(bp.specular)) {  // what the lanes without the lobe hold is not to be used
+            put(L.specular, k, Vec3f(0.5f, 0.3f, 0.2f));
+            L.lobe_p[k] = 0.7f;
+        }
         L.two_sided[k] = lane_mask(u() < 0.5f);
-        L.reflects[k] = lane_mask(u() < 0.95f);
+        // Scene::bsdf_params' reflecting (not always: the mask is obeyed)
+        L.reflects[k] = lane_mask(u() < 0.95f && !(luminance(bp.diffuse) + luminance(bp.specular) <= 0.f));
         const float d = u();
         L.disk[0][k] = d < 0.05f ? 0.5f : u();
         L.disk[1][k] = d < 0.05f ? 0.5f : d < 0.1f ? L.disk[0][k] : u();
@@ -873,30 +997,37 @@ void random_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng) {
     }
 }
 
-// The forward pass's diffuse vertices are shaded in AVX2's vectors of eight where the processor
-// has AVX2, in SSE2's of four otherwise (render/shade_lanes.h): each lane's operations are the
-// same, so both give the same bits. Checked on shade_lanes' arrays (every output of 64 random
-// paths and of a partial batch of 13, each strategy of weights) and on whole images, each width
-// forced in turn: both bit for bit trace_path's.
+// The forward pass's plain vertices (diffuse, or diffuse and GGX) are shaded in AVX2's vectors
+// of eight where the processor has AVX2, in SSE2's of four otherwise (render/shade_lanes.h):
+// each lane's operations are the same, so both give the same bits. Checked on shade_lanes'
+// arrays (every output of 64 random paths and of a partial batch of 13, each strategy of
+// weights), each lane against the scalar BSDF code (its continuation and its sky sample's
+// value, bit for bit), and on whole images, each width forced in turn: both bit for bit
+// trace_path's.
 TEST(Render, ShadeLanesWidthsAgree) {
     EXPECT_TRUE(shade_width_available(ShadeWidth::Sse2));
-    if (!shade_width_available(ShadeWidth::Avx2)) {
+    const bool avx2 = shade_width_available(ShadeWidth::Avx2);
+    if (!avx2) {
         EXPECT_EQ(shade_width(), ShadeWidth::Sse2);
         EXPECT_THROW(force_shade_width(ShadeWidth::Avx2), std::invalid_argument);
-        GTEST_SKIP() << "this processor (or build) has no AVX2: only the SSE2 width runs";
+    } else {
+        EXPECT_EQ(shade_width(), ShadeWidth::Avx2);
     }
-    EXPECT_EQ(shade_width(), ShadeWidth::Avx2);
     Rng rng(5, 7);
-    int goes_on = 0, light_on = 0, env_on = 0, compared = 0;
+    int goes_on = 0, light_on = 0, env_on = 0, compared = 0, ggx_on = 0, glossy_env = 0;
     for (int round = 0; round < 40; ++round)
         for (int n : {kShadeBatch, 13})
             for (bool mis : {true, false}) {
                 auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
                 random_lanes(*in, n, rng);
+                // One round in four with the Lambertian lobe alone (the kernel made for it).
+                const bool glossy = round % 4 != 3;
+                if (!glossy)
+                    for (int k = 0; k < n; ++k) in->has_specular[k] = lane_mask(false);
                 auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
                 auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
-                shade_lanes(*narrow, n, mis, ShadeWidth::Sse2);
-                shade_lanes(*wide, n, mis, ShadeWidth::Avx2);
+                shade_lanes(*narrow, n, mis, glossy, ShadeWidth::Sse2);
+                shade_lanes(*wide, n, mis, glossy, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
                 // What the batch reads back: the bent normal, the continuation, the masks of the
                 // shadow rays and, where a mask is set, its ray and value. (A vector in which no
                 // path has a light sample leaves those arrays as they were: the two widths group
@@ -930,6 +1061,49 @@ TEST(Render, ShadeLanesWidthsAgree) {
                     }
                 }
                 EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths, mis " << mis;
+                // And each lane's the scalar code's (shade_vertex's bend_normal, Frame,
+                // bsdf_sample, bsdf_eval, bsdf_pdf and mis_power), bit for bit.
+                int unlike = 0;
+                auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
+                auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
+                    for (int c = 0; c < 3; ++c) bits(x[c], k, y[c]);
+                };
+                auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
+                for (int k = 0; k < n; ++k) {
+                    const ShadeLanes<kShadeBatch>& i = *in;
+                    const Vec3f dir = get(i.dir, k), beta = get(i.beta, k);
+                    const Vec3f ns = bend_normal(get(i.ns, k), get(i.ng, k), -dir);
+                    const Frame frame(ns);
+                    const Vec3f wo = frame.to_local(-dir);
+                    BsdfParams bp;
+                    bp.diffuse = get(i.diffuse, k);
+                    bp.specular = lane_set(i.has_specular, k) ? get(i.specular, k) : Vec3f(0.f);
+                    bp.alpha = i.alpha[k];
+                    bp.two_sided = lane_set(i.two_sided, k);
+                    BsdfSample bs;
+                    Vec3f nb(0.f);
+                    const bool sampled =
+                        lane_set(i.reflects, k) && bsdf_sample(bp, wo, i.u_lobe[k], i.disk[0][k], i.disk[1][k], bs);
+                    if (sampled) nb = beta * (bsdf_eval(bp, wo, bs.wi) / bs.pdf);
+                    bits3(a.ns, k, ns);
+                    const bool on = sampled && !is_black(nb);
+                    unlike += lane_set(a.goes_on, k) != on;
+                    if (on) {
+                        bits3(a.next_dir, k, frame.to_world(bs.wi));
+                        bits3(a.next_beta, k, nb);
+                        bits(a.next_pdf, k, bs.pdf);
+                        ggx_on += lane_set(i.has_specular, k) && i.u_lobe[k] < i.lobe_p[k];
+                    }
+                    if (lane_set(i.env_on, k) && i.env_pdf[k] > 0.f) {
+                        const Vec3f wi = frame.to_local(get(i.env_dir, k));
+                        const Vec3f f = bsdf_eval(bp, wo, wi);
+                        unlike += lane_set(a.env_on, k) != !is_black(f);
+                        const float w = mis ? mis_power(i.env_pdf[k], bsdf_pdf(bp, wo, wi)) : 1.f;
+                        if (!is_black(f)) bits3(a.env_value, k, beta * f * get(i.env_radiance, k) * (w / i.env_pdf[k]));
+                        glossy_env += !is_black(f) && !is_black(bp.specular);
+                    }
+                }
+                EXPECT_EQ(unlike, 0) << "round " << round << ", " << n << " paths, mis " << mis << ": scalar";
                 for (int k = 0; k < n; ++k) {
                     goes_on += lane_set(narrow->goes_on, k);
                     light_on += lane_set(narrow->light_on, k);
@@ -946,13 +1120,21 @@ TEST(Render, ShadeLanesWidthsAgree) {
     EXPECT_LT(light_on, paths);
     EXPECT_GT(env_on, paths / 8);
     EXPECT_LT(env_on, paths);
+    // The GGX lobe's samples and values among them (three rounds in four have the lobe).
+    EXPECT_GT(ggx_on, paths / 20);
+    EXPECT_GT(glossy_env, paths / 12);
 
-    // Whole images: diffuse surfaces (one- and two-sided, vertex colours), a lamp, a sky.
+    if (!avx2) GTEST_SKIP() << "this processor (or build) has no AVX2: only the SSE2 width runs";
+
+    // Whole images: diffuse surfaces (one- and two-sided, vertex colours), glossy ones (one of
+    // them two-sided), a lamp, a sky.
     MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
     MeshData ball = make_sphere(Vec3f(0.4f, -0.4f, 0.3f), 0.6f, 12, 24);
     MeshData screen = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
     MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    MeshData shiny = make_sphere(Vec3f(-1.0f, -0.5f, 0.8f), 0.45f, 10, 20);
     ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), r({0.3f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
+    ConstTex gold({0.9f, 0.6f, 0.2f});
     std::vector<float> tint(size_t(ball.num_vertices()) * 3);
     for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
     std::vector<float> sky(4 * 8 * 3);
@@ -963,12 +1145,15 @@ TEST(Render, ShadeLanesWidthsAgree) {
     d.materials.push_back(material(red, black, r));
     d.materials[1].two_sided = true;
     d.materials.push_back(material(black, black, r));
+    d.materials.push_back(material(kd, gold, r));  // 3: glossy, two-sided
+    d.materials[3].two_sided = true;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(0));
     d.meshes[1].colors = tint.data();
     d.meshes.push_back(screen.desc(1));
     d.meshes.push_back(lamp.desc(2));
     d.meshes[3].emission = le.desc();
+    d.meshes.push_back(shiny.desc(3));
     d.has_envmap = true;
     d.envmap.values = {sky.data(), 4, 8, 3};
     auto scene = build_scene(d);
