@@ -301,6 +301,86 @@ TEST(Gradients, ReverseModeEqualsForwardMode) {
     }
 }
 
+// Every gradient buffer, and a derivative image, the same bit for bit on one thread and on two
+// (the additions of each tile, and of each chunk of the camera's edge samples, are made in their
+// order: OrderedAdds).
+TEST(Gradients, SameBitForBitWhateverTheThreadCount) {
+    FloorScene base(true, true);
+    base.desc.camera.width = 64;  // 4 x 3 tiles
+    base.desc.camera.height = 40;
+    auto scene = build_scene(base.desc);
+    const size_t n = 64 * 40 * 3;
+    std::vector<float> adj(n);
+    for (size_t i = 0; i < n; ++i) adj[i] = float(std::sin(0.37 * double(i)) + 0.2);
+    struct Buffers {
+        std::vector<float> verts, normals, diffuse, specular, rough, emission, env, camera;
+    };
+    auto run = [&](int threads, Buffers& b) {
+        b.verts.assign(base.floor.vertices.size(), 0.f);
+        b.normals.assign(base.floor.normals.size(), 0.f);
+        b.diffuse.assign(base.tex.size(), 0.f);
+        b.specular.assign(3, 0.f);
+        b.rough.assign(1, 0.f);
+        b.emission.assign(3, 0.f);
+        b.env.assign(base.env.size(), 0.f);
+        b.camera.assign(kCameraParams, 0.f);
+        SceneGradients g;
+        g.meshes.resize(2);
+        g.meshes[0].vertices.grad = b.verts.data();
+        g.meshes[0].normals.grad = b.normals.data();
+        g.meshes[1].emission.grad = b.emission.data();
+        g.materials.resize(2);
+        g.materials[0].diffuse.grad = b.diffuse.data();
+        g.materials[0].specular.grad = b.specular.data();
+        g.materials[0].roughness.grad = b.rough.data();
+        g.envmap.grad = b.env.data();
+        g.camera.grad = b.camera.data();
+        number_slots(g);
+        RenderOptions opt;
+        opt.spp = 4;
+        opt.max_bounces = 2;
+        opt.seed = 9;
+        opt.num_threads = threads;
+        render_gradients(*scene, opt, adj.data(), g);
+    };
+    Buffers one, two, again;
+    run(1, one);
+    run(2, two);
+    run(2, again);
+    double total = 0.0;
+    for (float v : one.verts) total += std::abs(v);
+    EXPECT_GT(total, 0.0);
+    for (const Buffers* b : {&two, &again}) {
+        EXPECT_EQ(one.verts, b->verts);
+        EXPECT_EQ(one.normals, b->normals);
+        EXPECT_EQ(one.diffuse, b->diffuse);
+        EXPECT_EQ(one.specular, b->specular);
+        EXPECT_EQ(one.rough, b->rough);
+        EXPECT_EQ(one.emission, b->emission);
+        EXPECT_EQ(one.env, b->env);
+        EXPECT_EQ(one.camera, b->camera);
+    }
+    // Forward mode: a derivative image along the floor's vertices.
+    std::vector<float> dir(base.floor.vertices.size());
+    for (size_t i = 0; i < dir.size(); ++i) dir[i] = float(std::cos(0.11 * double(i)));
+    auto image = [&](int threads) {
+        SceneGradients g;
+        g.meshes.resize(2);
+        g.meshes[0].vertices.dir = dir.data();
+        RenderOptions opt;
+        opt.spp = 4;
+        opt.max_bounces = 1;
+        opt.seed = 3;
+        opt.num_threads = threads;
+        std::vector<float> out(n, 0.f);
+        derivative_image(*scene, opt, g, out.data());
+        return out;
+    };
+    const std::vector<float> d1 = image(1);
+    EXPECT_EQ(d1, image(2));
+    EXPECT_EQ(d1, image(2));
+}
+
 // The secondary term's roulette floor must lie in (0, 1]: anything else is refused by name.
 TEST(Gradients, SecondarySurvivalOutsideZeroOneIsRefused) {
     FloorScene base(true, true);
