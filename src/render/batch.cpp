@@ -49,20 +49,22 @@ struct PathBatch::Impl {
     std::vector<RayPacket> shadow;
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
-    // Per mesh, for its plain vertices: whether they have a GGX lobe and then its specular and
-    // alpha; where the diffuse reflectance is the same at every point (a constant texture, no
-    // vertex colours), it and then the mask of its reflecting and the probability of the GGX
-    // lobe.
+    // Per mesh, for its plain vertices, what is the same at every point: the specular (a
+    // constant texture), and then whether it is black (no GGX lobe); the alpha (a constant
+    // roughness); the diffuse reflectance (a constant texture, no vertex colours); with both
+    // reflectances, the mask of its reflecting and the probability of the GGX lobe. The rest
+    // is looked up path by path, as Scene::bsdf_params does.
     struct PlainMesh {
-        // its material's vertices are plain: MaterialKind::Standard with a constant specular
-        // and, unless the specular is black (the Lambertian lobe alone), a constant roughness
+        // its material's vertices are plain: MaterialKind::Standard (the Lambertian lobe and
+        // the GGX lobe where the specular is not black)
         bool plain = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
-        bool glossy = false;  // plain, and the specular is not black
-        bool constant = false;
+        bool constant_specular = false, constant_alpha = false, constant = false;
+        bool glossy = false;  // constant_specular, and the specular is not black
         Vec3f specular;
         float alpha = 0.f;
         Vec3f diffuse;
+        bool fixed = false;  // constant and constant_specular: reflects and lobe_p hold
         float reflects = 0.f, lobe_p = 0.f;
     };
     std::vector<PlainMesh> plain_mesh;
@@ -89,19 +91,25 @@ struct PathBatch::Impl {
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
-            pm.plain = mat.kind == MaterialKind::Standard && mat.specular.is_constant() &&
-                       (is_black(Vec3f::load(mat.specular.data)) || mat.roughness.is_constant());
+            pm.plain = mat.kind == MaterialKind::Standard;
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
-            if (pm.plain && !is_black(Vec3f::load(mat.specular.data))) {
-                // Scene::bsdf_params'
-                pm.glossy = true;
+            // Scene::bsdf_params' values where they are constant.
+            if (pm.plain && mat.specular.is_constant()) {
+                pm.constant_specular = true;
                 pm.specular = Vec3f::load(mat.specular.data);
+                pm.glossy = !is_black(pm.specular);
+            }
+            if (pm.plain && mat.roughness.is_constant()) {
+                pm.constant_alpha = true;
                 pm.alpha = std::max(mat.roughness.data[0], kMinRoughness);
             }
             if (pm.plain && mat.diffuse.is_constant() && !m.colors) {
                 pm.constant = true;
                 pm.diffuse = Vec3f::load(mat.diffuse.data);  // Scene::diffuse_reflectance's
-                pm.reflects = plain_reflects(pm.diffuse, mat);
+            }
+            if (pm.constant && pm.constant_specular) {
+                pm.fixed = true;
+                pm.reflects = plain_reflects(pm.diffuse, pm.specular);
                 if (pm.glossy) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
             }
             plain_mesh.push_back(pm);
@@ -122,8 +130,8 @@ struct PathBatch::Impl {
 
     void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
     // The mask of a plain vertex's reflecting (a reflectance with luminance above 0).
-    static float plain_reflects(const Vec3f& diffuse, const Material& mat) {
-        return lane_mask(!(luminance(diffuse) + luminance(Vec3f::load(mat.specular.data)) <= 0.f));
+    static float plain_reflects(const Vec3f& diffuse, const Vec3f& specular) {
+        return lane_mask(!(luminance(diffuse) + luminance(specular) <= 0.f));
     }
     // specular_lobe_probability (scene/bsdf.h) of a plain vertex.
     static float lobe_probability(const Vec3f& diffuse, const Vec3f& specular) {
@@ -179,15 +187,17 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
     const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
-    l.has_specular[k] = lane_mask(pm.glossy);
-    if (pm.glossy) {
+    const Vec3f specular = pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv);
+    const bool glossy = pm.constant_specular ? pm.glossy : !is_black(specular);
+    l.has_specular[k] = lane_mask(glossy);
+    if (glossy) {
         glossy_ = true;
-        put3(l.specular, pm.specular);
-        l.alpha[k] = pm.alpha;
-        l.lobe_p[k] = pm.constant ? pm.lobe_p : lobe_probability(diffuse, pm.specular);
+        put3(l.specular, specular);
+        l.alpha[k] = pm.constant_alpha ? pm.alpha : std::max(eval_texture1(mat.roughness, ps.sp.uv), kMinRoughness);
+        l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
     }
     l.two_sided[k] = lane_mask(mat.two_sided);
-    l.reflects[k] = pm.constant ? pm.reflects : plain_reflects(diffuse, mat);
+    l.reflects[k] = pm.fixed ? pm.reflects : plain_reflects(diffuse, specular);
 
     const float ul0 = rng.next_float(), ul1 = rng.next_float(), ul2 = rng.next_float();
     float ue1 = ul1, ue2 = ul2;
@@ -196,7 +206,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         ue2 = rng.next_float();
     }
     const float ub0 = rng.next_float();  // the lobe's choice (the diffuse lobe the only one without GGX)
-    if (pm.glossy) l.u_lobe[k] = ub0;
+    if (glossy) l.u_lobe[k] = ub0;
     const float ub1 = rng.next_float();
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();

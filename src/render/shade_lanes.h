@@ -1,6 +1,6 @@
 // shade_vertex (render/path.h) for the plain case, a vector of paths at a time: the standard
-// material (MaterialKind::Standard) with a constant specular and, unless that is black (the
-// Lambertian lobe alone), a constant roughness (the Lambertian and GGX lobes). PathBatch
+// material (MaterialKind::Standard): the Lambertian lobe, and the GGX lobe where the specular
+// is not black, its reflectances and roughness constant or textured. PathBatch
 // (render/batch.cpp) gathers such vertices into the arrays of ShadeLanes (one entry a path:
 // structure of arrays), with the random numbers and what needs a table or a branch per path
 // computed beforehand path by path: the reflectances, alpha and the GGX lobe's probability,

@@ -702,7 +702,7 @@ TEST(Render, BatchedPathsMatchTracePath) {
 // The batches shade the vertices of a diffuse material four paths at a time in vectors
 // (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
 // trace_path's bit for bit, with both kinds in one batch (a glossy box with a textured
-// roughness among diffuse surfaces),
+// roughness, in the vectors, and a mirror, one by one, among diffuse surfaces),
 // a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
 // seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
 // (sampled by area in the vectors), with and without an environment, then with the lights whose
@@ -739,10 +739,12 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.materials.push_back(material(red, black, r));    // 1: diffuse, two-sided
     d.materials[1].two_sided = true;
     d.materials.push_back(material(black, black, r));  // 2: black (the lamps', the soot's)
-    d.materials.push_back(material(kd, ks, r));        // 3: glossy, textured roughness: shaded one by one
+    d.materials.push_back(material(kd, ks, r));        // 3: glossy, textured roughness (in the vectors)
     d.materials[3].roughness = bumpy_tex;
     d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
     d.materials[4].diffuse = floor_tex;
+    d.materials.push_back(material(black, ks, r));     // 5: a mirror: shaded one by one
+    d.materials[5].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(4));
     d.meshes.push_back(ball.desc(0));
     d.meshes[1].colors = tint.data();
@@ -755,6 +757,8 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.meshes[6].emission = le.desc();
     d.meshes[7].emission = le2.desc();
     d.meshes[7].two_sided_emission = true;
+    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
+    d.meshes.push_back(mirror.desc(5));
     MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
     MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
     MeshData spot_panel = make_quad(Vec3f(0.5f, 1.6f, 1.f), Vec3f(0.6f, 0, 0), Vec3f(0, 0, 0.6f));
@@ -823,8 +827,9 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
 // trace_path's bit for bit, on 1 and 2 threads. Glossy surfaces of roughness 0 (alpha clamped
 // to kMinRoughness), 0.05, 0.2 and 1, a grey, a weak (0.04) and a coloured specular, a black
 // diffuse under a specular (the GGX lobe alone), a textured diffuse (the lobe's probability
-// per point) and vertex colours, one two-sided surface seen from both sides, among a diffuse
-// wall and a textured roughness (shaded one by one); a lamp sampled by area in the vectors,
+// per point) and vertex colours, one two-sided surface seen from both sides, a textured
+// roughness under a textured specular with a black texel (the GGX lobe there and not beside
+// it), among a diffuse wall and a mirror (shaded one by one); a lamp sampled by area in the vectors,
 // then a sky, then lights whose samples are given whole (a sphere light by solid angle, a
 // quad by spherical triangles) and point lights; each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedGlossyPathsMatchTracePath) {
@@ -861,9 +866,18 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.materials.push_back(material(kd, grey, r02));    // 4: two-sided
     d.materials[4].two_sided = true;
     d.materials.push_back(material(black, bright, r02));  // 5: the GGX lobe alone
-    d.materials.push_back(material(kd, grey, r03));       // 6: textured roughness: one by one
+    // 6: textured roughness and specular (one texel black)
+    const float specs[12] = {0.5f, 0.5f, 0.5f, 0.f, 0.f, 0.f, 0.9f, 0.6f, 0.2f, 0.04f, 0.04f, 0.04f};
+    TextureDesc spec_tex;
+    spec_tex.data = specs;
+    spec_tex.height = spec_tex.width = 2;
+    spec_tex.channels = 3;
+    d.materials.push_back(material(kd, grey, r03));
     d.materials[6].roughness = bumpy_tex;
+    d.materials[6].specular = spec_tex;
     d.materials.push_back(material(black, black, r03));   // 7: the lamps'
+    d.materials.push_back(material(black, gold, r03));    // 8: a mirror: one by one
+    d.materials[8].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(1));
     d.meshes[1].colors = tint.data();
@@ -874,6 +888,8 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.meshes.push_back(box.desc(6));
     d.meshes.push_back(lamp.desc(7));
     d.meshes.back().emission = le.desc();
+    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
+    d.meshes.push_back(mirror.desc(8));
     MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
     MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
     PointLightDesc bulb;
