@@ -112,8 +112,9 @@ void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&
 
 // Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
 // the random numbers of render() for the same options; tile_end(tile) after each tile, on the
-// thread that ran it (tile: for_each_tile's index). With `full_paths` the whole path is traced and recorded (the radiance's gradient);
-// without, only the camera ray's first hit (record.vertices holds it, or record.camera_missed).
+// thread that ran it (tile: for_each_tile's index). With `full_paths` the whole path is traced
+// and recorded (the radiance's gradient); without, only the camera ray's first hit
+// (record.vertices holds it, or record.camera_missed).
 template <class SampleFn, class TileEnd>
 void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_paths, SampleFn&& fn,
                      TileEnd&& tile_end) {

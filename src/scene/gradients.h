@@ -74,7 +74,8 @@ using GradLog = std::vector<GradAdd>;
 // it made them, once every earlier item's are. Each item's additions are the same whatever the
 // thread count, so the sums are the same bit for bit. An item that finishes early is held until
 // the items before it are in (parallel_indices, render/tiles.h, starts them in order, so few are
-// held at a time). Every item in [0, count) must be committed, empty or not.
+// held at a time). Items are numbered from 0, and each must be committed, empty or not, for
+// those after it to be applied.
 class OrderedAdds {
 public:
     // Item `index`'s additions, taken out of `log` (left empty).
@@ -94,7 +95,7 @@ public:
             ++next_;
         }
     }
-    // Items committed in order so far, and the most held at once (for the tests).
+    // The items applied so far, and those held now (for the tests).
     int64_t applied() const { return next_; }
     size_t held() const { return pending_.size(); }
 
