@@ -699,6 +699,28 @@ TEST(Render, BatchedPathsMatchTracePath) {
     EXPECT_GT(outside, 0);
 }
 
+// The batches against trace_path for each sampling strategy at 0, 1 and 3 bounces, and with MIS
+// at `long_path` bounces too; each reference image must see some light. Returns how many
+// renders expect_render_matches compared.
+int expect_strategies_match(const Scene& scene, RenderOptions opt, int variant, int long_path) {
+    int compared = 0;
+    for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
+        for (int bounces : {0, 1, 3, long_path}) {
+            if (sampling != LightSampling::MIS && bounces == long_path) continue;
+            opt.sampling = sampling;
+            opt.max_bounces = bounces;
+            RayCounters counters;
+            const std::vector<float> reference = trace_path_image(scene, opt, counters);
+            const std::string what = "variant " + std::to_string(variant) + ", sampling " +
+                                     std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
+            double total = 0;
+            for (float v : reference) total += v;
+            EXPECT_GT(total, 0.0) << what;
+            compared += expect_render_matches(scene, opt, reference, counters, what);
+        }
+    return compared;
+}
+
 // The batches shade the vertices of a diffuse material four paths at a time in vectors
 // (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
 // trace_path's bit for bit, with both kinds in one batch (a glossy box with a textured
@@ -803,27 +825,13 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
             d.meshes.back().spot_profile[2] = 0.f;
             d.point_lights = {bulb, spot};
         }
-        auto scene = build_scene(d);
-        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
-            for (int bounces : {0, 1, 3, 40}) {
-                if (sampling != LightSampling::MIS && bounces == 40) continue;
-                opt.sampling = sampling;
-                opt.max_bounces = bounces;
-                RayCounters counters;
-                const std::vector<float> reference = trace_path_image(*scene, opt, counters);
-                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
-                                         std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
-                double total = 0;
-                for (float v : reference) total += v;
-                EXPECT_GT(total, 0.0) << what;
-                compared += expect_render_matches(*scene, opt, reference, counters, what);
-            }
+        compared += expect_strategies_match(*build_scene(d), opt, variant, 40);
     }
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
 }
 
-// The batches shade glossy vertices (the standard material with a constant specular and
-// roughness: the diffuse and GGX lobes) in the vectors too: each path's radiance is still
+// The batches shade glossy vertices (the standard material: the diffuse and GGX lobes, its
+// reflectances and roughness constant or textured) in the vectors too: each path's radiance is still
 // trace_path's bit for bit, on 1 and 2 threads. Glossy surfaces of roughness 0 (alpha clamped
 // to kMinRoughness), 0.05, 0.2 and 1, a grey, a weak (0.04) and a coloured specular, a black
 // diffuse under a specular (the GGX lobe alone), a textured diffuse (the lobe's probability
@@ -913,21 +921,7 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
             d.meshes.back().sample_spherical_triangle = true;
             d.point_lights = {bulb};
         }
-        auto scene = build_scene(d);
-        for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
-            for (int bounces : {0, 1, 3, 12}) {
-                if (sampling != LightSampling::MIS && bounces == 12) continue;
-                opt.sampling = sampling;
-                opt.max_bounces = bounces;
-                RayCounters counters;
-                const std::vector<float> reference = trace_path_image(*scene, opt, counters);
-                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
-                                         std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
-                double total = 0;
-                for (float v : reference) total += v;
-                EXPECT_GT(total, 0.0) << what;
-                compared += expect_render_matches(*scene, opt, reference, counters, what);
-            }
+        compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
     }
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
 }
