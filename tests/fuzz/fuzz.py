@@ -9,7 +9,8 @@ and memory cap, and every outcome is classified:
   unexpected  any other Python exception (a traceback of an unexpected type, MemoryError, a
               C++ exception that reached Python as RuntimeError, ...)
   signal      the child died by a signal (abort, segfault, the memory cap)
-  hang        the child ran past the time cap
+  hang        the child computed past the time cap on one case (CPU time), or waited six
+              times that without an answer (wall time)
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
 imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
@@ -47,9 +48,24 @@ import corpus  # noqa: E402
 BAD = ("unexpected", "signal", "hang")
 OUTCOMES = ("ok", "error", "unnamed") + BAD
 
-# Per case: seconds of wall time, bytes of address space beyond what the driver had mapped.
+# Per case: seconds of the child's CPU time (a case that computes that long hangs), bytes of
+# address space beyond what the driver had mapped. A case that waits without computing (a
+# deadlock) hangs after IDLE_FACTOR times the limit in wall time. CPU time rather than wall time,
+# so that a loaded machine, which slows every case down, does not make hangs of them.
 TIME_LIMIT = 10.0
+IDLE_FACTOR = 6.0
 MEMORY_LIMIT = 2 << 30
+
+
+def cpu_seconds(pid: int) -> Optional[float]:
+    """The CPU time (user and system, every thread) process ``pid`` has used, or None where
+    /proc cannot tell (then the limit is on wall time alone)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError):
+        return None
 
 
 def kind_of(path: str) -> str:
@@ -170,8 +186,10 @@ def _mapped_bytes() -> int:
 def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
               memory_limit: int = MEMORY_LIMIT) -> List[Tuple[str, str]]:
     """Runs cases (kind, path) in forked children, one after the other in the same child
-    (a fork costs more than most cases) until one kills it or runs past ``time_limit``
-    seconds; a new child goes on with the next. Returns (outcome, detail) per case."""
+    (a fork costs more than most cases) until one kills it or hangs: ``time_limit`` seconds of
+    CPU time on one case, or IDLE_FACTOR times that in wall time (wall time alone where the
+    CPU time is unknown); a new child goes on with the next. Returns (outcome, detail) per
+    case."""
     results: List[Tuple[str, str]] = []
     while len(results) < len(cases):
         read_fd, write_fd = os.pipe()
@@ -180,16 +198,24 @@ def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
             os.close(read_fd)
             _child(cases[len(results):], write_fd, memory_limit)
         os.close(write_fd)
-        buffer, note, timed_out = b"", "", False
-        deadline = time.monotonic() + time_limit
+        buffer, note, hang = b"", "", ""
+        # Where the current case started, in wall time and in the child's CPU time.
+        started, cpu_started = time.monotonic(), cpu_seconds(pid)
         try:
             while True:
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    timed_out = True
+                waited = time.monotonic() - started
+                cpu = cpu_seconds(pid)
+                if cpu is not None and cpu_started is not None:
+                    if cpu - cpu_started > time_limit:
+                        hang = f"no answer after {time_limit:g} s of CPU time"
+                    elif waited > IDLE_FACTOR * time_limit:
+                        hang = f"no answer in {IDLE_FACTOR * time_limit:g} s ({cpu - cpu_started:.1f} s of CPU time)"
+                elif waited > time_limit:
+                    hang = f"no answer in {time_limit:g} s"
+                if hang:
                     os.kill(pid, signal.SIGKILL)
                     break
-                ready, _, _ = select.select([read_fd], [], [], left)
+                ready, _, _ = select.select([read_fd], [], [], min(0.1, max(time_limit - waited, 0.01)))
                 if not ready:
                     continue
                 chunk = os.read(read_fd, 1 << 16)
@@ -203,13 +229,13 @@ def run_batch(cases: List[Tuple[str, str]], time_limit: float = TIME_LIMIT,
                         note += f" while {answer['note']}"
                     else:
                         results.append((answer["outcome"], answer["detail"]))
-                        note, deadline = "", time.monotonic() + time_limit
+                        note, started, cpu_started = "", time.monotonic(), cpu_seconds(pid)
         finally:
             os.close(read_fd)
             _, status = os.waitpid(pid, 0)
         if len(results) < len(cases):  # the child died in (or hung on) the next case
-            if timed_out:
-                results.append(("hang", f"no answer in {time_limit:g} s{note}"))
+            if hang:
+                results.append(("hang", hang + note))
             elif os.WIFSIGNALED(status):
                 results.append(("signal", f"killed by {signal.Signals(os.WTERMSIG(status)).name}{note}"))
             else:
@@ -334,7 +360,9 @@ def main(argv=None) -> int:
                                                       "unexpectedly into DIR")
     parser.add_argument("--log", metavar="FILE", help="one JSON line per case")
     parser.add_argument("--time-limit", type=float, default=TIME_LIMIT,
-                        help=f"seconds per case before it counts as a hang (default {TIME_LIMIT:g})")
+                        help=f"seconds of CPU time per case before it counts as a hang (default "
+                             f"{TIME_LIMIT:g}; {IDLE_FACTOR:g} times that in wall time for a case that "
+                             f"waits)")
     parser.add_argument("--replay", metavar="DIR", help="run the files of DIR instead")
     parser.add_argument("-q", "--quiet", action="store_true")
     args = parser.parse_args(argv)

@@ -58,3 +58,33 @@ def test_fuzz_slice(tmp_path):
         _check(case["outcome"], case["detail"],
                f"case {case['case']} of seed {case['seed']} ({case['kind']}, "
                f"{'+'.join(case['mutations'])})")
+
+
+def test_a_hang_is_told_by_cpu_time_not_by_a_slow_machine():
+    """A case hangs after ``time_limit`` seconds of CPU time, or, waiting without computing (a
+    deadlock), after IDLE_FACTOR times that in wall time. A case that takes longer than the
+    limit in wall time while computing little, as every case does on a loaded machine, is not a
+    hang (it was, when the limit was on wall time: false hangs on a busy machine). The cases
+    stand in for the loaders, in the fuzzer's own forked children."""
+    script = f"""
+import json, sys, time
+sys.path.insert(0, {str(FUZZ.parent)!r})
+import fuzz
+
+def case(kind, path, report=lambda note: None):
+    if path == "spin":
+        while True:
+            pass
+    if path == "wait":
+        time.sleep(1e6)
+    if path == "slow":
+        time.sleep(1.5)  # past the limit in wall time, with little CPU time
+    return "ok", path
+
+fuzz.run_case = case
+print(json.dumps(fuzz.run_batch([("obj", p) for p in ("spin", "slow", "wait", "done")], time_limit=1.0)))
+"""
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=120)
+    outcomes = json.loads(result.stdout.splitlines()[-1])
+    assert [o for o, _ in outcomes] == ["hang", "ok", "hang", "ok"], outcomes
+    assert outcomes[2][1].startswith(f"no answer in {fuzz.IDLE_FACTOR * 1.0:g} s"), outcomes[2]
