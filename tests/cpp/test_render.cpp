@@ -573,6 +573,61 @@ std::vector<float> trace_path_image(const Scene& scene, const RenderOptions& opt
     return image;
 }
 
+// A 4 x 8 sky with a bright patch, so that sampling it by radiance differs from uniform.
+std::vector<float> bright_patch_sky() {
+    std::vector<float> sky(4 * 8 * 3);
+    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    return sky;
+}
+
+// The textures the batched-paths tests share: a 3 x 3 checker (a textured diffuse), a 2 x 2
+// roughness, and vertex colours for a mesh of `vertices` vertices.
+struct BatchTextures {
+    std::vector<float> checker = std::vector<float>(3 * 3 * 3), tint;
+    const float bumpy[4] = {0.1f, 0.5f, 0.3f, 0.05f};
+    TextureDesc checker_tex, bumpy_tex;
+    explicit BatchTextures(int64_t vertices) : tint(size_t(vertices) * 3) {
+        for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
+        for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
+        checker_tex.data = checker.data();
+        checker_tex.height = checker_tex.width = checker_tex.channels = 3;
+        bumpy_tex.data = bumpy;
+        bumpy_tex.height = bumpy_tex.width = 2;
+        bumpy_tex.channels = 1;
+    }
+    BatchTextures(const BatchTextures&) = delete;  // the descriptions point into it
+    BatchTextures& operator=(const BatchTextures&) = delete;
+};
+
+// The batched-paths tests' variants of a scene: 0 its own lamps alone, 1 with the sky, 2 also
+// with lights whose samples the batches are given whole (a sphere light sampled by solid angle,
+// a quad by spherical triangles, both of material `material`) and a point light.
+struct LightVariants {
+    std::vector<float> sky = bright_patch_sky();
+    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
+    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
+    ConstTex le{{6.f, 6.f, 6.f}}, le2{{1.f, 2.f, 3.f}};
+    PointLightDesc bulb;
+    LightVariants() {
+        bulb.position[0] = -1.2f;
+        bulb.position[1] = 1.f;
+        bulb.position[2] = 1.5f;
+    }
+    // Makes d variant `variant` of the one before (variant 2 adds to it, once).
+    void apply(SceneDesc& d, int variant, int material) const {
+        d.has_envmap = variant > 0;
+        if (d.has_envmap) d.envmap.values = {sky.data(), 4, 8, 3};
+        if (variant != 2) return;
+        d.meshes.push_back(bulb_mesh.desc(material));
+        d.meshes.back().emission = le2.desc();
+        d.meshes.back().sample_solid_angle = true;
+        d.meshes.push_back(tri_lamp.desc(material));
+        d.meshes.back().emission = le.desc();
+        d.meshes.back().sample_spherical_triangle = true;
+        d.point_lights = {bulb};
+    }
+};
+
 // render() on 1 and 2 threads: `reference` bit for bit, with the same rays (`counters`).
 // Returns the number of renders compared.
 int expect_render_matches(const Scene& scene, RenderOptions opt, const std::vector<float>& reference,
@@ -609,9 +664,7 @@ TEST(Render, BatchedPathsMatchTracePath) {
     MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
     ConstTex kd({0.6f, 0.6f, 0.5f}), ks({0.2f, 0.2f, 0.2f}), r({0.3f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
     ConstTex metal({0.9f, 0.8f, 0.6f}), smooth({0.f}), rough({0.25f}), ior({1.5f}), white({1, 1, 1});
-    // A sky with a bright patch, so that sampling it by radiance differs from uniform.
-    std::vector<float> sky(4 * 8 * 3);
-    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
+    const std::vector<float> sky = bright_patch_sky();
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);  // its upper half sees the sky past the floor
     d.camera.crop_x = 2;
@@ -742,19 +795,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     MeshData panel = make_quad(Vec3f(-2.f, 0.2f, 1.2f), Vec3f(0, 0.6f, 0), Vec3f(0, 0, 0.6f));
     ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), ks({0.2f, 0.2f, 0.2f}), r({0.3f}), black({0, 0, 0});
     ConstTex le({6.f, 6.f, 6.f}), le2({1.f, 2.f, 3.f});
-    std::vector<float> sky(4 * 8 * 3);
-    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
-    std::vector<float> tint(size_t(ball.num_vertices()) * 3), checker(3 * 3 * 3);
-    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
-    for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
-    TextureDesc floor_tex;
-    floor_tex.data = checker.data();
-    floor_tex.height = floor_tex.width = floor_tex.channels = 3;
-    const float bumpy[4] = {0.1f, 0.5f, 0.3f, 0.05f};
-    TextureDesc bumpy_tex;
-    bumpy_tex.data = bumpy;
-    bumpy_tex.height = bumpy_tex.width = 2;
-    bumpy_tex.channels = 1;
+    const BatchTextures tex(ball.num_vertices());
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     d.materials.push_back(material(kd, black, r));     // 0: diffuse
@@ -762,14 +803,14 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.materials[1].two_sided = true;
     d.materials.push_back(material(black, black, r));  // 2: black (the lamps', the soot's)
     d.materials.push_back(material(kd, ks, r));        // 3: glossy, textured roughness (in the vectors)
-    d.materials[3].roughness = bumpy_tex;
+    d.materials[3].roughness = tex.bumpy_tex;
     d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
-    d.materials[4].diffuse = floor_tex;
+    d.materials[4].diffuse = tex.checker_tex;
     d.materials.push_back(material(black, ks, r));     // 5: a mirror: shaded one by one
     d.materials[5].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(4));
     d.meshes.push_back(ball.desc(0));
-    d.meshes[1].colors = tint.data();
+    d.meshes[1].colors = tex.tint.data();
     d.meshes.push_back(back_wall.desc(0));
     d.meshes.push_back(screen.desc(1));
     d.meshes.push_back(soot.desc(2));
@@ -781,8 +822,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.meshes[7].two_sided_emission = true;
     MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
     d.meshes.push_back(mirror.desc(5));
-    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
-    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
+    const LightVariants variants;
     MeshData spot_panel = make_quad(Vec3f(0.5f, 1.6f, 1.f), Vec3f(0.6f, 0, 0), Vec3f(0, 0, 0.6f));
     std::vector<float> glow(2 * 2 * 3);
     for (size_t i = 0; i < glow.size(); ++i) glow[i] = 1.f + float(i % 5);
@@ -790,10 +830,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     glow_tex.data = glow.data();
     glow_tex.height = glow_tex.width = 2;
     glow_tex.channels = 3;
-    PointLightDesc bulb, spot;
-    bulb.position[0] = -1.2f;
-    bulb.position[1] = 1.f;
-    bulb.position[2] = 1.5f;
+    PointLightDesc spot;
     spot.position[0] = 0.3f;
     spot.position[1] = 1.5f;
     spot.position[2] = 0.5f;
@@ -808,22 +845,14 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     opt.seed = 11;
     int compared = 0;
     for (int variant = 0; variant < 3; ++variant) {
-        const bool env = variant > 0;
-        d.has_envmap = env;
-        if (env) d.envmap.values = {sky.data(), 4, 8, 3};
-        if (variant == 2) {
-            d.meshes.push_back(bulb_mesh.desc(2));
-            d.meshes.back().emission = le2.desc();
-            d.meshes.back().sample_solid_angle = true;
-            d.meshes.push_back(tri_lamp.desc(2));
-            d.meshes.back().emission = le.desc();
-            d.meshes.back().sample_spherical_triangle = true;
+        variants.apply(d, variant, 2);
+        if (variant == 2) {  // and a spot-profiled panel and a spot point light
             d.meshes.push_back(spot_panel.desc(2));
             d.meshes.back().emission = glow_tex;
             d.meshes.back().spot = true;
             d.meshes.back().spot_profile[1] = -1.f;
             d.meshes.back().spot_profile[2] = 0.f;
-            d.point_lights = {bulb, spot};
+            d.point_lights.push_back(spot);
         }
         compared += expect_strategies_match(*build_scene(d), opt, variant, 40);
     }
@@ -851,23 +880,12 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
     ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
     ConstTex weak({0.04f, 0.04f, 0.04f}), gold({0.9f, 0.6f, 0.2f}), grey({0.5f, 0.5f, 0.5f}), bright({0.8f, 0.8f, 0.8f});
-    ConstTex r0({0.f}), r005({0.05f}), r02({0.2f}), r1({1.f}), r03({0.3f}), le2({1.f, 2.f, 3.f});
-    std::vector<float> sky(4 * 8 * 3), tint(size_t(ball.num_vertices()) * 3), checker(3 * 3 * 3);
-    for (size_t i = 0; i < sky.size(); ++i) sky[i] = 0.1f + 0.05f * float(i % 7) + (i / 3 == 9 ? 4.f : 0.f);
-    for (size_t i = 0; i < tint.size(); ++i) tint[i] = 0.4f + 0.15f * float((i * 7) % 5);
-    for (size_t i = 0; i < checker.size(); ++i) checker[i] = (i / 3) % 2 ? 0.8f : 0.2f + 0.1f * float(i % 3);
-    TextureDesc floor_tex;
-    floor_tex.data = checker.data();
-    floor_tex.height = floor_tex.width = floor_tex.channels = 3;
-    const float bumpy[4] = {0.1f, 0.5f, 0.3f, 0.05f};
-    TextureDesc bumpy_tex;
-    bumpy_tex.data = bumpy;
-    bumpy_tex.height = bumpy_tex.width = 2;
-    bumpy_tex.channels = 1;
+    ConstTex r0({0.f}), r005({0.05f}), r02({0.2f}), r1({1.f}), r03({0.3f});
+    const BatchTextures tex(ball.num_vertices());
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     d.materials.push_back(material(kd, weak, r005));   // 0: textured diffuse, weak specular
-    d.materials[0].diffuse = floor_tex;
+    d.materials[0].diffuse = tex.checker_tex;
     d.materials.push_back(material(kd, gold, r0));     // 1: coloured specular, alpha clamped
     d.materials.push_back(material(kd, grey, r1));     // 2: the roughest
     d.materials.push_back(material(red, black, r03));  // 3: diffuse
@@ -881,14 +899,14 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     spec_tex.height = spec_tex.width = 2;
     spec_tex.channels = 3;
     d.materials.push_back(material(kd, grey, r03));
-    d.materials[6].roughness = bumpy_tex;
+    d.materials[6].roughness = tex.bumpy_tex;
     d.materials[6].specular = spec_tex;
     d.materials.push_back(material(black, black, r03));   // 7: the lamps'
     d.materials.push_back(material(black, gold, r03));    // 8: a mirror: one by one
     d.materials[8].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(1));
-    d.meshes[1].colors = tint.data();
+    d.meshes[1].colors = tex.tint.data();
     d.meshes.push_back(matte_ball.desc(2));
     d.meshes.push_back(wall.desc(3));
     d.meshes.push_back(panel.desc(4));
@@ -898,29 +916,13 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.meshes.back().emission = le.desc();
     MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
     d.meshes.push_back(mirror.desc(8));
-    MeshData bulb_mesh = make_sphere(Vec3f(1.6f, 1.2f, 0.4f), 0.15f, 6, 12);
-    MeshData tri_lamp = make_quad(Vec3f(-1.5f, 1.5f, -1.f), Vec3f(0.8f, 0, 0), Vec3f(0, -0.2f, 0.8f));
-    PointLightDesc bulb;
-    bulb.position[0] = -1.2f;
-    bulb.position[1] = 1.f;
-    bulb.position[2] = 1.5f;
+    const LightVariants variants;
     RenderOptions opt;
     opt.spp = 3;
     opt.seed = 13;
     int compared = 0;
     for (int variant = 0; variant < 3; ++variant) {
-        const bool env = variant > 0;
-        d.has_envmap = env;
-        if (env) d.envmap.values = {sky.data(), 4, 8, 3};
-        if (variant == 2) {
-            d.meshes.push_back(bulb_mesh.desc(7));
-            d.meshes.back().emission = le2.desc();
-            d.meshes.back().sample_solid_angle = true;
-            d.meshes.push_back(tri_lamp.desc(7));
-            d.meshes.back().emission = le.desc();
-            d.meshes.back().sample_spherical_triangle = true;
-            d.point_lights = {bulb};
-        }
+        variants.apply(d, variant, 7);
         compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
     }
     EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
