@@ -101,7 +101,7 @@ struct PathBatch::Impl {
             }
             if (pm.plain && mat.roughness.is_constant()) {
                 pm.constant_alpha = true;
-                pm.alpha = std::max(mat.roughness.data[0], kMinRoughness);
+                pm.alpha = ggx_alpha(mat.roughness.data[0]);
             }
             if (pm.plain && mat.diffuse.is_constant() && !m.colors) {
                 pm.constant = true;
@@ -193,7 +193,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     if (glossy) {
         glossy_ = true;
         put3(l.specular, specular);
-        l.alpha[k] = pm.constant_alpha ? pm.alpha : std::max(eval_texture1(mat.roughness, ps.sp.uv), kMinRoughness);
+        l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(eval_texture1(mat.roughness, ps.sp.uv));
         l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
     }
     l.two_sided[k] = lane_mask(mat.two_sided);

@@ -8,6 +8,7 @@
 // beside the base's density. The smooth materials (mirror, glass: scene/specular.h) have no density: their eval and pdf
 // are zero, and bsdf_sample returns their one direction with its weight.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include "math/vec.h"
 #include "sampling/warp.h"
@@ -19,6 +20,10 @@ namespace edgepath {
 
 // Smallest GGX alpha; below it the lobe is numerically a mirror in float.
 constexpr float kMinRoughness = 1e-3f;
+
+// The GGX alpha of a material's roughness value (Scene::bsdf_params; the forward batches'
+// vectors take the same).
+inline float ggx_alpha(float roughness) { return std::max(roughness, kMinRoughness); }
 
 struct BsdfParams {
     Vec3f diffuse;

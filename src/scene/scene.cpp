@@ -417,7 +417,7 @@ void Scene::set_views(const SceneDesc& desc) {
         if (md.kind == MaterialKind::Dielectric || md.kind == MaterialKind::Plastic) m.ior = Texture(md.ior);
         if (md.kind == MaterialKind::Plastic) {
             const float roughness = md.roughness.data[0];
-            m.coat = coat_table(std::max(roughness, kMinRoughness), md.ior.data[0], !(roughness > 0.f));
+            m.coat = coat_table(ggx_alpha(roughness), md.ior.data[0], !(roughness > 0.f));
             m.nonlinear = md.nonlinear;
         }
         m.normal_map = Texture(md.normal_map);
@@ -684,7 +684,7 @@ BsdfParams Scene::bsdf_params(const SurfacePoint& sp) const {
     p.diffuse = diffuse_reflectance(sp);
     p.specular = eval_texture3(m.specular, sp.uv);
     const float roughness = eval_texture1(m.roughness, sp.uv);
-    p.alpha = std::max(roughness, kMinRoughness);
+    p.alpha = ggx_alpha(roughness);
     p.two_sided = m.two_sided;
     p.kind = m.kind;
     if (m.kind == MaterialKind::Dielectric || m.kind == MaterialKind::Plastic) {
