@@ -260,6 +260,7 @@ edgepath::RenderOptions render_options(const nb::dict& d) {
     o.primary_edges = scalar<bool>(d, "primary_edges", f);
     o.secondary_edges = scalar<bool>(d, "secondary_edges", f);
     if (has(d, "hide_emitters")) o.hide_emitters = scalar<bool>(d, "hide_emitters", f);
+    if (has(d, "replayable")) o.replayable = scalar<bool>(d, "replayable", f);
     if (has(d, "secondary_survival")) o.secondary_survival = scalar<float>(d, "secondary_survival", f);
     o.edge_samples = scalar<int64_t>(d, "edge_samples", f);
     o.edge_sampling = static_cast<edgepath::EdgeSampling>(scalar<int>(d, "edge_sampling", f));

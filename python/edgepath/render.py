@@ -101,13 +101,17 @@ class RenderOptions:
     edge_sampling: int = 0
     hide_emitters: bool = False
     secondary_survival: Optional[float] = None  # None: the core's default
+    # The image's paths are those a gradient pass (or a derivative image) with the same seed
+    # retraces. False only for an image no gradient follows: a uniform sky is then left to the
+    # BSDF's samples (docs/conventions.md, "How lights are sampled").
+    replayable: bool = True
 
     def core(self) -> dict:
         out = {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
                "num_threads": self.num_threads, "sampling": self.sampling,
                "primary_edges": self.primary_edges, "secondary_edges": self.secondary_edges,
                "edge_samples": self.edge_samples, "edge_sampling": self.edge_sampling,
-               "hide_emitters": self.hide_emitters}
+               "hide_emitters": self.hide_emitters, "replayable": self.replayable}
         if self.secondary_survival is not None:
             out["secondary_survival"] = self.secondary_survival
         return out
@@ -132,7 +136,10 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     Differentiable: if a scene tensor requires grad, ``loss.backward()`` runs the gradient pass
     with ``backward_spp`` samples per pixel (default: ``spp``). Its random numbers are
     independent of the image's by default (an unbiased gradient of the expected image);
-    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image.
+    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image. (An
+    image no gradient follows, with ``sampling="mis"``, leaves a uniform sky to the BSDF's
+    samples instead of sampling it as the gradient pass does: other paths, fewer rays, less
+    noise; docs/conventions.md.)
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
     shading points: shadows, reflections, indirect light) switch them off for speed or
@@ -169,6 +176,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     attached_views = [] if cameras is None else [(k, t) for k, t in enumerate(view_params) if t.requires_grad]
     if (not attached and not attached_views) or not torch.is_grad_enabled():
+        options.replayable = False  # an image alone
         if cameras is not None:
             return render_views_flat(flat, views, options)
         image, _ = render_flat(flat, options)
@@ -335,8 +343,9 @@ def derivative_image(scene: Scene, param: torch.Tensor, direction: torch.Tensor,
     ``param`` is any tensor the scene holds (vertices, a texture, ``camera.to_world``, the
     envmap's ``scale``, ...), or a tensor with ``requires_grad`` that the scene's tensors were
     computed from (a pose, a scalar offset); ``direction`` has its shape. Computed by the gradient pass's own
-    code, per camera sample, with the same random numbers as ``render`` for the same seed, plus
-    the edges' boundary terms (options as for ``render``)."""
+    code, per camera sample, with the same random numbers as ``render`` for the same seed (the
+    paths of a render whose gradient is wanted: see ``render``), plus the edges' boundary terms
+    (options as for ``render``)."""
     options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
                              secondary_edges, edge_samples, edge_sampling, hide_emitters,
                              secondary_survival)
@@ -398,6 +407,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     continuous = [n for n in names if n not in ID_CHANNELS]
     if not attached or not continuous or not torch.is_grad_enabled():
+        options.replayable = False  # an image alone
         values, ids, _ = render_channels_flat(flat, names, options)
     else:
         grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
@@ -503,12 +513,14 @@ def finite_difference_channels(scene: Scene, param: torch.Tensor, direction: tor
     if not eps > 0:
         v.fail("eps", f"must be > 0, got {eps}")
     base, direction = _check_direction(param, direction)
+    # Replayable paths (the options' default): those of derivative_channels for the same seed.
+    options = render_options(spp, max_bounces, seed, num_threads, sampling, hide_emitters=hide_emitters)
     sides = []
     with torch.no_grad():
         for sign in (0.5, -0.5):
             moved = _substitute(scene, param, (base + sign * eps * direction).to(param.dtype))
-            sides.append(render_channels(moved, names, spp, max_bounces, seed, num_threads, sampling,
-                                         hide_emitters=hide_emitters))
+            values, _, _ = render_channels_flat(flatten_scene(moved), names, options)
+            sides.append(_split_channels(names, values, None))
     return {n: (sides[0][n] - sides[1][n]) / eps for n in names}
 
 

@@ -254,7 +254,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         }
     }
     l.env_on[k] = lane_mask(false);
-    if (settings.use_nee && scene.env_sampled) {
+    if (settings.use_nee && settings.use_env) {
         LightSample ls;
         const bool env = scene.sample_env(ue1, ue2, ls);
         l.env_on[k] = lane_mask(env);

@@ -6,7 +6,7 @@ namespace edgepath {
 
 Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng, RayCounters& counters,
                  PathRecord* record, const FirstHit* first) {
-    const PathSettings settings(scene, opt);
+    const PathSettings settings(scene, opt, record != nullptr);
 
     Vec3f L(0.f), beta(1.f);
     ++counters.camera;

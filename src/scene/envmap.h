@@ -67,7 +67,9 @@ struct Envmap {
     // One texel (a constant environment, as Mitsuba's `constant` emitter): the same value in
     // every direction. Its lookups skip the direction's position (an arc tangent and an arc
     // cosine), which only weighs the texel against itself (the bilinear weights add up to 1, up
-    // to rounding), and it is sampled uniformly over the sphere: density 1 / (4 pi) everywhere,
+    // to rounding), and it is sampled uniformly over the sphere where it is sampled at all (a
+    // render that combines the strategies leaves it to the BSDF: env_nee in render/path.h):
+    // density 1 / (4 pi) everywhere,
     // where the lat-long cells' density would be 1 / (2 pi^2 sin theta), heavier at the poles
     // and with more variance for the same value.
     bool constant() const { return tex.width == 1 && tex.height == 1; }

@@ -214,7 +214,9 @@ public:
     // Delta lights (desc.h): next-event estimation only, every one at every vertex.
     std::vector<PointLightDesc> point_lights;
     Distribution1D light_distribution;
-    bool env_sampled = false;  // the environment has light to sample (not black)
+    // The environment has light to sample (not black); whether a render samples it is
+    // env_nee's decision (render/path.h).
+    bool env_sampled = false;
 
     bool intersect(const Ray& ray, Hit& hit) const;
     // The first hit on anything but faces f0 and f1 of mesh `mesh` (-1: none), however close to
@@ -259,14 +261,14 @@ public:
     // Radiance emitted by the surface at sp in direction w (world, leaving the surface).
     Vec3f emitted(const SurfacePoint& sp, const Vec3f& w) const;
 
-    bool has_lights() const { return light_distribution.valid() || env_sampled; }
     // Radiance (or, for a point light, intensity) scale of a spot profile in direction w.
     static float spot_scale(bool spot, const float* profile, const Vec3f& w) {
         return spot ? spot_falloff(profile, w) : 1.f;
     }
     // Next-event estimation samples both kinds of emitters separately, each with its own
     // sample: picking one of them at random would multiply a small lamp's nearly noiseless
-    // estimate by a random 0 or 1/p.
+    // estimate by a random 0 or 1/p. (A constant environment is left to the BSDF's samples
+    // when the strategies are combined: env_nee in render/path.h.)
     // Samples an area light as seen from p (u0 picks the triangle, by power).
     bool sample_area_light(const Vec3f& p, float u0, float u1, float u2, LightSample& ls) const;
     // The entry of `lights` that sample_area_light picks with u0 (light_distribution valid);
@@ -286,8 +288,6 @@ public:
         return m.solid_angle || m.spherical_by_mesh ? m.triangle_area(prim)
                                                     : lights[size_t(m.light_offset + prim)].area;
     }
-    // Solid-angle density with which sample_env would produce `dir`.
-    float env_pdf(const Vec3f& dir) const { return env_sampled ? envmap.pdf(dir) : 0.f; }
 
     RTCScene rtc_scene() const { return rtc_; }
 

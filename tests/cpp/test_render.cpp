@@ -122,6 +122,81 @@ TEST(Render, WhiteFurnaceFlatSphere) {
 }
 
 
+// A constant sky is left to the BSDF's samples when the strategies are combined, in an image no
+// gradient pass retraces (env_nee in render/path.h): on the white furnace's convex sphere each
+// such sample escapes with the weight rho exactly, so every sample of a pixel inside the outline
+// is rho, with no shadow ray traced, where a light sample of the sky (uniform over the sphere,
+// half of it below the surface) mixed by MIS scatters them. Light-only sampling still samples
+// the sky (without it that strategy would see nothing), and so do replayable images.
+TEST(Render, ConstantSkyIsLeftToTheBsdfSamples) {
+    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 24, 48);
+    sphere.normals.clear();
+    ConstTex kd({0.6f, 0.6f, 0.6f}), ks({0, 0, 0}), rough({0.5f}), env({1, 1, 1});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 0, 4), Vec3f(0, 0, 0), 32, 32, 40);
+    d.materials.push_back(material(kd, ks, rough));
+    d.meshes.push_back(sphere.desc(0));
+    d.has_envmap = true;
+    d.envmap.values = env.desc();
+    auto scene = build_scene(d);
+    const double R = std::tan(std::asin(0.25)) / std::tan(20.0 * M_PI / 180.0) * 16.0;
+    for (bool mis : {true, false}) {
+        RenderOptions opt;
+        opt.spp = 4;
+        opt.max_bounces = 2;
+        opt.sampling = mis ? LightSampling::MIS : LightSampling::LightOnly;
+        opt.replayable = false;
+        std::vector<float> img(32 * 32 * 3);
+        const RenderStats stats = render(*scene, opt, img.data());
+        if (mis) {
+            EXPECT_EQ(stats.shadow_rays, 0u);
+        } else {
+            EXPECT_GT(stats.shadow_rays, 400u);  // about one a vertex (none for the lower half of the sky's samples)
+        }
+        double worst = 0, sum = 0;
+        int tested = 0;
+        for (int y = 0; y < 32; ++y)
+            for (int x = 0; x < 32; ++x) {
+                if (std::hypot(x + 0.5 - 16, y + 0.5 - 16) > R - 1.5) continue;
+                for (int c = 0; c < 3; ++c) {
+                    const double v = img[(size_t(y) * 32 + x) * 3 + c];
+                    worst = std::max(worst, std::abs(v - 0.6));
+                    sum += v;
+                }
+                ++tested;
+            }
+        ASSERT_GT(tested, 100);
+        if (mis) {
+            EXPECT_LT(worst, 1e-5);
+        } else {  // noisy, but right on average
+            EXPECT_GT(worst, 1e-2);
+            EXPECT_NEAR(sum / (3 * tested), 0.6, 0.02);
+        }
+    }
+    // The paths recorded for the adjoint sweep keep the sky's light sample (env_nee), and so
+    // does an image they may retrace: the same camera ray traced with and without a record, and
+    // an image with the default options.
+    RenderOptions opt;
+    opt.max_bounces = 1;
+    std::vector<float> img(32 * 32 * 3);
+    EXPECT_GT(render(*scene, opt, img.data()).shadow_rays, 400u);
+    opt.replayable = false;
+    int sampled = 0;
+    for (uint64_t s = 0; s < 64; ++s) {
+        const Ray ray = scene->camera.generate_ray(16.f, 16.f);
+        RayCounters plain, recorded;
+        Rng rng = Rng::for_sample(1, 0, s), rng2 = rng;
+        trace_path(*scene, opt, ray, rng, plain);
+        PathRecord rec;
+        trace_path(*scene, opt, ray, rng2, recorded, &rec);
+        EXPECT_EQ(plain.shadow, 0u);
+        ASSERT_EQ(rec.vertices.size(), 1u);
+        EXPECT_EQ(recorded.shadow, rec.vertices[0].nee_env.used ? 1u : 0u);
+        sampled += rec.vertices[0].nee_env.used;
+    }
+    EXPECT_GT(sampled, 16);  // about half: the sky's samples above the surface
+}
+
 // Projects a world point to full-film pixel coordinates (perspective camera of scene/camera.h).
 Vec2f project(const Camera& c, const Vec3f& p) {
     Vec3f d = p - c.position;

@@ -79,15 +79,21 @@ def test_scenes_load_welded(tmp_path):
 
 def test_rays_per_sample(tmp_path):
     # The counts the forward table prints beside the times: one camera ray per sample; at most
-    # max_bounces continuations; the scan scene (an area light and a sky) traces shadow rays
-    # towards both, so more than one per sample on average, fewer than two per vertex.
+    # max_bounces continuations; the scan scene (an area light and a uniform sky) traces shadow
+    # rays towards the area light alone, at most one per vertex: the sky is left to the BSDF's
+    # samples (docs/conventions.md), unless the light sampling strategy is used alone, which
+    # samples both.
+    from edgepath.render import flatten_scene, render_flat, render_options
     mc = load_script()
     xml, _ = mc.make_scan(str(tmp_path), 16, 1, 3)
     loaded = write(tmp_path, xml)
     camera, shadow, bounce = mc.rays_per_sample(loaded.scene, 16, 2, 2)
     assert camera == 1.0
     assert 0.3 < bounce <= 2.0
-    assert 1.0 < shadow <= 2.0 * (1.0 + bounce)
+    assert 0.3 < shadow <= 1.0 + bounce
+    _, light_only = render_flat(flatten_scene(loaded.scene),
+                                render_options(spp=2, max_bounces=2, sampling="light"))
+    assert light_only["shadow_rays"] / (16 * 16 * 2) > shadow + 0.3
 
 
 def test_skipped_without_mitsuba(tmp_path):

@@ -90,25 +90,47 @@ def test_gradients_of_lamp_emission_and_sky_scale():
     # The image is linear in the lamp's emission and in the sky's scale, and neither moves a
     # sample (the light choice no longer depends on them), so a central difference with the
     # same seed is exact up to rounding: the gradient pass, replaying the same paths
-    # (backward_seed=seed), must match it closely.
+    # (backward_seed=seed), must match it closely. The differences are finite_difference_image's,
+    # whose images have the paths a gradient pass retraces (an image rendered with no gradient
+    # to follow leaves the uniform sky to the BSDF's samples: other paths).
     emission = torch.full((3,), 2000.0, requires_grad=True)
     scale = torch.tensor([1.0], requires_grad=True)
     weights = torch.linspace(0.5, 1.5, RES[0] * RES[1] * 3).reshape(RES[0], RES[1], 3)
     img = ep.render(lamp_scene(emission=emission, env_scale=scale), spp=4, seed=7, backward_seed=7)
     (img * weights).sum().backward()
 
-    def loss(e, s):
-        with torch.no_grad():
-            return (ep.render(lamp_scene(emission=e, env_scale=s), spp=4, seed=7).double() * weights).sum().item()
+    def fd(param, h, scene):  # along all ones: the sum of the partial derivatives
+        d = ep.finite_difference_image(scene, param, torch.ones_like(param), eps=2 * h, spp=4, seed=7)
+        return (d.double() * weights).sum().item()
 
-    h = 10.0
-    fd_e = (loss(torch.full((3,), 2000.0 + h), torch.tensor([1.0])) -
-            loss(torch.full((3,), 2000.0 - h), torch.tensor([1.0]))) / (2 * h)
+    scene = lamp_scene(emission=torch.full((3,), 2000.0), env_scale=torch.tensor([1.0]))
+    fd_e = fd(scene.meshes[2].emission, 10.0, scene)
     g_e = emission.grad.sum().item()
     assert abs(g_e - fd_e) < 2e-3 * abs(fd_e), (g_e, fd_e)
-    hs = 0.05
-    fd_s = (loss(torch.full((3,), 2000.0), torch.tensor([1.0 + hs])) -
-            loss(torch.full((3,), 2000.0), torch.tensor([1.0 - hs]))) / (2 * hs)
+    fd_s = fd(scene.envmap.scale, 0.05, scene)
     g_s = scale.grad.item()
     assert abs(g_s - fd_s) < 2e-3 * abs(fd_s), (g_s, fd_s)
     assert g_e > 0 and g_s > 0
+
+
+def test_an_image_alone_leaves_a_uniform_sky_to_the_bsdf():
+    # docs/conventions.md, "How lights are sampled": a flat-shaded sphere (convex) of albedo 0.6
+    # under a white uniform sky. In an image no gradient follows, the sky is left to the BSDF's
+    # samples, each of which escapes with the weight 0.6: inside the outline every pixel is 0.6
+    # to rounding. An image whose gradient is wanted samples the sky as its gradient pass does
+    # (so that backward_seed=seed retraces its paths): noisy, the same on average.
+    v, i = shapes.sphere(radius=1.0, rings=12, segments=24)[:2]
+    cam = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3), fov=40.0, resolution=(32, 32))
+    albedo = torch.tensor([0.6, 0.6, 0.6])
+    sky = ep.EnvironmentMap(torch.ones((1, 1, 3)))
+
+    def image(diffuse):
+        return ep.render(ep.Scene(cam, [ep.Mesh(v, i, material=ep.Material(diffuse=diffuse))], sky),
+                         spp=4, max_bounces=2, seed=1)
+
+    inside = (slice(12, 20), slice(12, 20))
+    alone = image(albedo)[inside]
+    assert (alone - 0.6).abs().max() < 1e-5
+    followed = image(albedo.clone().requires_grad_())[inside].detach()
+    assert (followed - 0.6).abs().max() > 1e-2
+    assert abs(followed.mean().item() - 0.6) < 0.02
