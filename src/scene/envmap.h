@@ -36,8 +36,8 @@ struct Envmap {
     // luminance less the map's mean over the sphere, where positive (the "MIS compensation" of
     // Karlik et al. 2019). Where the map is no brighter than its mean the BSDF's samples find its
     // light well enough, and the light samples go where it is brighter. Empty for a map nowhere
-    // above its mean, a constant one: the BSDF's samples alone find it. Built at its first use
-    // (a render's, on any thread), and shared by the copies of this map.
+    // above its mean by more than rounding (a uniform one): the BSDF's samples alone find it.
+    // Built at its first use (a render's, on any thread), and shared by the copies of this map.
     const Distribution2D& compensated() const {
         Compensated& k = *compensated_;
         std::call_once(k.once, [&] {
@@ -47,9 +47,11 @@ struct Envmap {
                 solid += sin_theta;
             });
             const double mean = solid > 0 ? sum / solid : 0;
+            // A uniform map's cells differ from its mean by rounding alone: no light above it.
+            const double above = mean * (1.0 + 1e-6);
             std::vector<double> w(size_t(rows) * cols);
             for_each_cell([&](int r, int c, double l, double sin_theta) {
-                w[size_t(r) * cols + c] = std::max(0.0, l - mean) * sin_theta;
+                w[size_t(r) * cols + c] = l > above ? (l - mean) * sin_theta : 0.0;
             });
             k.dist.build(w, rows, cols);
         });

@@ -402,7 +402,8 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
 // in an image alone): its density integrates to one over the sphere, agrees with its sampler's,
 // is zero wherever the map is no brighter than its mean (all the light samples land on the
 // bright patch), and the map's light above its mean, max(L - mean, 0), is estimated without
-// bias by its samples. A constant map has none (empty), as has a map nowhere above its mean.
+// bias by its samples. A constant map has none (empty), nor has a uniform lat-long map (its
+// cells differ from their mean by rounding alone).
 TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     const int W = 12, H = 7;
     std::vector<float> data(W * H * 3);
@@ -427,7 +428,7 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     int above = 0;
     env.for_each_cell([&](int r, int c, double l, double) {
         const float pmf = env.compensated().pmf(r, c);
-        if (l > mean) {
+        if (l > mean * (1 + 1e-6)) {
             ++above;
             EXPECT_GT(pmf, 0.f) << r << "," << c;
         } else {
@@ -482,6 +483,16 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     EXPECT_FALSE(constant.sample(0.3f, 0.6f, ws, pdf, true));
     constant.eval(Vec3f(0, 1, 0), pdf, true);
     EXPECT_EQ(pdf, 0.f);
+    std::vector<float> flat(5 * 9 * 3, 0.2f);
+    EnvmapDesc grey;
+    grey.values.data = flat.data();
+    grey.values.height = 5;
+    grey.values.width = 9;
+    grey.values.channels = 3;
+    Envmap uniform;
+    uniform.build(grey);
+    EXPECT_TRUE(uniform.dist.valid());
+    EXPECT_FALSE(uniform.compensated().valid());
 }
 
 TEST(Envmap, MitsubaLookupConvention) {
