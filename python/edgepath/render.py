@@ -102,8 +102,9 @@ class RenderOptions:
     hide_emitters: bool = False
     secondary_survival: Optional[float] = None  # None: the core's default
     # The image's paths are those a gradient pass (or a derivative image) with the same seed
-    # retraces. False only for an image no gradient follows: a uniform sky is then left to the
-    # BSDF's samples (docs/conventions.md, "How lights are sampled").
+    # retraces. False only for an image no gradient follows: the environment is then sampled by
+    # its light above its mean, a uniform sky not at all (docs/conventions.md, "How lights are
+    # sampled").
     replayable: bool = True
 
     def core(self) -> dict:
@@ -137,9 +138,9 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
     with ``backward_spp`` samples per pixel (default: ``spp``). Its random numbers are
     independent of the image's by default (an unbiased gradient of the expected image);
     ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image. (An
-    image no gradient follows, with ``sampling="mis"``, leaves a uniform sky to the BSDF's
-    samples instead of sampling it as the gradient pass does: other paths, fewer rays, less
-    noise; docs/conventions.md.)
+    image no gradient follows, with ``sampling="mis"``, samples the environment by its light
+    above its mean, and a uniform sky not at all, where the gradient pass samples its whole
+    radiance: other paths, less noise; docs/conventions.md.)
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
     shading points: shadows, reflections, indirect light) switch them off for speed or

@@ -256,7 +256,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     l.env_on[k] = lane_mask(false);
     if (settings.use_nee && settings.use_env) {
         LightSample ls;
-        const bool env = scene.sample_env(ue1, ue2, ls);
+        const bool env = scene.sample_env(ue1, ue2, ls, settings.env_compensated);
         l.env_on[k] = lane_mask(env);
         if (env) {
             put3(l.env_dir, ls.dir);

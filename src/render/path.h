@@ -109,31 +109,37 @@ inline bool see_point_light(const Scene& scene, const SurfacePoint& sp, const Po
     return !scene.occluded(shadow);
 }
 
-// Whether the vertices sample the environment (next-event estimation) under these options.
-// A constant environment need not be: its light is the same from every direction, so when the
-// strategies are combined the BSDF's sample, drawn in proportion to the lobe (and traced anyway
-// for the path's next bounce), is as good a sample of it as a light sample (better than a
-// uniform one, half of whose directions lie below the surface), counted at full weight. That
-// saves a shadow ray a vertex and lowers the image's variance, and an image that no gradient
-// pass retraces (RenderOptions::replayable false) does so. The paths recorded for the adjoint
-// sweep (`recorded`) still sample it: the sweep differentiates a BSDF sample's value over its
-// density with the density held, and for a cosine-weighted sample that derivative grows as
-// 1 / cos towards grazing directions (its variance is infinite), where a light sample's
-// density does not depend on the surface (on a smooth-shaded sphere under a uniform sky, the
-// derivative image with respect to the camera's position had 3.9 times the variance with the
-// sky left to the BSDF). So do the images a gradient pass may retrace, to have its paths; and
-// light-only sampling, which nothing else would find the sky for.
-inline bool env_nee(const Scene& scene, const RenderOptions& opt, bool recorded) {
+// Whether the vertices sample the environment (next-event estimation) under these options, and
+// by which distribution (`compensated`: Envmap::compensated()). When the strategies are combined
+// the BSDF's samples, drawn in proportion to the lobe (and traced anyway for the path's next
+// bounce), find the environment's light too, and find it well where it is no brighter than its
+// mean: an image that no gradient pass retraces (RenderOptions::replayable false) samples only
+// the light above the mean ("MIS compensation"), and a constant environment not at all (better
+// than a uniform sample, half of whose directions lie below the surface), its escaping BSDF
+// samples counting at full weight. That saves a shadow ray a vertex under a uniform sky, and
+// lowers the image's variance. The paths recorded for the adjoint sweep (`recorded`) sample
+// the environment by its whole radiance: the sweep differentiates a BSDF sample's value over
+// its density with the density held, and for a cosine-weighted sample that derivative grows as
+// 1 / cos towards grazing directions (its variance is infinite), where a light sample's density
+// does not depend on the surface (on a smooth-shaded sphere under a uniform sky, the derivative
+// image with respect to the camera's position had 3.9 times the variance with the sky left to
+// the BSDF). So do the images a gradient pass may retrace, to have its paths, and light-only
+// sampling, which has nothing else to find the environment with.
+inline bool env_nee(const Scene& scene, const RenderOptions& opt, bool recorded, bool& compensated) {
+    compensated = false;
     if (!scene.env_sampled || opt.sampling == LightSampling::BSDFOnly) return false;
-    return recorded || opt.replayable || !(opt.sampling == LightSampling::MIS && scene.envmap.constant());
+    if (recorded || opt.replayable || opt.sampling != LightSampling::MIS) return true;
+    compensated = true;
+    return scene.envmap.compensated().valid();
 }
 
 // What the path tracer does with the options, once for all its paths (`recorded`: paths
 // recorded for the adjoint sweep).
 struct PathSettings {
-    bool use_env, use_nee, use_hits, mis, both_lights;
+    bool env_compensated, use_env, use_nee, use_hits, mis, both_lights;
     PathSettings(const Scene& scene, const RenderOptions& opt, bool recorded = false)
-        : use_env(env_nee(scene, opt, recorded)),
+        : env_compensated(false),
+          use_env(env_nee(scene, opt, recorded, env_compensated)),
           use_nee(opt.sampling != LightSampling::BSDFOnly && (scene.light_distribution.valid() || use_env)),
           use_hits(opt.sampling != LightSampling::LightOnly),
           mis(opt.sampling == LightSampling::MIS),
@@ -155,7 +161,7 @@ inline bool escaped_light(const Scene& scene, const PathSettings& ps, const Vec3
     if (!scene.has_envmap || !continuation_counts(ps, delta)) return false;
     const bool weighted = continuation_weighted(ps, delta);
     float env_pdf = 0.f;
-    Le = weighted && ps.use_env ? scene.envmap.eval(dir, env_pdf) : scene.envmap.eval(dir);
+    Le = weighted && ps.use_env ? scene.envmap.eval(dir, env_pdf, ps.env_compensated) : scene.envmap.eval(dir);
     w = weighted ? mis_power(pdf, env_pdf) : 1.f;
     return true;
 }
@@ -239,7 +245,7 @@ inline bool shade_vertex(const Scene& scene, const PathSettings& ps, SurfacePoin
     const bool nee_here = ps.use_nee && !delta;
     LightSample ls;
     if (nee_here && scene.sample_area_light(sp.p, ul0, ul1, ul2, ls)) next_event(ShadowKind::Area, ls);
-    if (nee_here && ps.use_env && scene.sample_env(ue1, ue2, ls)) next_event(ShadowKind::Env, ls);
+    if (nee_here && ps.use_env && scene.sample_env(ue1, ue2, ls, ps.env_compensated)) next_event(ShadowKind::Env, ls);
     if (!delta) point_light_samples(scene, sp, bp, frame, wo, beta, counters, on_shadow);
     return delta;
 }

@@ -189,8 +189,9 @@ struct RenderOptions {
     bool hide_emitters = false;
     // The image's paths are those a gradient pass with the same seed retraces, and those of a
     // derivative image with the same seed (the default). False, for an image no gradient will
-    // follow, lets its paths leave a uniform sky to the BSDF's samples (render/path.h, env_nee):
-    // a shadow ray fewer a vertex and less noise, but other paths than the gradient pass's.
+    // follow, lets its paths sample the environment by its light above its mean, and leave a
+    // uniform sky to the BSDF's samples (render/path.h, env_nee): less noise, a shadow ray fewer
+    // a vertex under a uniform sky, but other paths than the gradient pass's.
     bool replayable = true;
     // Optional: another thread sets it to stop the call. The loops stop taking work within a
     // sample and the call throws Cancelled; its outputs are then unspecified.

@@ -1,8 +1,11 @@
 // Lat-long environment map (Mitsuba's convention, see scene/desc.h), importance-sampled by a
 // piecewise-constant distribution over the cells between texels, weighted by sin(theta); a
-// constant map (one texel), uniformly over the sphere.
+// constant map (one texel), uniformly over the sphere. An image alone samples it by the light
+// above its mean instead (compensated()).
 #pragma once
 #include <cmath>
+#include <memory>
+#include <mutex>
 #include "sampling/distribution.h"
 #include "sampling/warp.h"
 #include "scene/texture.h"
@@ -23,6 +26,42 @@ struct Envmap {
         rows = std::max(tex.height - 1, 1);
         cols = tex.width;
         std::vector<double> w(size_t(rows) * cols);
+        for_each_cell([&](int r, int c, double l, double sin_theta) { w[size_t(r) * cols + c] = l * sin_theta; });
+        dist.build(w, rows, cols);
+        compensated_ = std::make_shared<Compensated>();
+    }
+
+    // The distribution of the light samples of an image that combines them with the BSDF's
+    // samples and that no gradient pass retraces (render/path.h, env_nee): each cell's
+    // luminance less the map's mean over the sphere, where positive (the "MIS compensation" of
+    // Karlik et al. 2019). Where the map is no brighter than its mean the BSDF's samples find its
+    // light well enough, and the light samples go where it is brighter. Empty for a map nowhere
+    // above its mean by more than rounding (a uniform one): the BSDF's samples alone find it.
+    // Built at its first use (a render's, on any thread), and shared by the copies of this map.
+    const Distribution2D& compensated() const {
+        Compensated& k = *compensated_;
+        std::call_once(k.once, [&] {
+            double sum = 0, solid = 0;
+            for_each_cell([&](int, int, double l, double sin_theta) {
+                sum += l * sin_theta;
+                solid += sin_theta;
+            });
+            const double mean = solid > 0 ? sum / solid : 0;
+            // A uniform map's cells differ from its mean by rounding alone: no light above it.
+            const double above = mean * (1.0 + 1e-6);
+            std::vector<double> w(size_t(rows) * cols);
+            for_each_cell([&](int r, int c, double l, double sin_theta) {
+                w[size_t(r) * cols + c] = l > above ? (l - mean) * sin_theta : 0.0;
+            });
+            k.dist.build(w, rows, cols);
+        });
+        return k.dist;
+    }
+
+    // f(row, col, l, sin_theta) for every sampling cell: its mean luminance l (of its four
+    // texels, no lower than 0) and the sine of its centre's polar angle.
+    template <class F>
+    void for_each_cell(F&& f) const {
         for (int r = 0; r < rows; ++r) {
             int r1 = std::min(r + 1, tex.height - 1);
             double sin_theta = std::sin((r + 0.5) / rows * 3.14159265358979);
@@ -30,10 +69,9 @@ struct Envmap {
                 int c1 = (c + 1) % cols;
                 double l = luminance(texel(r, c)) + luminance(texel(r, c1)) + luminance(texel(r1, c)) +
                            luminance(texel(r1, c1));
-                w[size_t(r) * cols + c] = std::max(0.0, l) * 0.25 * sin_theta;
+                f(r, c, std::max(0.0, l) * 0.25, sin_theta);
             }
         }
-        dist.build(w, rows, cols);
     }
 
     Vec3f texel(int row, int col) const {
@@ -67,11 +105,10 @@ struct Envmap {
     // One texel (a constant environment, as Mitsuba's `constant` emitter): the same value in
     // every direction. Its lookups skip the direction's position (an arc tangent and an arc
     // cosine), which only weighs the texel against itself (the bilinear weights add up to 1, up
-    // to rounding), and it is sampled uniformly over the sphere where it is sampled at all (a
-    // render that combines the strategies leaves it to the BSDF: env_nee in render/path.h):
-    // density 1 / (4 pi) everywhere,
-    // where the lat-long cells' density would be 1 / (2 pi^2 sin theta), heavier at the poles
-    // and with more variance for the same value.
+    // to rounding), and it is sampled uniformly over the sphere where it is sampled at all (an
+    // image alone leaves it to the BSDF: its compensated() is empty): density 1 / (4 pi)
+    // everywhere, where the lat-long cells' density would be 1 / (2 pi^2 sin theta), heavier at
+    // the poles and with more variance for the same value.
     bool constant() const { return tex.width == 1 && tex.height == 1; }
     static constexpr float kUniformPdf = 0.25f * kInvPi;
 
@@ -130,14 +167,15 @@ struct Envmap {
     Vec3f eval(const Vec3f& world_dir) const {
         return constant() ? texel(0) * scale : eval_at(position(world_dir));
     }
-    // The value towards world_dir and the density sample() gives it, from one position lookup.
-    Vec3f eval(const Vec3f& world_dir, float& pdf_out) const {
+    // The value towards world_dir and the density sample() gives it (with the same
+    // `compensated`), from one position lookup.
+    Vec3f eval(const Vec3f& world_dir, float& pdf_out, bool compensated = false) const {
         if (constant()) {
-            pdf_out = dist.valid() ? kUniformPdf : 0.f;
+            pdf_out = (compensated ? this->compensated() : dist).valid() ? kUniformPdf : 0.f;
             return texel(0) * scale;
         }
         const Vec2f p = position(world_dir);
-        pdf_out = pdf_at(p);
+        pdf_out = pdf_at(p, compensated);
         return eval_at(p);
     }
     Vec3f eval_at(const Vec2f& p) const {
@@ -155,23 +193,26 @@ struct Envmap {
         if (!dist.valid()) return 0.f;
         return constant() ? kUniformPdf : pdf_at(position(world_dir));
     }
-    float pdf_at(const Vec2f& p) const {
-        if (!dist.valid()) return 0.f;
+    float pdf_at(const Vec2f& p, bool compensated = false) const {
+        const Distribution2D& d = compensated ? this->compensated() : dist;
+        if (!d.valid()) return 0.f;
         int c = std::min(int(p.x), cols - 1), r = std::min(int(p.y), rows - 1);
         float sin_theta = std::sin(p.y / float(rows) * kPi);
         if (sin_theta <= 0.f) return 0.f;
-        return dist.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
+        return d.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
     }
 
-    bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out) const {
-        if (!dist.valid()) return false;
+    // A direction by `dist`, or by compensated() (then never a constant map's).
+    bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out, bool compensated = false) const {
+        const Distribution2D& d = compensated ? this->compensated() : dist;
+        if (!d.valid()) return false;
         if (constant()) {  // uniform: no rotation needed
             world_dir = square_to_sphere(u1, u2);
             pdf_out = kUniformPdf;
             return true;
         }
         int r = 0, c = 0;
-        dist.sample(u1, u2, r, c);
+        d.sample(u1, u2, r, c);
         // Cell c lies between columns c and c + 1: u from (c + 0.5) / W to (c + 1.5) / W.
         float x = (float(c) + 0.5f + u2) / float(cols), y = (float(r) + u1) / float(rows);
         float theta = y * kPi, phi = x * 2.f * kPi;
@@ -179,9 +220,16 @@ struct Envmap {
         if (sin_theta <= 0.f) return false;
         Vec3f local(sin_theta * std::sin(phi), std::cos(theta), -sin_theta * std::cos(phi));
         world_dir = to_world_dir(local);
-        pdf_out = dist.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
+        pdf_out = d.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
         return pdf_out > 0.f;
     }
+
+private:
+    struct Compensated {
+        std::once_flag once;
+        Distribution2D dist;
+    };
+    std::shared_ptr<Compensated> compensated_ = std::make_shared<Compensated>();
 };
 
 }  // namespace edgepath

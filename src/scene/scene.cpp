@@ -708,11 +708,11 @@ Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
     return eval_texture3(m.emission, sp.uv) * spot_scale(m.spot, m.spot_profile, w);
 }
 
-bool Scene::sample_env(float u1, float u2, LightSample& ls) const {
+bool Scene::sample_env(float u1, float u2, LightSample& ls, bool compensated) const {
     if (!env_sampled) return false;
     Vec3f dir;
     float pdf;
-    if (!envmap.sample(u1, u2, dir, pdf)) return false;
+    if (!envmap.sample(u1, u2, dir, pdf, compensated)) return false;
     ls.dir = dir;
     ls.dist = std::numeric_limits<float>::infinity();
     ls.radiance = envmap.eval(dir);

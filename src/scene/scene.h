@@ -277,8 +277,9 @@ public:
         u = std::min(u0, 0.99999994f);
         return light_distribution.sample(u);
     }
-    // Samples a direction towards the environment (by its radiance).
-    bool sample_env(float u1, float u2, LightSample& ls) const;
+    // Samples a direction towards the environment (by its radiance; `compensated`: by
+    // Envmap::compensated()).
+    bool sample_env(float u1, float u2, LightSample& ls, bool compensated = false) const;
     // Solid-angle density with which sample_area_light would produce the direction from p to
     // the emitting surface point `on_light`.
     float light_pdf(const Vec3f& p, const SurfacePoint& on_light) const;

@@ -655,6 +655,46 @@ std::vector<float> bright_patch_sky() {
     return sky;
 }
 
+// An image alone samples a lat-long sky by its light above the mean (Envmap::compensated): the
+// same image in expectation as the replayable one, which samples it by its whole radiance, and
+// less noisy (a diffuse floor and a glossy sphere under the bright-patch sky).
+TEST(Render, CompensatedSkySamplesAgreeAndAreLessNoisy) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0, -0.2f, 0), 0.8f, 16, 32);
+    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.2f, 0.2f, 0.2f}), rough({0.3f}), black({0, 0, 0});
+    const std::vector<float> sky = bright_patch_sky();
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.5f, 4), Vec3f(0, -0.3f, 0), 20, 20, 50);
+    d.materials.push_back(material(kd, black, rough));
+    d.materials.push_back(material(kd, ks, rough));
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(1));
+    d.has_envmap = true;
+    d.envmap.values = {sky.data(), 4, 8, 3};
+    auto scene = build_scene(d);
+    ASSERT_TRUE(scene->envmap.compensated().valid());
+    RenderOptions opt;
+    opt.spp = 4;
+    opt.max_bounces = 2;
+    const Stats whole = render_stats(*scene, opt, 48);
+    opt.replayable = false;
+    const Stats comp = render_stats(*scene, opt, 48);
+    double var_whole = 0, var_comp = 0, sum_whole = 0, sum_comp = 0;
+    int off = 0;
+    for (size_t i = 0; i < whole.mean.size(); ++i) {
+        const double se = std::hypot(whole.stderr_[i], comp.stderr_[i]);
+        off += std::abs(whole.mean[i] - comp.mean[i]) > 5 * se + 1e-6;
+        var_whole += whole.stderr_[i] * whole.stderr_[i];
+        var_comp += comp.stderr_[i] * comp.stderr_[i];
+        sum_whole += whole.mean[i];
+        sum_comp += comp.mean[i];
+    }
+    EXPECT_EQ(off, 0);
+    // The image sums (the pixels' errors are independent): a bias shows there first.
+    EXPECT_NEAR(sum_comp, sum_whole, 4 * std::sqrt(var_whole + var_comp));
+    EXPECT_LT(var_comp, 0.9 * var_whole);
+}
+
 // The textures the batched-paths tests share: a 3 x 3 checker (a textured diffuse), a 2 x 2
 // roughness, and vertex colours for a mesh of `vertices` vertices.
 struct BatchTextures {
@@ -795,35 +835,38 @@ TEST(Render, BatchedPathsMatchTracePath) {
         scene->set_camera(d.camera);
         for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
             for (bool hide : {false, true})
-                for (int bounces : {0, 1, 3, 40}) {
-                    if (sampling != LightSampling::MIS && (hide || bounces == 40)) continue;
-                    if (type == CameraType::Fisheye && (sampling != LightSampling::MIS || hide || bounces != 3))
-                        continue;
-                    opt.sampling = sampling;
-                    opt.hide_emitters = hide;
-                    opt.max_bounces = bounces;
-                    RayCounters counters;
-                    const std::vector<float> reference = trace_path_image(*scene, opt, counters, &outside);
-                    const std::string what = "camera " + std::to_string(int(type)) + ", sampling " +
-                                             std::to_string(int(sampling)) + ", hide " + std::to_string(hide) + ", " +
-                                             std::to_string(bounces) + " bounces";
-                    double total = 0;
-                    for (float v : reference) total += v;
-                    if (hide && bounces == 0)
-                        EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
-                    else
-                        EXPECT_GT(total, 0.0) << what;
-                    compared += expect_render_matches(*scene, opt, reference, counters, what);
-                    const ChannelLayout layout({Channel::Depth, Channel::Radiance});
-                    std::vector<float> values(size_t(W) * H * 4);
-                    render_channels(*scene, opt, layout, values.data(), nullptr);
-                    int differing = 0;
-                    for (size_t i = 0; i < reference.size(); ++i)
-                        differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
-                    EXPECT_EQ(differing, 0) << what << ", render_channels";
-                }
+                for (int bounces : {0, 1, 3, 40})
+                    for (bool replayable : {true, false}) {  // false: the sky's compensated samples
+                        if (sampling != LightSampling::MIS && (hide || bounces == 40 || !replayable)) continue;
+                        if (type == CameraType::Fisheye && (sampling != LightSampling::MIS || hide || bounces != 3))
+                            continue;
+                        opt.sampling = sampling;
+                        opt.hide_emitters = hide;
+                        opt.max_bounces = bounces;
+                        opt.replayable = replayable;
+                        RayCounters counters;
+                        const std::vector<float> reference = trace_path_image(*scene, opt, counters, &outside);
+                        const std::string what = "camera " + std::to_string(int(type)) + ", sampling " +
+                                                 std::to_string(int(sampling)) + ", hide " + std::to_string(hide) + ", " +
+                                                 std::to_string(bounces) + " bounces, replayable " +
+                                                 std::to_string(replayable);
+                        double total = 0;
+                        for (float v : reference) total += v;
+                        if (hide && bounces == 0)
+                            EXPECT_EQ(total, 0.0) << what;  // the emitters and the sky hidden, nothing lit
+                        else
+                            EXPECT_GT(total, 0.0) << what;
+                        compared += expect_render_matches(*scene, opt, reference, counters, what);
+                        const ChannelLayout layout({Channel::Depth, Channel::Radiance});
+                        std::vector<float> values(size_t(W) * H * 4);
+                        render_channels(*scene, opt, layout, values.data(), nullptr);
+                        int differing = 0;
+                        for (size_t i = 0; i < reference.size(); ++i)
+                            differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
+                        EXPECT_EQ(differing, 0) << what << ", render_channels";
+                    }
     }
-    EXPECT_EQ(compared, 2 * (8 + 3 + 3 + 1));
+    EXPECT_EQ(compared, 2 * (2 * 8 + 3 + 3 + 2));
     EXPECT_GT(outside, 0);
 }
 
@@ -833,19 +876,23 @@ TEST(Render, BatchedPathsMatchTracePath) {
 int expect_strategies_match(const Scene& scene, RenderOptions opt, int variant, int long_path) {
     int compared = 0;
     for (LightSampling sampling : {LightSampling::MIS, LightSampling::LightOnly, LightSampling::BSDFOnly})
-        for (int bounces : {0, 1, 3, long_path}) {
-            if (sampling != LightSampling::MIS && bounces == long_path) continue;
-            opt.sampling = sampling;
-            opt.max_bounces = bounces;
-            RayCounters counters;
-            const std::vector<float> reference = trace_path_image(scene, opt, counters);
-            const std::string what = "variant " + std::to_string(variant) + ", sampling " +
-                                     std::to_string(int(sampling)) + ", " + std::to_string(bounces) + " bounces";
-            double total = 0;
-            for (float v : reference) total += v;
-            EXPECT_GT(total, 0.0) << what;
-            compared += expect_render_matches(scene, opt, reference, counters, what);
-        }
+        for (int bounces : {0, 1, 3, long_path})
+            for (bool replayable : {true, false}) {  // false: the sky's compensated samples
+                if (sampling != LightSampling::MIS && (bounces == long_path || !replayable)) continue;
+                if (!replayable && bounces != 3) continue;
+                opt.sampling = sampling;
+                opt.max_bounces = bounces;
+                opt.replayable = replayable;
+                RayCounters counters;
+                const std::vector<float> reference = trace_path_image(scene, opt, counters);
+                const std::string what = "variant " + std::to_string(variant) + ", sampling " +
+                                         std::to_string(int(sampling)) + ", " + std::to_string(bounces) +
+                                         " bounces, replayable " + std::to_string(replayable);
+                double total = 0;
+                for (float v : reference) total += v;
+                EXPECT_GT(total, 0.0) << what;
+                compared += expect_render_matches(scene, opt, reference, counters, what);
+            }
     return compared;
 }
 
@@ -931,7 +978,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
         }
         compared += expect_strategies_match(*build_scene(d), opt, variant, 40);
     }
-    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
 }
 
 // The batches shade glossy vertices (the standard material: the diffuse and GGX lobes, its
@@ -1000,7 +1047,7 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
         variants.apply(d, variant, 7);
         compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
     }
-    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
 }
 
 // shade_lanes' widths in force for the life of a test, then the processor's widest again.

@@ -398,6 +398,103 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
     EXPECT_NEAR(L_uniform.mean(), L_sampled.mean(), 5 * std::hypot(L_uniform.se(), L_sampled.se()));
 }
 
+// The compensated distribution (Envmap::compensated, for light samples combined with the BSDF's
+// in an image alone): its density integrates to one over the sphere, agrees with its sampler's,
+// is zero wherever the map is no brighter than its mean (all the light samples land on the
+// bright patch), and the map's light above its mean, max(L - mean, 0), is estimated without
+// bias by its samples. A constant map has none (empty), nor has a uniform lat-long map (its
+// cells differ from their mean by rounding alone).
+TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
+    const int W = 12, H = 7;
+    std::vector<float> data(W * H * 3);
+    for (int j = 0; j < H; ++j)
+        for (int i = 0; i < W; ++i)
+            for (int c = 0; c < 3; ++c) data[(j * W + i) * 3 + c] = (i == 2 && j == 3) ? 20.f : 0.1f + 0.01f * (i + c);
+    EnvmapDesc d;
+    d.values.data = data.data();
+    d.values.height = H;
+    d.values.width = W;
+    d.values.channels = 3;
+    Envmap env;
+    env.build(d);
+    ASSERT_TRUE(env.compensated().valid());
+    // The mean over the sphere, from the cells' luminance as the distributions see them.
+    double sum = 0, solid = 0;
+    env.for_each_cell([&](int, int, double l, double sin_theta) {
+        sum += l * sin_theta;
+        solid += sin_theta;
+    });
+    const double mean = sum / solid;
+    int above = 0;
+    env.for_each_cell([&](int r, int c, double l, double) {
+        const float pmf = env.compensated().pmf(r, c);
+        if (l > mean * (1 + 1e-6)) {
+            ++above;
+            EXPECT_GT(pmf, 0.f) << r << "," << c;
+        } else {
+            EXPECT_EQ(pmf, 0.f) << r << "," << c;
+        }
+    });
+    EXPECT_GT(above, 0);
+    EXPECT_LT(above, 8);  // the cells touching the bright texel
+    Rng rng(3, 9);
+    Acc pdf_int, excess_uniform, excess_sampled;
+    for (int i = 0; i < 400000; ++i) {
+        const Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
+        float pdf_w;
+        env.eval(w, pdf_w, true);
+        pdf_int.add(pdf_w * 4 * kPi);
+        Vec3f ws;
+        float pdf;
+        ASSERT_TRUE(env.sample(rng.next_float(), rng.next_float(), ws, pdf, true));
+        float pdf_back;
+        env.eval(ws, pdf_back, true);
+        const float sin_theta = std::sin(env.position(ws).y / float(env.rows) * kPi);
+        if (sin_theta > 0.1f) EXPECT_NEAR(pdf_back, pdf, 2e-3f * pdf);
+        // The cells' excess over the mean, as a function of direction: piecewise constant.
+        auto excess = [&](const Vec3f& dir) {
+            const Vec2f p = env.position(dir);
+            const int r = std::min(int(p.y), env.rows - 1), c = std::min(int(p.x), env.cols - 1);
+            double out = 0;
+            env.for_each_cell([&](int rr, int cc, double l, double) {
+                if (rr == r && cc == c) out = std::max(0.0, l - mean);
+            });
+            return out;
+        };
+        if (i % 50 == 0) {  // the excess is looked up by a scan of the cells: every 50th sample
+            excess_uniform.add(excess(w) * 4 * kPi);
+            excess_sampled.add(excess(ws) / pdf);
+        }
+    }
+    EXPECT_NEAR(pdf_int.mean(), 1.0, 5 * pdf_int.se());
+    EXPECT_NEAR(excess_uniform.mean(), excess_sampled.mean(), 5 * std::hypot(excess_uniform.se(), excess_sampled.se()));
+
+    const float texel[3] = {0.2f, 0.25f, 0.3f};
+    EnvmapDesc one;
+    one.values.data = texel;
+    one.values.height = one.values.width = 1;
+    one.values.channels = 3;
+    Envmap constant;
+    constant.build(one);
+    EXPECT_TRUE(constant.dist.valid());
+    EXPECT_FALSE(constant.compensated().valid());
+    Vec3f ws;
+    float pdf;
+    EXPECT_FALSE(constant.sample(0.3f, 0.6f, ws, pdf, true));
+    constant.eval(Vec3f(0, 1, 0), pdf, true);
+    EXPECT_EQ(pdf, 0.f);
+    std::vector<float> flat(5 * 9 * 3, 0.2f);
+    EnvmapDesc grey;
+    grey.values.data = flat.data();
+    grey.values.height = 5;
+    grey.values.width = 9;
+    grey.values.channels = 3;
+    Envmap uniform;
+    uniform.build(grey);
+    EXPECT_TRUE(uniform.dist.valid());
+    EXPECT_FALSE(uniform.compensated().valid());
+}
+
 TEST(Envmap, MitsubaLookupConvention) {
     // Texel column i sits at u = (i + 0.5) / W, row j at v = j / (H - 1); -z is u = 0, +y is
     // row 0; u wraps between the last column and the first.
