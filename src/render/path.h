@@ -155,7 +155,8 @@ inline bool continuation_counts(const PathSettings& ps, bool delta) { return ps.
 inline bool continuation_weighted(const PathSettings& ps, bool delta) { return ps.mis && ps.use_nee && !delta; }
 
 // The environment seen along `dir` by a continuation that left the scene: its value and, for
-// the weight, its density (as sample_env gives it, where the vertices sample it) from one lookup of the direction.
+// the weight, its density (as the vertices' sample_env gives it) from one lookup of the
+// direction.
 inline bool escaped_light(const Scene& scene, const PathSettings& ps, const Vec3f& dir, float pdf, bool delta,
                           Vec3f& Le, float& w) {
     if (!scene.has_envmap || !continuation_counts(ps, delta)) return false;
