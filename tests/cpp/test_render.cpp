@@ -83,19 +83,36 @@ Stats render_stats(const Scene& s, RenderOptions opt, int runs) {
     return st;
 }
 
+// The white furnace: a flat-shaded sphere (a convex polyhedron: it never sees itself) of albedo
+// 0.6 under a uniform environment of radiance 1, seen from (0, 0, 4) on a 32 x 32 film.
+struct WhiteFurnace {
+    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 24, 48);
+    ConstTex kd{{0.6f, 0.6f, 0.6f}}, ks{{0, 0, 0}}, rough{{0.5f}}, env{{1, 1, 1}};
+    std::shared_ptr<Scene> scene;
+    // Pixels whose whole footprint lies on the sphere are those within this distance of the
+    // film's centre, less a pixel and a half: the projected radius is tan(asin(1/4)) / tan(20
+    // deg) of the half width.
+    const double radius = std::tan(std::asin(0.25)) / std::tan(20.0 * M_PI / 180.0) * 16.0;
+    WhiteFurnace() {
+        sphere.normals.clear();
+        SceneDesc d;
+        d.camera = camera(Vec3f(0, 0, 4), Vec3f(0, 0, 0), 32, 32, 40);
+        d.materials.push_back(material(kd, ks, rough));
+        d.meshes.push_back(sphere.desc(0));
+        d.has_envmap = true;
+        d.envmap.values = env.desc();
+        scene = build_scene(d);
+    }
+    WhiteFurnace(const WhiteFurnace&) = delete;  // the scene points into it
+    WhiteFurnace& operator=(const WhiteFurnace&) = delete;
+    bool inside(int x, int y) const { return std::hypot(x + 0.5 - 16, y + 0.5 - 16) <= radius - 1.5; }
+};
+
 // White furnace: a convex object of albedo rho under a uniform environment of radiance 1 has
 // radiance rho everywhere, for any max_bounces >= 1.
 TEST(Render, WhiteFurnaceFlatSphere) {
-    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 24, 48);
-    sphere.normals.clear();  // flat shading: the polyhedron is convex, it never sees itself
-    ConstTex kd({0.6f, 0.6f, 0.6f}), ks({0, 0, 0}), rough({0.5f}), env({1, 1, 1});
-    SceneDesc d;
-    d.camera = camera(Vec3f(0, 0, 4), Vec3f(0, 0, 0), 32, 32, 40);
-    d.materials.push_back(material(kd, ks, rough));
-    d.meshes.push_back(sphere.desc(0));
-    d.has_envmap = true;
-    d.envmap.values = env.desc();
-    auto scene = build_scene(d);
+    const WhiteFurnace furnace;
+    const Scene* scene = furnace.scene.get();
     for (int bounces : {1, 3}) {
         RenderOptions opt;
         opt.spp = 8;
@@ -103,14 +120,10 @@ TEST(Render, WhiteFurnaceFlatSphere) {
         // 32 independent runs: the per-pixel standard error is itself estimated from them, and
         // with few runs its own error makes 5-sigma outliers common over hundreds of pixels.
         Stats st = render_stats(*scene, opt, 32);
-        // Pixels whose whole footprint lies on the sphere: the projected radius is tan(asin(1/4))
-        // / tan(20 deg) of the half width; keep those well inside it.
-        double R = std::tan(std::asin(0.25)) / std::tan(20.0 * M_PI / 180.0) * 16.0;
         int tested = 0;
         for (int y = 0; y < 32; ++y)
             for (int x = 0; x < 32; ++x) {
-                double r = std::hypot(x + 0.5 - 16, y + 0.5 - 16);
-                if (r > R - 1.5) continue;
+                if (!furnace.inside(x, y)) continue;
                 for (int c = 0; c < 3; ++c) {
                     size_t i = (size_t(y) * 32 + x) * 3 + c;
                     EXPECT_NEAR(st.mean[i], 0.6, 5 * st.stderr_[i] + 1e-4) << "pixel " << x << "," << y;
@@ -129,17 +142,8 @@ TEST(Render, WhiteFurnaceFlatSphere) {
 // half of it below the surface) mixed by MIS scatters them. Light-only sampling still samples
 // the sky (without it that strategy would see nothing), and so do replayable images.
 TEST(Render, ConstantSkyIsLeftToTheBsdfSamples) {
-    MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 24, 48);
-    sphere.normals.clear();
-    ConstTex kd({0.6f, 0.6f, 0.6f}), ks({0, 0, 0}), rough({0.5f}), env({1, 1, 1});
-    SceneDesc d;
-    d.camera = camera(Vec3f(0, 0, 4), Vec3f(0, 0, 0), 32, 32, 40);
-    d.materials.push_back(material(kd, ks, rough));
-    d.meshes.push_back(sphere.desc(0));
-    d.has_envmap = true;
-    d.envmap.values = env.desc();
-    auto scene = build_scene(d);
-    const double R = std::tan(std::asin(0.25)) / std::tan(20.0 * M_PI / 180.0) * 16.0;
+    const WhiteFurnace furnace;
+    const Scene* scene = furnace.scene.get();
     for (bool mis : {true, false}) {
         RenderOptions opt;
         opt.spp = 4;
@@ -157,7 +161,7 @@ TEST(Render, ConstantSkyIsLeftToTheBsdfSamples) {
         int tested = 0;
         for (int y = 0; y < 32; ++y)
             for (int x = 0; x < 32; ++x) {
-                if (std::hypot(x + 0.5 - 16, y + 0.5 - 16) > R - 1.5) continue;
+                if (!furnace.inside(x, y)) continue;
                 for (int c = 0; c < 3; ++c) {
                     const double v = img[(size_t(y) * 32 + x) * 3 + c];
                     worst = std::max(worst, std::abs(v - 0.6));

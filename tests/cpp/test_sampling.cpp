@@ -398,6 +398,18 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
     EXPECT_NEAR(L_uniform.mean(), L_sampled.mean(), 5 * std::hypot(L_uniform.se(), L_sampled.se()));
 }
 
+// An RGB lat-long map of height x width texels over `data` (which must outlive it), built.
+Envmap lat_long(const std::vector<float>& data, int height, int width) {
+    EnvmapDesc d;
+    d.values.data = data.data();
+    d.values.height = height;
+    d.values.width = width;
+    d.values.channels = 3;
+    Envmap env;
+    env.build(d);
+    return env;
+}
+
 // The compensated distribution (Envmap::compensated, for light samples combined with the BSDF's
 // in an image alone): its density integrates to one over the sphere, agrees with its sampler's,
 // is zero wherever the map is no brighter than its mean (all the light samples land on the
@@ -410,13 +422,7 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     for (int j = 0; j < H; ++j)
         for (int i = 0; i < W; ++i)
             for (int c = 0; c < 3; ++c) data[(j * W + i) * 3 + c] = (i == 2 && j == 3) ? 20.f : 0.1f + 0.01f * (i + c);
-    EnvmapDesc d;
-    d.values.data = data.data();
-    d.values.height = H;
-    d.values.width = W;
-    d.values.channels = 3;
-    Envmap env;
-    env.build(d);
+    const Envmap env = lat_long(data, H, W);
     ASSERT_TRUE(env.compensated().valid());
     // The mean over the sphere, from the cells' luminance as the distributions see them.
     double sum = 0, solid = 0;
@@ -469,13 +475,8 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     EXPECT_NEAR(pdf_int.mean(), 1.0, 5 * pdf_int.se());
     EXPECT_NEAR(excess_uniform.mean(), excess_sampled.mean(), 5 * std::hypot(excess_uniform.se(), excess_sampled.se()));
 
-    const float texel[3] = {0.2f, 0.25f, 0.3f};
-    EnvmapDesc one;
-    one.values.data = texel;
-    one.values.height = one.values.width = 1;
-    one.values.channels = 3;
-    Envmap constant;
-    constant.build(one);
+    const std::vector<float> texel = {0.2f, 0.25f, 0.3f};
+    const Envmap constant = lat_long(texel, 1, 1);
     EXPECT_TRUE(constant.dist.valid());
     EXPECT_FALSE(constant.compensated().valid());
     Vec3f ws;
@@ -483,14 +484,8 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
     EXPECT_FALSE(constant.sample(0.3f, 0.6f, ws, pdf, true));
     constant.eval(Vec3f(0, 1, 0), pdf, true);
     EXPECT_EQ(pdf, 0.f);
-    std::vector<float> flat(5 * 9 * 3, 0.2f);
-    EnvmapDesc grey;
-    grey.values.data = flat.data();
-    grey.values.height = 5;
-    grey.values.width = 9;
-    grey.values.channels = 3;
-    Envmap uniform;
-    uniform.build(grey);
+    const std::vector<float> grey(5 * 9 * 3, 0.2f);
+    const Envmap uniform = lat_long(grey, 5, 9);
     EXPECT_TRUE(uniform.dist.valid());
     EXPECT_FALSE(uniform.compensated().valid());
 }
@@ -502,13 +497,7 @@ TEST(Envmap, MitsubaLookupConvention) {
     std::vector<float> data(W * H * 3, 0.f);
     for (int j = 0; j < H; ++j)
         for (int i = 0; i < W; ++i) data[(j * W + i) * 3] = float(100 * j + i);
-    EnvmapDesc d;
-    d.values.data = data.data();
-    d.values.height = H;
-    d.values.width = W;
-    d.values.channels = 3;
-    Envmap env;
-    env.build(d);
+    const Envmap env = lat_long(data, H, W);
     auto dir = [](double u, double v) {  // the local direction of (u, v)
         double phi = 2 * M_PI * u, theta = M_PI * v;
         return Vec3f(float(std::sin(theta) * std::sin(phi)), float(std::cos(theta)),
