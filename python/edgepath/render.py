@@ -391,7 +391,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
                     secondary_survival: Optional[float] = None) -> Dict[str, torch.Tensor]:
     """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
     (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
-    the same options, bit for bit; "alpha", "depth", "position", "geometry_normal",
+    the same options, bit for bit (both with a gradient wanted, or both without); "alpha", "depth", "position", "geometry_normal",
     "shading_normal", "uv", "albedo", "barycentrics", "vertex_color", "roughness" and "specular"
     are float32, averaged over the same camera samples (filtered like radiance); "mesh_id",
     "triangle_id" and "material_id" are int32 (-1 where nothing is hit), those of the ray through
