@@ -56,8 +56,9 @@ struct PathBatch::Impl {
     // is looked up path by path, as Scene::bsdf_params does.
     struct PlainMesh {
         // its material's vertices are plain: MaterialKind::Standard (the Lambertian lobe and
-        // the GGX lobe where the specular is not black)
-        bool plain = false;
+        // the GGX lobe where the specular is not black), or plastic (MaterialKind::Plastic, in
+        // lanes of their own: shade_plastic_lanes)
+        bool plain = false, plastic = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
         bool constant_specular = false, constant_alpha = false, constant = false;
         bool glossy = false;  // constant_specular, and the specular is not black
@@ -66,6 +67,10 @@ struct PathBatch::Impl {
         Vec3f diffuse;
         bool fixed = false;  // constant and constant_specular: reflects and lobe_p hold
         float reflects = 0.f, lobe_p = 0.f;
+        // The plastic's: its index (a constant ior) and whether it is rough (a constant roughness).
+        bool constant_eta = false;
+        float eta = 0.f;
+        bool rough = false;
     };
     std::vector<PlainMesh> plain_mesh;
     // What the vectors take of an entry of scene.lights: whether they sample it (a triangle
@@ -82,16 +87,22 @@ struct PathBatch::Impl {
     static constexpr size_t kMaxLightEntries = 64;
     std::vector<LightEntry> light_entries;
     LightEntry looked_up_;  // the entry looked up last, without them (reused: not built per path)
-    ShadeLanes<kBatchSize> lanes;
-    int plain[kBatchSize];
-    int nplain_ = 0;
-    bool glossy_ = false;  // whether any of the bounce's plain vertices has a GGX lobe
+    // A bounce's vertices shaded in vectors: their lanes, their paths' places in `live`, their
+    // count and whether any has a GGX lobe (the standard material's).
+    struct LaneGroup {
+        ShadeLanes<kBatchSize> lanes;
+        int plain[kBatchSize];
+        int n = 0;
+        bool glossy = false;
+    };
+    LaneGroup standard_, plastic_;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
-            pm.plain = mat.kind == MaterialKind::Standard;
+            pm.plastic = mat.kind == MaterialKind::Plastic && mat.coat;
+            pm.plain = mat.kind == MaterialKind::Standard || pm.plastic;
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
             // Scene::bsdf_params' values where they are constant.
             if (pm.plain && mat.specular.is_constant()) {
@@ -110,8 +121,13 @@ struct PathBatch::Impl {
             if (pm.constant && pm.constant_specular) {
                 pm.fixed = true;
                 pm.reflects = plain_reflects(pm.diffuse, pm.specular);
-                if (pm.glossy) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
+                if (pm.glossy && !pm.plastic) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
             }
+            if (pm.plastic && mat.ior.is_constant()) {
+                pm.constant_eta = true;
+                pm.eta = mat.ior.data[0];
+            }
+            if (pm.plastic && pm.constant_alpha) pm.rough = mat.roughness.data[0] > 0.f;
             plain_mesh.push_back(pm);
         }
         if (scene.light_distribution.valid() && scene.lights.size() <= kMaxLightEntries) {
@@ -168,10 +184,12 @@ struct PathBatch::Impl {
 
 bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const Rng start = rng;
-    const int k = nplain_++;
-    plain[k] = j;
     const PathState& ps = paths[live[j]];
-    ShadeLanes<kBatchSize>& l = lanes;
+    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+    LaneGroup& group = pm.plastic ? plastic_ : standard_;
+    const int k = group.n++;
+    group.plain[k] = j;
+    ShadeLanes<kBatchSize>& l = group.lanes;
     auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
         a[0][k] = v.x;
         a[1][k] = v.y;
@@ -184,17 +202,34 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
     // Scene::bsdf_params' reflectances and alpha, and the GGX lobe's probability.
-    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
     const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
     const Vec3f specular = pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv);
     const bool glossy = pm.constant_specular ? pm.glossy : !is_black(specular);
-    l.has_specular[k] = lane_mask(glossy);
-    if (glossy) {
-        glossy_ = true;
+    if (pm.plastic) {
+        // The plastic's (Scene::bsdf_params): its coating, index and roughness, and the means
+        // of its reflectances that choose its lobe (plastic_coat_probability).
         put3(l.specular, specular);
-        l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(eval_texture1(mat.roughness, ps.sp.uv));
-        l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
+        float roughness = 0.f;
+        if (!pm.constant_alpha) roughness = eval_texture1(mat.roughness, ps.sp.uv);
+        l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(roughness);
+        l.rough[k] = lane_mask(pm.constant_alpha ? pm.rough : roughness > 0.f);
+        l.eta[k] = pm.constant_eta ? pm.eta : eval_texture1(mat.ior, ps.sp.uv);
+        const CoatTable* coat = mat.coat.get();
+        l.coat[k] = coat;
+        l.coat_r[k] = coat->r;
+        l.coat_lobe[k] = lane_mask(!coat->smooth && !is_black(specular));
+        l.nonlinear[k] = lane_mask(mat.nonlinear);
+        l.ks[k] = plastic_mean(specular);
+        l.kd[k] = plastic_mean(diffuse);
+    } else {
+        l.has_specular[k] = lane_mask(glossy);
+        if (glossy) {
+            group.glossy = true;
+            put3(l.specular, specular);
+            l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(eval_texture1(mat.roughness, ps.sp.uv));
+            l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
+        }
     }
     l.two_sided[k] = lane_mask(mat.two_sided);
     l.reflects[k] = pm.fixed ? pm.reflects : plain_reflects(diffuse, specular);
@@ -206,7 +241,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         ue2 = rng.next_float();
     }
     const float ub0 = rng.next_float();  // the lobe's choice (the diffuse lobe the only one without GGX)
-    if (glossy) l.u_lobe[k] = ub0;
+    if (glossy || pm.plastic) l.u_lobe[k] = ub0;
     const float ub1 = rng.next_float();
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();
@@ -240,7 +275,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
             if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
                 if (!std::isfinite(ls.dist)) {  // shadow_ray would not aim at a point
                     rng = start;
-                    --nplain_;
+                    --group.n;
                     return false;
                 }
                 put3(l.given_dir, ls.dir);
@@ -308,8 +343,8 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
         // what each would add.
         int nshadow = 0, nnext = 0;
-        nplain_ = 0;
-        glossy_ = false;
+        standard_.n = plastic_.n = 0;
+        standard_.glossy = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
         auto add_next = [&](PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
@@ -341,13 +376,19 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
             ps.shadow_end = nshadow;
         }
-        // The plain vertices, a vector of them at a time; then their rays into the packets.
-        if (nplain_ > 0) {
-            ShadeLanes<kBatchSize>& l = lanes;
-            shade_lanes(l, nplain_, settings.mis, glossy_);
+        // The plain vertices, a vector of them at a time (the standard material's, then the
+        // plastic's); then their rays into the packets.
+        for (LaneGroup* group : {&standard_, &plastic_}) {
+            if (group->n == 0) continue;
+            const bool plastic = group == &plastic_;
+            ShadeLanes<kBatchSize>& l = group->lanes;
+            if (plastic)
+                shade_plastic_lanes(l, group->n, settings.mis);
+            else
+                shade_lanes(l, group->n, settings.mis, group->glossy);
             auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
-            for (int k = 0; k < nplain_; ++k) {
-                PathState& ps = paths[live[plain[k]]];
+            for (int k = 0; k < group->n; ++k) {
+                PathState& ps = paths[live[group->plain[k]]];
                 ps.sp.ns = get3(l.ns, k);
                 ps.goes_on = false;
                 ps.shadow_begin = nshadow;
@@ -356,7 +397,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     ++counters.bounce;
                     r.origin = get3(l.next_origin, k);
                     r.dir = get3(l.next_dir, k);
-                    add_next(ps, r, get3(l.next_beta, k), l.next_pdf[k], false);
+                    add_next(ps, r, get3(l.next_beta, k), l.next_pdf[k], plastic && lane_set(l.next_delta, k));
                 }
                 if (lane_set(l.light_on, k)) {
                     r.origin = get3(l.light_origin, k);
@@ -371,19 +412,30 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     add_shadow(r, get3(l.env_value, k));
                 }
                 counters.shadow += uint64_t(nshadow - ps.shadow_begin);
-                // The point lights, path by path (shade_vertex's own code).
+                // The point lights, path by path (shade_vertex's own code), with Scene::bsdf_params'
+                // values.
                 if (!scene.point_lights.empty()) {
                     const Frame frame(ps.sp.ns);
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
-                    if (lane_set(l.has_specular, k)) {
+                    bp.two_sided = lane_set(l.two_sided, k);
+                    if (plastic) {
                         bp.specular = get3(l.specular, k);
                         bp.alpha = l.alpha[k];
+                        bp.kind = MaterialKind::Plastic;
+                        bp.eta = l.eta[k];
+                        bp.rough = lane_set(l.rough, k);
+                        bp.coat = l.coat[k];
+                        bp.nonlinear = lane_set(l.nonlinear, k);
                     } else {
-                        bp.specular = Vec3f(0.f);
+                        if (lane_set(l.has_specular, k)) {
+                            bp.specular = get3(l.specular, k);
+                            bp.alpha = l.alpha[k];
+                        } else {
+                            bp.specular = Vec3f(0.f);
+                        }
+                        bp.kind = MaterialKind::Standard;
                     }
-                    bp.two_sided = lane_set(l.two_sided, k);
-                    bp.kind = MaterialKind::Standard;
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
                                         [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*,
                                             float) { add_shadow(shadow_ray, value); });

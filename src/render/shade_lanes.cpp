@@ -6,12 +6,14 @@
 
 #include "math/simd4.h"
 #include "render/shade_kernel.h"
+#include "scene/bsdf.h"
 
 namespace edgepath {
 
 // render/shade_lanes_avx2.cpp: whether it was compiled with its AVX2 code, and that code.
 bool shade_lanes_avx2_compiled();
 void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
+void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis);
 
 namespace {
 
@@ -54,14 +56,45 @@ void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, Shade
         if (!shade_width_available(w)) throw std::invalid_argument("shade_lanes: AVX2 is not available");
         shade_lanes_avx2(L, n, mis, glossy);
     } else if (glossy) {
-        shade_lanes_kernel<F4, M4, V4, true>(L, n, mis);
+        shade_lanes_kernel<F4, M4, V4, true, false>(L, n, mis);
     } else {
-        shade_lanes_kernel<F4, M4, V4, false>(L, n, mis);
+        shade_lanes_kernel<F4, M4, V4, false, false>(L, n, mis);
     }
 }
 
 void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy) {
     shade_lanes(L, n, mis, glossy, shade_width());
+}
+
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w) {
+    if (w == ShadeWidth::Auto) w = shade_width();
+    if (w == ShadeWidth::Avx2) {
+        if (!shade_width_available(w)) throw std::invalid_argument("shade_plastic_lanes: AVX2 is not available");
+        shade_plastic_lanes_avx2(L, n, mis);
+    } else {
+        shade_lanes_kernel<F4, M4, V4, false, true>(L, n, mis);
+    }
+}
+
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
+    shade_plastic_lanes(L, n, mis, shade_width());
+}
+
+// The plastic's table lookups, path by path, with scalar code's functions themselves (a lane
+// past the batch's paths may hold no table, or a NaN cosine: 0 there, never read back).
+void plastic_coat_transmittances(const ShadeLanes<kShadeBatch>& L, int k, int count, float* c) {
+    for (int j = 0; j < count; ++j) {
+        const CoatTable* t = L.coat[k + j];
+        c[j] = t && !std::isnan(c[j]) ? detail::coat_transmittance(*t, c[j], L.eta[k + j]) : 0.f;
+    }
+}
+
+void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int n, const float* co, float* t_o, float* ps) {
+    for (int k = 0; k < n; ++k) {
+        const CoatTable* t = L.coat[k];
+        t_o[k] = t && !std::isnan(co[k]) ? detail::coat_transmittance(*t, co[k], L.eta[k]) : 0.f;
+        ps[k] = plastic_coat_probability(L.ks[k], L.kd[k], t_o[k]);
+    }
 }
 
 }  // namespace edgepath

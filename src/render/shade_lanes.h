@@ -27,6 +27,8 @@
 
 namespace edgepath {
 
+struct CoatTable;
+
 template <int N>
 struct ShadeLanes {
     static_assert(N % 16 == 0, "whole vectors of every width");
@@ -55,6 +57,17 @@ struct ShadeLanes {
     alignas(64) float given_p[3][N], given_p_error[3][N], given_ng[3][N];
     // The environment's sample (mask env_on): its direction, value and density.
     alignas(64) float env_on[N], env_dir[3][N], env_radiance[3][N], env_pdf[N];
+    // The plastic's lanes (shade_plastic_lanes; MaterialKind::Plastic, Scene::bsdf_params'
+    // values): its relative index, the coating's R (CoatTable::r), the means of the specular
+    // and of the diffuse reflectance (plastic_coat_probability's ks and kd); masks of a rough
+    // coating (a roughness above 0), of the rough coating's lobe in the value (the table not
+    // smooth, the specular not black) and of `nonlinear`; the coating's table. Their specular,
+    // alpha and lobe number are in specular, alpha and u_lobe above (has_specular, lobe_p not read).
+    alignas(64) float eta[N], coat_r[N], ks[N], kd[N], rough[N], coat_lobe[N], nonlinear[N];
+    // Out: the mask of a continuation along the smooth coating's mirror direction (a delta
+    // lobe: next_pdf is its probability, next_beta its weight).
+    alignas(64) float next_delta[N];
+    const CoatTable* coat[N];
 
     // Out: the bent shading normal (into ns); the continuation (mask goes_on), its ray and
     // throughput past it and the BSDF sample's density; the area light's shadow ray (mask
@@ -97,6 +110,16 @@ enum class ShadeWidth { Auto, Sse2, Avx2 };
 void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
 // The same in vectors of width w (Auto: the width in force); w must be available.
 void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, ShadeWidth w);
+// Lanes [0, n) of L, every one a plastic vertex (MaterialKind::Plastic, rough or smooth
+// coating), shaded likewise: shade_vertex's operations for the plastic, bit for bit.
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis);
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w);
+// The scalar steps of the plastic's lanes, for the kernels (render/shade_lanes.cpp, compiled
+// for the baseline processor): T(c) (detail::coat_transmittance) of lanes [k, k + count) for
+// the cosines c (in place), and for lanes [0, n) T(co) and plastic_coat_probability's value of
+// each lane's co.
+void plastic_coat_transmittances(const ShadeLanes<kShadeBatch>& L, int k, int count, float* c);
+void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int n, const float* co, float* t_o, float* ps);
 // Whether this build and processor can run width w (Sse2 and Auto always).
 bool shade_width_available(ShadeWidth w);
 // The width shade_lanes uses: the widest available unless another was forced.
