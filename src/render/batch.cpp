@@ -1,6 +1,7 @@
 #include "render/batch.h"
 
 #include <limits>
+#include <type_traits>
 
 #include "render/embree_lanes.h"
 #include "render/shade_lanes.h"
@@ -178,15 +179,18 @@ struct PathBatch::Impl {
     // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
     // drawn in shade_vertex's order, its light picked and its environment sample taken).
     // False, with nothing drawn, for a light sample the vectors cannot take (an infinite
-    // distance to the light): shade_vertex then shades the vertex.
+    // distance to the light): shade_vertex then shades the vertex. Plastic: the vertex is a
+    // plastic's (into plastic_), otherwise the standard material's (into standard_).
+    template <bool Plastic>
     bool gather_plain(int j, const Material& m, Rng& rng);
 };
 
+template <bool Plastic>
 bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const Rng start = rng;
     const PathState& ps = paths[live[j]];
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
-    LaneGroup& group = pm.plastic ? plastic_ : standard_;
+    LaneGroup& group = Plastic ? plastic_ : standard_;
     const int k = group.n++;
     group.plain[k] = j;
     ShadeLanes<kBatchSize>& l = group.lanes;
@@ -206,7 +210,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.diffuse, diffuse);
     const Vec3f specular = pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv);
     const bool glossy = pm.constant_specular ? pm.glossy : !is_black(specular);
-    if (pm.plastic) {
+    if constexpr (Plastic) {
         // The plastic's (Scene::bsdf_params): its coating, index and roughness, and the means
         // of its reflectances that choose its lobe (plastic_coat_probability).
         put3(l.specular, specular);
@@ -241,7 +245,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         ue2 = rng.next_float();
     }
     const float ub0 = rng.next_float();  // the lobe's choice (the diffuse lobe the only one without GGX)
-    if (glossy || pm.plastic) l.u_lobe[k] = ub0;
+    if (glossy || Plastic) l.u_lobe[k] = ub0;
     const float ub1 = rng.next_float();
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();
@@ -363,9 +367,12 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
-            if (plain_mesh[size_t(ps.sp.mesh)].plain &&
-                gather_plain(j, scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)], samples[live[j]].rng))
-                continue;
+            const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+            if (pm.plain) {
+                const Material& mat = scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)];
+                Rng& rng = samples[live[j]].rng;
+                if (pm.plastic ? gather_plain<true>(j, mat, rng) : gather_plain<false>(j, mat, rng)) continue;
+            }
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
             shade_vertex(
@@ -378,11 +385,12 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         }
         // The plain vertices, a vector of them at a time (the standard material's, then the
         // plastic's); then their rays into the packets.
-        for (LaneGroup* group : {&standard_, &plastic_}) {
-            if (group->n == 0) continue;
-            const bool plastic = group == &plastic_;
+        // (is_plastic: std::true_type for plastic_, whose continuations may be a delta lobe's.)
+        auto read_back = [&](LaneGroup* group, auto is_plastic) {
+            constexpr bool plastic = decltype(is_plastic)::value;
+            if (group->n == 0) return;
             ShadeLanes<kBatchSize>& l = group->lanes;
-            if (plastic)
+            if constexpr (plastic)
                 shade_plastic_lanes(l, group->n, settings.mis);
             else
                 shade_lanes(l, group->n, settings.mis, group->glossy);
@@ -419,7 +427,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
                     bp.two_sided = lane_set(l.two_sided, k);
-                    if (plastic) {
+                    if constexpr (plastic) {
                         bp.specular = get3(l.specular, k);
                         bp.alpha = l.alpha[k];
                         bp.kind = MaterialKind::Plastic;
@@ -442,7 +450,9 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 }
                 ps.shadow_end = nshadow;
             }
-        }
+        };
+        read_back(&standard_, std::false_type{});
+        read_back(&plastic_, std::true_type{});
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;
         // then the shadow rays.
