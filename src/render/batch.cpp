@@ -6,6 +6,12 @@
 #include "render/embree_lanes.h"
 #include "render/shade_lanes.h"
 
+#if defined(__GNUC__)
+#define EDGEPATH_ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define EDGEPATH_ALWAYS_INLINE
+#endif
+
 namespace edgepath {
 
 namespace {
@@ -351,19 +357,20 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         standard_.glossy = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
-        auto add_next = [&](PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
+        // (`count`: nnext or nshadow, or a copy of it kept in a register.)
+        auto add_next = [&](int& count, PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
             ps.goes_on = true;
             ps.next_beta = next_beta;
             ps.pdf = pdf;
             ps.delta = delta;
-            ps.next = nnext;
-            set_ray_extent(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
-            ++nnext;
+            ps.next = count;
+            set_ray_extent(next[count / kLanes].rh.ray, count % kLanes, r);
+            ++count;
         };
-        auto add_shadow = [&](const Ray& r, const Vec3f& value) {
-            set_ray_extent(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-            shadow_value[size_t(nshadow)] = value;
-            ++nshadow;
+        auto add_shadow = [&](int& count, const Ray& r, const Vec3f& value) {
+            set_ray_extent(shadow[size_t(count / kLanes)].r, count % kLanes, r);
+            shadow_value[size_t(count)] = value;
+            ++count;
         };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
@@ -378,18 +385,23 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             shade_vertex(
                 scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
                 [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
-                    add_next(ps, r, next_beta, bs.pdf, bs.delta);
+                    add_next(nnext, ps, r, next_beta, bs.pdf, bs.delta);
                 },
-                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
+                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
+                    add_shadow(nshadow, r, value);
+                });
             ps.shadow_end = nshadow;
         }
         // The plain vertices, a vector of them at a time (the standard material's, then the
         // plastic's); then their rays into the packets.
-        // (is_plastic: std::true_type for plastic_, whose continuations may be a delta lobe's.)
-        auto read_back = [&](LaneGroup* group, auto is_plastic) {
+        // (is_plastic: std::true_type for plastic_, whose continuations may be a delta lobe's.
+        // Inlined, both, and the ray counts copied in and out: the compiler then keeps them in
+        // registers, as it did with one group.)
+        auto read_back = [&](LaneGroup* group, auto is_plastic) EDGEPATH_ALWAYS_INLINE {
             constexpr bool plastic = decltype(is_plastic)::value;
             if (group->n == 0) return;
             ShadeLanes<kBatchSize>& l = group->lanes;
+            int shadows = nshadow, nexts = nnext;
             if constexpr (plastic)
                 shade_plastic_lanes(l, group->n, settings.mis);
             else
@@ -399,27 +411,27 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 PathState& ps = paths[live[group->plain[k]]];
                 ps.sp.ns = get3(l.ns, k);
                 ps.goes_on = false;
-                ps.shadow_begin = nshadow;
+                ps.shadow_begin = shadows;
                 Ray r;
                 if (lane_set(l.goes_on, k)) {
                     ++counters.bounce;
                     r.origin = get3(l.next_origin, k);
                     r.dir = get3(l.next_dir, k);
-                    add_next(ps, r, get3(l.next_beta, k), l.next_pdf[k], plastic && lane_set(l.next_delta, k));
+                    add_next(nexts, ps, r, get3(l.next_beta, k), l.next_pdf[k], plastic && lane_set(l.next_delta, k));
                 }
                 if (lane_set(l.light_on, k)) {
                     r.origin = get3(l.light_origin, k);
                     r.dir = get3(l.light_dir, k);
                     r.tmax = l.light_tmax[k];
-                    add_shadow(r, get3(l.light_value, k));
+                    add_shadow(shadows, r, get3(l.light_value, k));
                 }
                 if (lane_set(l.env_on, k)) {
                     r.origin = get3(l.env_origin, k);
                     r.dir = get3(l.env_dir, k);
                     r.tmax = std::numeric_limits<float>::infinity();
-                    add_shadow(r, get3(l.env_value, k));
+                    add_shadow(shadows, r, get3(l.env_value, k));
                 }
-                counters.shadow += uint64_t(nshadow - ps.shadow_begin);
+                counters.shadow += uint64_t(shadows - ps.shadow_begin);
                 // The point lights, path by path (shade_vertex's own code), with Scene::bsdf_params'
                 // values.
                 if (!scene.point_lights.empty()) {
@@ -446,10 +458,12 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     }
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
                                         [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*,
-                                            float) { add_shadow(shadow_ray, value); });
+                                            float) { add_shadow(shadows, shadow_ray, value); });
                 }
-                ps.shadow_end = nshadow;
+                ps.shadow_end = shadows;
             }
+            nshadow = shadows;
+            nnext = nexts;
         };
         read_back(&standard_, std::false_type{});
         read_back(&plastic_, std::true_type{});
