@@ -228,6 +228,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         const CoatTable* coat = mat.coat.get();
         l.coat[k] = coat;
         l.coat_r[k] = coat->r;
+        l.coat_smooth[k] = lane_mask(coat->smooth);
         l.coat_lobe[k] = lane_mask(!coat->smooth && !is_black(specular));
         l.nonlinear[k] = lane_mask(mat.nonlinear);
         l.ks[k] = plastic_mean(specular);

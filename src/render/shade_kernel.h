@@ -164,7 +164,7 @@ struct PlasticLanes {
     V diffuse, specular;
     F alpha, eta, R, to, ps;
     M rough, lobe, nonlinear;
-    bool any_rough, any_lobe;
+    bool any_rough, any_lobe, smooth;  // smooth: every lane's table smooth
 };
 // plastic_terms (f cos) for the oriented pair (o, i), co = o.z and ci = i.z, ti = T(ci), and
 // bsdf_pdf's density for it (both before the test that the pair is above the surface).
@@ -226,7 +226,6 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     constexpr int W = F::width;
     static_assert(N % W == 0, "whole vectors");
     const F zero(0.f), one(1.f);
-    const int whole = (n + W - 1) / W * W;
     // bend_normal (scene/bsdf_diff.h) of lane k's shading normal, wo_world = -dir.
     auto bent_normal = [&](int k, const V& wo_world) {
         const V ng = load3<V>(L.ng, k), ns0 = load3<V>(L.ns, k);
@@ -234,26 +233,39 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const M keep = s * d >= F(kMinShadingCosine);
         return select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
     };
+    // Whether every lane of the vector at lane k has a smooth coating: its T(c) is then
+    // 1 - fresnel_dielectric(c, eta) in vectors, otherwise each lane's table's, path by path.
+    constexpr int all_lanes = (1 << W) - 1;
+    auto all_smooth = [&](int k) { return M::load(L.coat_smooth + k).bits() == all_lanes; };
+    auto coat_t = [&](int k, bool smooth, F c) {
+        if (smooth) return one - fresnel_lanes(c, F::load(L.eta + k));
+        alignas(64) float a[W];
+        c.store(a);
+        plastic_coat_transmittances(L, k, W, a);
+        return F::load(a);
+    };
     // The plastic's wo (its cosine co, mirrored for a two-sided one seen from below), T(co)
-    // and the coating's probability, path by path.
+    // and the coating's probability (plastic_coat_probability's operations).
     alignas(64) float co[N], t_o[N], coat_p[N];
     if constexpr (Plastic) {
         for (int k = 0; k < n; k += W) {
             const V wo_world = -load3<V>(L.dir, k);
             const F z = dot(wo_world, bent_normal(k, wo_world));
             const M flip = M::load(L.two_sided + k) & (z < zero);
-            select(flip, -z, z).store(co + k);
+            const F c = select(flip, -z, z);
+            c.store(co + k);
+            if (all_smooth(k)) {
+                const F t = coat_t(k, true, c), ks = F::load(L.ks + k), kd = F::load(L.kd + k);
+                const F s = (one - t) * ks, d = t * kd;
+                t.store(t_o + k);
+                select(ks + kd > zero, select(s + d > zero, s / (s + d), zero), zero).store(coat_p + k);
+            } else {
+                const int count = std::min(W, n - k);
+                plastic_coat_probabilities(L, k, count, co, t_o, coat_p);
+                for (int j = k + count; j < k + W; ++j) t_o[j] = coat_p[j] = 0.f;
+            }
         }
-        plastic_coat_probabilities(L, n, co, t_o, coat_p);
-        for (int k = n; k < whole; ++k) t_o[k] = coat_p[k] = 0.f;
     }
-    // T(c) of the vector at lane k, path by path.
-    auto coat_t = [&](int k, F c) {
-        alignas(64) float a[W];
-        c.store(a);
-        plastic_coat_transmittances(L, k, W, a);
-        return F::load(a);
-    };
     // The BSDF sample's angle: square_to_disk's (sampling/warp.h) for the cosine-weighted lobe
     // or 2 pi u2 for the GGX visible normal, whichever lobe the path's number chose (u_lobe <
     // lobe_p: the GGX lobe); its cosine and sine; the disk's radius and point.
@@ -323,6 +335,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             P.nonlinear = M::load(L.nonlinear + k);
             P.any_rough = P.rough.bits() != 0;
             P.any_lobe = P.lobe.bits() != 0;
+            P.smooth = all_smooth(k);
         } else if constexpr (Glossy) {
             has_spec = M::load(L.has_specular + k);
             lobe_p = select(has_spec, F::load(L.lobe_p + k), zero);
@@ -354,7 +367,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
                                                          F::load(sine + k));
                     wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
                 }
-                plastic_oriented(P, wo_up, wi, coat_t(k, wi.z), value, pdf);
+                plastic_oriented(P, wo_up, wi, coat_t(k, P.smooth, wi.z), value, pdf);
                 const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
                 ok = select(mirror, ok, ok & !(wi.z <= zero) & (pdf > zero));
                 nb = beta * (f / pdf);
@@ -404,7 +417,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
                 const M up = (o.z > zero) & (i.z > zero);
                 V value;
                 F density;
-                plastic_oriented(P, o, i, coat_t(k, i.z), value, density);
+                plastic_oriented(P, o, i, coat_t(k, P.smooth, i.z), value, density);
                 f = select(up, value, V(zero));
                 bpdf = select(up, density, zero);
             } else {

@@ -80,20 +80,25 @@ void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
     shade_plastic_lanes(L, n, mis, shade_width());
 }
 
-// The plastic's table lookups, path by path, with scalar code's functions themselves (a lane
-// past the batch's paths may hold no table, or a NaN cosine: 0 there, never read back).
+// The plastic's table lookups, path by path, with the scalar code's functions themselves (a
+// lane past the batch's paths may hold no table, or a rough one a NaN cosine, which has no
+// entry: 0 there, never read back).
+namespace {
+float lane_transmittance(const ShadeLanes<kShadeBatch>& L, int k, float c) {
+    const CoatTable* t = L.coat[k];
+    return t && (t->smooth || !std::isnan(c)) ? detail::coat_transmittance(*t, c, L.eta[k]) : 0.f;
+}
+}  // namespace
+
 void plastic_coat_transmittances(const ShadeLanes<kShadeBatch>& L, int k, int count, float* c) {
-    for (int j = 0; j < count; ++j) {
-        const CoatTable* t = L.coat[k + j];
-        c[j] = t && !std::isnan(c[j]) ? detail::coat_transmittance(*t, c[j], L.eta[k + j]) : 0.f;
-    }
+    for (int j = 0; j < count; ++j) c[j] = lane_transmittance(L, k + j, c[j]);
 }
 
-void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int n, const float* co, float* t_o, float* ps) {
-    for (int k = 0; k < n; ++k) {
-        const CoatTable* t = L.coat[k];
-        t_o[k] = t && !std::isnan(co[k]) ? detail::coat_transmittance(*t, co[k], L.eta[k]) : 0.f;
-        ps[k] = plastic_coat_probability(L.ks[k], L.kd[k], t_o[k]);
+void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int k, int count, const float* co, float* t_o,
+                                float* ps) {
+    for (int j = k; j < k + count; ++j) {
+        t_o[j] = lane_transmittance(L, j, co[j]);
+        ps[j] = plastic_coat_probability(L.ks[j], L.kd[j], t_o[j]);
     }
 }
 

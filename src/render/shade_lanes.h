@@ -74,10 +74,12 @@ struct ShadeLanes {
     // The plastic's lanes (shade_plastic_lanes; MaterialKind::Plastic, Scene::bsdf_params'
     // values): its relative index, the coating's R (CoatTable::r), the means of the specular
     // and of the diffuse reflectance (plastic_coat_probability's ks and kd); masks of a rough
-    // coating (a roughness above 0), of the rough coating's lobe in the value (the table not
-    // smooth, the specular not black) and of `nonlinear`; the coating's table. Their specular,
-    // alpha and lobe number are in specular, alpha and u_lobe above (has_specular, lobe_p not read).
-    alignas(64) float eta[N], coat_r[N], ks[N], kd[N], rough[N], coat_lobe[N], nonlinear[N];
+    // coating (a roughness above 0), of a smooth table (T(c) = 1 - F(c), computed in vectors
+    // where every lane of a vector has one), of the rough coating's lobe in the value (the table
+    // not smooth, the specular not black) and of `nonlinear`; the coating's table. Their
+    // specular, alpha and lobe number are in specular, alpha and u_lobe above (has_specular,
+    // lobe_p not read).
+    alignas(64) float eta[N], coat_r[N], ks[N], kd[N], rough[N], coat_smooth[N], coat_lobe[N], nonlinear[N];
     // Out: the mask of a continuation along the smooth coating's mirror direction (a delta
     // lobe: next_pdf is its probability, next_beta its weight).
     alignas(64) float next_delta[N];
@@ -130,10 +132,11 @@ void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis);
 void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w);
 // The scalar steps of the plastic's lanes, for the kernels (render/shade_lanes.cpp, compiled
 // for the baseline processor): T(c) (detail::coat_transmittance) of lanes [k, k + count) for
-// the cosines c (in place), and for lanes [0, n) T(co) and plastic_coat_probability's value of
-// each lane's co.
+// the cosines c (in place), and for lanes [k, k + count) T(co) and plastic_coat_probability's
+// value of each lane's co (the arrays indexed by lane).
 void plastic_coat_transmittances(const ShadeLanes<kShadeBatch>& L, int k, int count, float* c);
-void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int n, const float* co, float* t_o, float* ps);
+void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int k, int count, const float* co, float* t_o,
+                                float* ps);
 // Whether this build and processor can run width w (Sse2 and Auto always).
 bool shade_width_available(ShadeWidth w);
 // The width shade_lanes uses: the widest available unless another was forced.

@@ -1338,21 +1338,24 @@ TEST(Render, ShadeLanesWidthsAgree) {
 
 // The plastic's lanes (shade_plastic_lanes): random_lanes' paths made plastic, each with one of
 // a few coatings (rough of alpha 0.05, 0.3 and 1 with indices 1.5 and 1.33, smooth with 1.5,
-// 1.33 and 0.7), a specular of 1, tinted or black, nonlinear or not; their BsdfParams (as
-// Scene::bsdf_params makes a plastic's) for the scalar code.
+// 1.33 and 0.7; or the smooth ones alone, whose T(c) the kernel computes in vectors where a
+// whole vector has them), a specular of 1, tinted or black, nonlinear or not; their
+// BsdfParams (as Scene::bsdf_params makes a plastic's) for the scalar code.
 struct PlasticLaneCoats {
     std::shared_ptr<const CoatTable> coats[6] = {coat_table(0.05f, 1.5f, false), coat_table(0.3f, 1.33f, false),
                                                  coat_table(1.f, 1.5f, false),   coat_table(0.f, 1.5f, true),
                                                  coat_table(0.f, 1.33f, true),   coat_table(0.f, 0.7f, true)};
 };
-std::vector<BsdfParams> random_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng, const PlasticLaneCoats& c) {
+std::vector<BsdfParams> random_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng, const PlasticLaneCoats& c,
+                                             bool smooth_only) {
     random_lanes(L, n, rng);
     std::vector<BsdfParams> params(static_cast<size_t>(n));
     auto u = [&] { return rng.next_float(); };
     auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
     for (int k = 0; k < n; ++k) {
         BsdfParams& bp = params[size_t(k)];
-        const CoatTable* coat = c.coats[std::min(int(u() * 6.f), 5)].get();
+        const float pick = u();
+        const CoatTable* coat = c.coats[smooth_only ? 3 + std::min(int(pick * 3.f), 2) : std::min(int(pick * 6.f), 5)].get();
         const float s = u();
         bp.diffuse = get(L.diffuse, k);
         bp.specular = s < 0.5f ? Vec3f(1.f) : s < 0.85f ? Vec3f(u(), u(), u()) : Vec3f(0.f);
@@ -1369,6 +1372,7 @@ std::vector<BsdfParams> random_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, 
         L.coat[k] = coat;
         L.coat_r[k] = coat->r;
         L.rough[k] = lane_mask(bp.rough);
+        L.coat_smooth[k] = lane_mask(coat->smooth);
         L.coat_lobe[k] = lane_mask(!coat->smooth && !is_black(bp.specular));
         L.nonlinear[k] = lane_mask(bp.nonlinear);
         L.ks[k] = plastic_mean(bp.specular);
@@ -1384,7 +1388,8 @@ std::vector<BsdfParams> random_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, 
 // code's (bend_normal, Frame, bsdf_sample, bsdf_eval, bsdf_pdf, mis_power) bit for bit: its
 // continuation (the coating's GGX sample, the smooth coating's mirror with its weight, or the
 // base's cosine-weighted sample), its sky sample's and its given light sample's values, on 64
-// random paths and a partial batch of 13, with each strategy's weights.
+// random paths and a partial batch of 13, with each strategy's weights; T(c) from the tables
+// path by path, and in vectors where all of a vector's coatings are smooth.
 TEST(Render, ShadePlasticLanesWidthsAgree) {
     const bool avx2 = shade_width_available(ShadeWidth::Avx2);
     const PlasticLaneCoats coats;
@@ -1394,7 +1399,8 @@ TEST(Render, ShadePlasticLanesWidthsAgree) {
         for (int n : {kShadeBatch, 13})
             for (bool mis : {true, false}) {
                 auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
-                const std::vector<BsdfParams> params = random_plastic_lanes(*in, n, rng, coats);
+                // One round in four with smooth coatings alone.
+                const std::vector<BsdfParams> params = random_plastic_lanes(*in, n, rng, coats, round % 4 == 3);
                 auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
                 auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
                 shade_plastic_lanes(*narrow, n, mis, ShadeWidth::Sse2);
