@@ -1,6 +1,7 @@
 #include "render/batch.h"
 
 #include <limits>
+#include <memory>
 #include <type_traits>
 
 #include "render/embree_lanes.h"
@@ -102,7 +103,10 @@ struct PathBatch::Impl {
         int n = 0;
         bool glossy = false;
     };
-    LaneGroup standard_, plastic_;
+    // (The plastic's only where the scene has a plastic: a batch is made, and its lanes
+    // zeroed, for each tile.)
+    LaneGroup standard_;
+    std::unique_ptr<LaneGroup> plastic_;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         for (const Mesh& m : scene.meshes) {
@@ -136,6 +140,7 @@ struct PathBatch::Impl {
             }
             if (pm.plastic && pm.constant_alpha) pm.rough = mat.roughness.data[0] > 0.f;
             plain_mesh.push_back(pm);
+            if (pm.plastic && !plastic_) plastic_ = std::make_unique<LaneGroup>();
         }
         if (scene.light_distribution.valid() && scene.lights.size() <= kMaxLightEntries) {
             light_entries.resize(scene.lights.size());
@@ -196,7 +201,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const Rng start = rng;
     const PathState& ps = paths[live[j]];
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
-    LaneGroup& group = Plastic ? plastic_ : standard_;
+    LaneGroup& group = Plastic ? *plastic_ : standard_;
     const int k = group.n++;
     group.plain[k] = j;
     ShadeLanes<kBatchSize>& l = group.lanes;
@@ -354,7 +359,8 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
         // what each would add.
         int nshadow = 0, nnext = 0;
-        standard_.n = plastic_.n = 0;
+        standard_.n = 0;
+        if (plastic_) plastic_->n = 0;
         standard_.glossy = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
@@ -467,7 +473,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             nnext = nexts;
         };
         read_back(&standard_, std::false_type{});
-        read_back(&plastic_, std::true_type{});
+        if (plastic_) read_back(plastic_.get(), std::true_type{});
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;
         // then the shadow rays.

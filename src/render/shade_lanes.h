@@ -17,13 +17,14 @@
 // selects with the same NaN semantics), so the samples are the same bit for bit
 // (Render.BatchedPlainPathsMatchTracePath, Render.BatchedGlossyPathsMatchTracePath).
 //
-// The plastic (MaterialKind::Plastic, rough or smooth coating: scene/plastic.h) has lanes of its
-// own (shade_plastic_lanes, the same kernel with its lobes): gathered likewise with its index,
-// coating table, R, the means of its reflectances and its masks (rough, the coating's GGX term,
-// nonlinear). The table's T(c) is looked up path by path with the scalar function itself
-// (detail::coat_transmittance, in render/shade_lanes.cpp): T(co) and the coating's probability
+// The plastic (MaterialKind::Plastic, rough or smooth coating: scene/plastic.h) has lanes of
+// its own (shade_plastic_lanes, the same kernel with its lobes): gathered likewise with its
+// index, coating table, R, the means of its reflectances and its masks (rough, smooth table,
+// the coating's GGX term, nonlinear). The table's T(c) is looked up path by path with the
+// scalar function itself (detail::coat_transmittance, in render/shade_lanes.cpp; in vectors,
+// 1 - F(c), where all of a vector's coatings are smooth): T(co) and the coating's probability
 // (plastic_coat_probability) before the sample's angle, which depends on the lobe chosen, then
-// T(ci) for the sample and each light sample; the rest is in vectors: the GGX visible normal
+// T(ci) for the sample and each light sample. The rest is in vectors: the GGX visible normal
 // where rough, the smooth coating's mirror direction and weight ks F(co) / ps (next_delta: the
 // continuation is a delta lobe's), the cosine-weighted base, plastic_terms' value (the base's
 // kd / (1 - R) or kd / (1 - kd R) and the coating's GGX term with the dielectric's Fresnel
