@@ -1006,12 +1006,12 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
 
 // The batches shade plastic vertices (MaterialKind::Plastic) in vectors of their own
 // (shade_plastic_lanes): each path's radiance is still trace_path's bit for bit, on 1 and 2
-// threads. Rough coatings of roughness 0.05, 0.3 and 1 (indices 1.5, 1.33), smooth ones (the
-// mirror lobe chosen by the coating's probability, 1.5 and, seen from inside, 0.7), a textured
-// diffuse, vertex colours, nonlinear, a tinted and a black specular, one two-sided surface
-// seen from both sides, among a standard glossy box (its own vectors) and a mirror (one by
-// one); a lamp sampled by area in the vectors, then a sky, then lights whose samples are
-// given whole and a point light; each sampling strategy, 0 to 12 bounces.
+// threads. Rough coatings of roughness 0.05, 0.2, 0.3 and 1 (indices 1.5, 1.33), smooth ones
+// (the mirror lobe chosen by the coating's probability; indices 1.5 and 0.7, below 1), a
+// textured diffuse, vertex colours, nonlinear, a tinted and a black specular, a normal map,
+// one two-sided surface seen from both sides, among a standard glossy box (its own vectors)
+// and a mirror (one by one); a lamp sampled by area in the vectors, then a sky, then lights
+// whose samples are given whole and a point light; each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedPlasticPathsMatchTracePath) {
     MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
     MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
@@ -1041,7 +1041,13 @@ TEST(Render, BatchedPlasticPathsMatchTracePath) {
     d.materials.push_back(plastic(light, tint, r03, ior133));  // 1: vertex colours, nonlinear, tinted
     d.materials[1].nonlinear = true;
     d.materials.push_back(plastic(kd, tint, r0, ior15));      // 2: smooth, tinted
-    d.materials.push_back(plastic(red, white, r1, ior15));    // 3: the roughest
+    d.materials.push_back(plastic(red, white, r1, ior15));    // 3: the roughest, a normal map
+    const float bumps[12] = {0.65f, 0.5f, 1.f, 0.4f, 0.55f, 1.f, 0.5f, 0.35f, 1.f, 0.5f, 0.5f, 1.f};
+    TextureDesc bump_map;
+    bump_map.data = bumps;
+    bump_map.height = bump_map.width = 2;
+    bump_map.channels = 3;
+    d.materials[3].normal_map = bump_map;
     d.materials.push_back(plastic(kd, white, r03, ior15));    // 4: two-sided
     d.materials[4].two_sided = true;
     d.materials.push_back(plastic(kd, black, r02, ior15));    // 5: black specular (the base alone)
