@@ -65,8 +65,9 @@ struct PathBatch::Impl {
     struct PlainMesh {
         // its material's vertices are plain: MaterialKind::Standard (the Lambertian lobe and
         // the GGX lobe where the specular is not black), or plastic (MaterialKind::Plastic, in
-        // lanes of their own: shade_plastic_lanes)
-        bool plain = false, plastic = false;
+        // lanes of their own: shade_plastic_lanes), or a mirror (MaterialKind::Conductor:
+        // shade_mirror_lanes)
+        bool plain = false, plastic = false, mirror = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
         bool constant_specular = false, constant_alpha = false, constant = false;
         bool glossy = false;  // constant_specular, and the specular is not black
@@ -106,14 +107,15 @@ struct PathBatch::Impl {
     // (The plastic's only where the scene has a plastic: a batch is made, and its lanes
     // zeroed, for each tile.)
     LaneGroup standard_;
-    std::unique_ptr<LaneGroup> plastic_;
+    std::unique_ptr<LaneGroup> plastic_, mirror_;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
             pm.plastic = mat.kind == MaterialKind::Plastic && mat.coat;
-            pm.plain = mat.kind == MaterialKind::Standard || pm.plastic;
+            pm.mirror = mat.kind == MaterialKind::Conductor;
+            pm.plain = mat.kind == MaterialKind::Standard || pm.plastic || pm.mirror;
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
             // Scene::bsdf_params' values where they are constant.
             if (pm.plain && mat.specular.is_constant()) {
@@ -141,6 +143,7 @@ struct PathBatch::Impl {
             if (pm.plastic && pm.constant_alpha) pm.rough = mat.roughness.data[0] > 0.f;
             plain_mesh.push_back(pm);
             if (pm.plastic && !plastic_) plastic_ = std::make_unique<LaneGroup>();
+            if (pm.mirror && !mirror_) mirror_ = std::make_unique<LaneGroup>();
         }
         if (scene.light_distribution.valid() && scene.lights.size() <= kMaxLightEntries) {
             light_entries.resize(scene.lights.size());
@@ -194,7 +197,36 @@ struct PathBatch::Impl {
     // plastic's (into plastic_), otherwise the standard material's (into standard_).
     template <bool Plastic>
     bool gather_plain(int j, const Material& m, Rng& rng);
+    // The same for a mirror's vertex (into mirror_): its specular, and shade_vertex's random
+    // numbers drawn (a delta material samples no light).
+    void gather_mirror(int j, const Material& m, Rng& rng);
 };
+
+void PathBatch::Impl::gather_mirror(int j, const Material& mat, Rng& rng) {
+    const PathState& ps = paths[live[j]];
+    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+    LaneGroup& group = *mirror_;
+    const int k = group.n++;
+    group.plain[k] = j;
+    ShadeLanes<kBatchSize>& l = group.lanes;
+    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
+        a[0][k] = v.x;
+        a[1][k] = v.y;
+        a[2][k] = v.z;
+    };
+    put3(l.p, ps.sp.p);
+    put3(l.p_error, ps.sp.p_error);
+    put3(l.ng, ps.sp.ng);
+    put3(l.ns, ps.sp.ns);
+    put3(l.dir, ps.dir);
+    put3(l.beta, ps.beta);
+    put3(l.specular, pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv));
+    l.two_sided[k] = lane_mask(mat.two_sided);
+    l.light_on[k] = l.env_on[k] = lane_mask(false);
+    // shade_vertex's: three for the lights, two more for the sky where the scene has both,
+    // three for the BSDF's sample (the mirror uses none).
+    for (int i = settings.both_lights ? 8 : 6; i > 0; --i) rng.next_float();
+}
 
 template <bool Plastic>
 bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
@@ -361,6 +393,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         int nshadow = 0, nnext = 0;
         standard_.n = 0;
         if (plastic_) plastic_->n = 0;
+        if (mirror_) mirror_->n = 0;
         standard_.glossy = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
@@ -385,6 +418,10 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             if (pm.plain) {
                 const Material& mat = scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)];
                 Rng& rng = samples[live[j]].rng;
+                if (pm.mirror) {
+                    gather_mirror(j, mat, rng);
+                    continue;
+                }
                 if (pm.plastic ? gather_plain<true>(j, mat, rng) : gather_plain<false>(j, mat, rng)) continue;
             }
             ps.goes_on = false;
@@ -401,16 +438,19 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         }
         // The plain vertices, a vector of them at a time (the standard material's, then the
         // plastic's); then their rays into the packets.
-        // (is_plastic: std::true_type for plastic_, whose continuations may be a delta lobe's.
-        // Inlined, both, and the ray counts copied in and out: the compiler then keeps them in
-        // registers, as it did with one group.)
-        auto read_back = [&](LaneGroup* group, auto is_plastic) EDGEPATH_ALWAYS_INLINE {
-            constexpr bool plastic = decltype(is_plastic)::value;
+        // (is_plastic, is_mirror: std::true_type for plastic_ or mirror_, whose continuations
+        // may be a delta lobe's; a mirror's vertex has no light samples. Inlined, each, and the
+        // ray counts copied in and out: the compiler then keeps them in registers, as it did
+        // with one group.)
+        auto read_back = [&](LaneGroup* group, auto is_plastic, auto is_mirror) EDGEPATH_ALWAYS_INLINE {
+            constexpr bool plastic = decltype(is_plastic)::value, mirror = decltype(is_mirror)::value;
             if (group->n == 0) return;
             ShadeLanes<kBatchSize>& l = group->lanes;
             int shadows = nshadow, nexts = nnext;
             if constexpr (plastic)
                 shade_plastic_lanes(l, group->n, settings.mis);
+            else if constexpr (mirror)
+                shade_mirror_lanes(l, group->n);
             else
                 shade_lanes(l, group->n, settings.mis, group->glossy);
             auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
@@ -424,7 +464,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     ++counters.bounce;
                     r.origin = get3(l.next_origin, k);
                     r.dir = get3(l.next_dir, k);
-                    add_next(nexts, ps, r, get3(l.next_beta, k), l.next_pdf[k], plastic && lane_set(l.next_delta, k));
+                    add_next(nexts, ps, r, get3(l.next_beta, k), l.next_pdf[k], (plastic || mirror) && lane_set(l.next_delta, k));
                 }
                 if (lane_set(l.light_on, k)) {
                     r.origin = get3(l.light_origin, k);
@@ -441,7 +481,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                 counters.shadow += uint64_t(shadows - ps.shadow_begin);
                 // The point lights, path by path (shade_vertex's own code), with Scene::bsdf_params'
                 // values.
-                if (!scene.point_lights.empty()) {
+                if (!mirror && !scene.point_lights.empty()) {
                     const Frame frame(ps.sp.ns);
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
@@ -472,8 +512,9 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             nshadow = shadows;
             nnext = nexts;
         };
-        read_back(&standard_, std::false_type{});
-        if (plastic_) read_back(plastic_.get(), std::true_type{});
+        read_back(&standard_, std::false_type{}, std::false_type{});
+        if (plastic_) read_back(plastic_.get(), std::true_type{}, std::false_type{});
+        if (mirror_) read_back(mirror_.get(), std::false_type{}, std::true_type{});
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;
         // then the shadow rays.

@@ -484,4 +484,55 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     }
 }
 
+// The smooth conductor's lanes (shade_mirror_lanes, MaterialKind::Conductor): bsdf_sample's
+// delta branch for the mirror (delta_scatter: the mirror direction about the bent shading
+// normal, on the back too where two-sided, weight Schlick's reflectance of `specular`), its ray
+// and throughput; no light sample (a delta material samples none). Lanes [0, n) of L, L.specular
+// and L.two_sided read; next_pdf is the lobe's probability, 1.
+template <class F, class M, class V, int N>
+inline void shade_mirror_lanes_kernel(ShadeLanes<N>& L, int n) {
+    using namespace lanes;
+    constexpr int W = F::width;
+    static_assert(N % W == 0, "whole vectors");
+    const F zero(0.f), one(1.f);
+    for (int k = 0; k < n; k += W) {
+        const V p = load3<V>(L.p, k), p_error = load3<V>(L.p_error, k), ng = load3<V>(L.ng, k);
+        const V beta = load3<V>(L.beta, k), specular = load3<V>(L.specular, k);
+        const V wo_world = -load3<V>(L.dir, k);
+        // bend_normal (scene/bsdf_diff.h).
+        const V ns0 = load3<V>(L.ns, k);
+        const F sd = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
+        const M keep = sd * d >= F(kMinShadingCosine);
+        const V ns = select(keep, ns0, normalize(ns0 + wo_world * (sd * F(kMinShadingCosine) - d)));
+        store3(L.ns, k, ns);
+        // Frame (math/frame.h) and wo.
+        const F sign = sign_of(ns.z);
+        const F a = F(-1.f) / (sign + ns.z);
+        const F b = ns.x * ns.y * a;
+        const V fs(one + sign * ns.x * ns.x * a, sign * b, -sign * ns.x);
+        const V ft(b, sign + ns.y * ns.y * a, -ns.y);
+        const V wo(dot(wo_world, fs), dot(wo_world, ft), dot(wo_world, ns));
+        // delta_scatter's mirror with n = (0, 0, 1): c = n . wo, turned to wo's side where
+        // two-sided; the direction n (2 s c) - wo; Schlick's weight, std::clamp as
+        // min(max(1 - c, 0), 1).
+        const F c0 = zero * wo.x + zero * wo.y + one * wo.z;
+        const F s = select(M::load(L.two_sided + k) & (c0 < zero), F(-1.f), one);
+        const F c = c0 * s;
+        const M ok = c > zero;
+        const F m2 = F(2.f) * s * c;
+        const V wi(zero * m2 - wo.x, zero * m2 - wo.y, one * m2 - wo.z);
+        const F m = min_std(max_std(one - c, zero), one);
+        const F m5 = m * m * m * m * m;
+        const V nb = select(ok, beta * (specular + (V(one) - specular) * m5), V(zero));
+        const M goes_on = ok & !is_black(nb);
+        goes_on.store(L.goes_on + k);
+        goes_on.store(L.next_delta + k);
+        store3(L.next_beta, k, nb);
+        one.store(L.next_pdf + k);
+        const V w = fs * wi.x + ft * wi.y + ns * wi.z;
+        store3(L.next_dir, k, w);
+        store3(L.next_origin, k, offset_ray_origin(p, p_error, ng, w));
+    }
+}
+
 }  // namespace edgepath

@@ -14,6 +14,7 @@ namespace edgepath {
 bool shade_lanes_avx2_compiled();
 void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
 void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis);
+void shade_mirror_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n);
 
 namespace {
 
@@ -79,6 +80,18 @@ void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth
 void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
     shade_plastic_lanes(L, n, mis, shade_width());
 }
+
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n, ShadeWidth w) {
+    if (w == ShadeWidth::Auto) w = shade_width();
+    if (w == ShadeWidth::Avx2) {
+        if (!shade_width_available(w)) throw std::invalid_argument("shade_mirror_lanes: AVX2 is not available");
+        shade_mirror_lanes_avx2(L, n);
+    } else {
+        shade_mirror_lanes_kernel<F4, M4, V4>(L, n);
+    }
+}
+
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n) { shade_mirror_lanes(L, n, shade_width()); }
 
 // The plastic's table lookups, path by path, with the scalar code's functions themselves (a
 // lane past the batch's paths may hold no table, or a rough one a NaN cosine, which has no

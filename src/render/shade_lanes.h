@@ -131,6 +131,11 @@ void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, Shade
 // coating), shaded likewise: shade_vertex's operations for the plastic, bit for bit.
 void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis);
 void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w);
+// Lanes [0, n) of L, every one a smooth conductor's vertex (MaterialKind::Conductor: the
+// mirror), shaded likewise: its continuation only (no light samples; light_on and env_on not
+// written, next_delta set where it goes on).
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n);
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n, ShadeWidth w);
 // The scalar steps of the plastic's lanes, for the kernels (render/shade_lanes.cpp, compiled
 // for the baseline processor): T(c) (detail::coat_transmittance) of lanes [k, k + count) for
 // the cosines c (in place), and for lanes [k, k + count) T(co) and plastic_coat_probability's

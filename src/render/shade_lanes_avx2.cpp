@@ -39,6 +39,9 @@ void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy) 
 void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
     shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, false, true>(L, n, mis);
 }
+void shade_mirror_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n) {
+    shade_mirror_lanes_kernel<avx2::F8, avx2::M8, avx2::V8>(L, n);
+}
 
 }  // namespace edgepath
 
@@ -57,6 +60,7 @@ bool shade_lanes_avx2_compiled() { return true; }
 bool shade_lanes_avx2_compiled() { return false; }
 void shade_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool, bool) {}  // never called: not compiled
 void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool) {}
+void shade_mirror_lanes_avx2(ShadeLanes<kShadeBatch>&, int) {}
 #endif
 
 }  // namespace edgepath

@@ -851,9 +851,9 @@ int expect_strategies_match(const Scene& scene, RenderOptions opt, int variant, 
 }
 
 // The batches shade the vertices of a diffuse material four paths at a time in vectors
-// (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
-// trace_path's bit for bit, with both kinds in one batch (a glossy box with a textured
-// roughness, in the vectors, and a mirror, one by one, among diffuse surfaces),
+// (render/shade_lanes.h; a mirror's in vectors of its own, other kinds one by one): each
+// path's radiance is still trace_path's bit for bit, with several kinds in one batch (a glossy
+// box with a textured roughness, in the vectors, and a mirror, in its own, among diffuse surfaces),
 // a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
 // seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
 // (sampled by area in the vectors), with and without an environment, then with the lights whose
@@ -882,7 +882,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.materials[3].roughness = tex.bumpy_tex;
     d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
     d.materials[4].diffuse = tex.checker_tex;
-    d.materials.push_back(material(black, ks, r));     // 5: a mirror: shaded one by one
+    d.materials.push_back(material(black, ks, r));     // 5: a mirror: its own vectors
     d.materials[5].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(4));
     d.meshes.push_back(ball.desc(0));
@@ -942,7 +942,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
 // diffuse under a specular (the GGX lobe alone), a textured diffuse (the lobe's probability
 // per point) and vertex colours, one two-sided surface seen from both sides, a textured
 // roughness under a textured specular with a black texel (the GGX lobe there and not beside
-// it), among a diffuse wall and a mirror (shaded one by one); a lamp sampled by area in the vectors,
+// it), among a diffuse wall and a mirror (its own vectors); a lamp sampled by area in the vectors,
 // then a sky, then lights whose samples are given whole (a sphere light by solid angle, a
 // quad by spherical triangles) and point lights; each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedGlossyPathsMatchTracePath) {
@@ -978,7 +978,7 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.materials[6].roughness = tex.bumpy_tex;
     d.materials[6].specular = spec_tex;
     d.materials.push_back(material(black, black, r03));   // 7: the lamps'
-    d.materials.push_back(material(black, gold, r03));    // 8: a mirror: one by one
+    d.materials.push_back(material(black, gold, r03));    // 8: a mirror: its own vectors
     d.materials[8].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(1));
@@ -1010,8 +1010,9 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
 // (the mirror lobe chosen by the coating's probability; indices 1.5 and 0.7, below 1), a
 // textured diffuse, vertex colours, nonlinear, a tinted and a black specular, a normal map,
 // one two-sided surface seen from both sides, among a standard glossy box (its own vectors)
-// and a mirror (one by one); a lamp sampled by area in the vectors, then a sky, then lights
-// whose samples are given whole and a point light; each sampling strategy, 0 to 12 bounces.
+// and a two-sided mirror of textured specular (its own vectors too); a lamp sampled by area
+// in the vectors, then a sky, then lights whose samples are given whole and a point light;
+// each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedPlasticPathsMatchTracePath) {
     MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
     MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
@@ -1055,8 +1056,10 @@ TEST(Render, BatchedPlasticPathsMatchTracePath) {
     d.materials[6].two_sided = true;
     d.materials.push_back(material(kd, grey, r03));           // 7: standard, glossy
     d.materials.push_back(material(black, black, r03));       // 8: the lamps'
-    d.materials.push_back(material(black, tint, r03));        // 9: a mirror: one by one
+    d.materials.push_back(material(black, tint, r03));        // 9: a mirror: its own vectors
     d.materials[9].kind = MaterialKind::Conductor;
+    d.materials[9].two_sided = true;
+    d.materials[9].specular = tex.checker_tex;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(1));
     d.meshes[1].colors = tex.tint.data();
@@ -1508,6 +1511,81 @@ TEST(Render, ShadePlasticLanesWidthsAgree) {
     EXPECT_LT(env_on, paths);
     EXPECT_GT(lobe_env, paths / 20);
     EXPECT_GT(given_on, paths / 40);
+}
+
+// The mirror's lanes (shade_mirror_lanes, MaterialKind::Conductor): random_lanes' paths with a
+// random specular (black at times) and two-sided or not through both widths, the same bits,
+// and each lane's continuation the scalar bsdf_sample's delta branch bit for bit (its
+// direction, weight and probability; none where wo is behind a one-sided mirror).
+TEST(Render, ShadeMirrorLanesWidthsAgree) {
+    const bool avx2 = shade_width_available(ShadeWidth::Avx2);
+    Rng rng(3, 8);
+    int goes_on = 0, behind = 0, compared = 0;
+    auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
+    for (int round = 0; round < 20; ++round)
+        for (int n : {kShadeBatch, 13}) {
+            auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
+            random_lanes(*in, n, rng);
+            for (int k = 0; k < n; ++k) {
+                const float g = rng.next_float();
+                const Vec3f s = g < 0.1f ? Vec3f(0.f) : Vec3f(rng.next_float(), rng.next_float(), rng.next_float());
+                for (int c = 0; c < 3; ++c) in->specular[c][k] = s[c];
+            }
+            auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+            auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+            shade_mirror_lanes(*narrow, n, ShadeWidth::Sse2);
+            shade_mirror_lanes(*wide, n, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
+            int differing = 0, unlike = 0;
+            auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
+            auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
+                for (int c = 0; c < 3; ++c) bits(x[c], k, y[c]);
+            };
+            const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide, &i = *in;
+            for (int k = 0; k < n; ++k) {
+                auto same = [&](const float* x, const float* y) { differing += std::memcmp(x + k, y + k, sizeof(float)) != 0; };
+                same(a.goes_on, b.goes_on);
+                same(a.next_delta, b.next_delta);
+                same(a.next_pdf, b.next_pdf);
+                for (int c = 0; c < 3; ++c) {
+                    same(a.ns[c], b.ns[c]);
+                    same(a.next_dir[c], b.next_dir[c]);
+                    same(a.next_beta[c], b.next_beta[c]);
+                    same(a.next_origin[c], b.next_origin[c]);
+                }
+                const Vec3f dir = get(i.dir, k), beta = get(i.beta, k);
+                const Vec3f ns = bend_normal(get(i.ns, k), get(i.ng, k), -dir);
+                const Frame frame(ns);
+                const Vec3f wo = frame.to_local(-dir);
+                BsdfParams bp;
+                bp.kind = MaterialKind::Conductor;
+                bp.specular = get(i.specular, k);
+                bp.two_sided = lane_set(i.two_sided, k);
+                BsdfSample bs;
+                Vec3f nb(0.f);
+                const bool sampled = bsdf_sample(bp, wo, i.u_lobe[k], i.disk[0][k], i.disk[1][k], bs);
+                if (sampled) nb = beta * bs.weight;
+                bits3(a.ns, k, ns);
+                const bool on = sampled && !is_black(nb);
+                unlike += lane_set(a.goes_on, k) != on || lane_set(a.next_delta, k) != on;
+                behind += !sampled;
+                if (on) {
+                    unlike += !bs.delta;
+                    bits3(a.next_dir, k, frame.to_world(bs.wi));
+                    bits3(a.next_origin, k,
+                          offset_ray_origin(get(i.p, k), get(i.p_error, k), get(i.ng, k), frame.to_world(bs.wi)));
+                    bits3(a.next_beta, k, nb);
+                    bits(a.next_pdf, k, bs.pdf);
+                    ++goes_on;
+                }
+            }
+            EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths";
+            EXPECT_EQ(unlike, 0) << "round " << round << ", " << n << " paths: scalar";
+            ++compared;
+        }
+    EXPECT_EQ(compared, 20 * 2);
+    const int paths = 20 * (kShadeBatch + 13);
+    EXPECT_GT(goes_on, paths / 3);
+    EXPECT_GT(behind, paths / 20);
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
