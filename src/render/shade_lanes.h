@@ -30,7 +30,9 @@
 // kd / (1 - R) or kd / (1 - kd R) and the coating's GGX term with the dielectric's Fresnel
 // reflectance), bsdf_pdf's density and the MIS weights (Render.ShadePlasticLanesWidthsAgree,
 // Render.BatchedPlasticPathsMatchTracePath). The material is not a delta one: its vertices
-// sample the lights whichever lobe the continuation took, as shade_vertex's do.
+// sample the lights whichever lobe the continuation took, as shade_vertex's do. The mirror
+// (MaterialKind::Conductor) has lanes of its own as well (shade_mirror_lanes): its bent normal,
+// frame, delta_scatter's direction and weight and its ray; no light samples (a delta material).
 //
 // The vectors are eight floats (AVX2, render/shade_lanes_avx2.cpp) on a processor that has
 // AVX2 and four (SSE2, math/simd4.h) otherwise, chosen at run time: the same samples bit for
