@@ -1,9 +1,17 @@
 #include "render/batch.h"
 
 #include <limits>
+#include <memory>
+#include <type_traits>
 
 #include "render/embree_lanes.h"
 #include "render/shade_lanes.h"
+
+#if defined(__GNUC__)
+#define EDGEPATH_ALWAYS_INLINE __attribute__((always_inline))
+#else
+#define EDGEPATH_ALWAYS_INLINE
+#endif
 
 namespace edgepath {
 
@@ -56,8 +64,10 @@ struct PathBatch::Impl {
     // is looked up path by path, as Scene::bsdf_params does.
     struct PlainMesh {
         // its material's vertices are plain: MaterialKind::Standard (the Lambertian lobe and
-        // the GGX lobe where the specular is not black)
-        bool plain = false;
+        // the GGX lobe where the specular is not black), or plastic (MaterialKind::Plastic, in
+        // lanes of their own: shade_plastic_lanes), or a mirror (MaterialKind::Conductor:
+        // shade_mirror_lanes)
+        bool plain = false, plastic = false, mirror = false;
         bool flat = false;   // no normals, uvs or normal map: Scene::surface_point_base is its points'
         bool constant_specular = false, constant_alpha = false, constant = false;
         bool glossy = false;  // constant_specular, and the specular is not black
@@ -66,6 +76,10 @@ struct PathBatch::Impl {
         Vec3f diffuse;
         bool fixed = false;  // constant and constant_specular: reflects and lobe_p hold
         float reflects = 0.f, lobe_p = 0.f;
+        // The plastic's: its index (a constant ior) and whether it is rough (a constant roughness).
+        bool constant_eta = false;
+        float eta = 0.f;
+        bool rough = false;
     };
     std::vector<PlainMesh> plain_mesh;
     // What the vectors take of an entry of scene.lights: whether they sample it (a triangle
@@ -82,16 +96,26 @@ struct PathBatch::Impl {
     static constexpr size_t kMaxLightEntries = 64;
     std::vector<LightEntry> light_entries;
     LightEntry looked_up_;  // the entry looked up last, without them (reused: not built per path)
-    ShadeLanes<kBatchSize> lanes;
-    int plain[kBatchSize];
-    int nplain_ = 0;
-    bool glossy_ = false;  // whether any of the bounce's plain vertices has a GGX lobe
+    // A bounce's vertices shaded in vectors: their lanes, their paths' places in `live`, their
+    // count and whether any has a GGX lobe (the standard material's).
+    struct LaneGroup {
+        ShadeLanes<kBatchSize> lanes;
+        int plain[kBatchSize];
+        int n = 0;
+        bool glossy = false;
+    };
+    // (The plastic's only where the scene has a plastic: a batch is made, and its lanes
+    // zeroed, for each tile.)
+    LaneGroup standard_;
+    std::unique_ptr<LaneGroup> plastic_, mirror_;
 
     Impl(const Scene& s, const RenderOptions& o) : scene(s), opt(o), settings(s, o) {
         for (const Mesh& m : scene.meshes) {
             PlainMesh pm;
             const Material& mat = scene.materials[size_t(m.material)];
-            pm.plain = mat.kind == MaterialKind::Standard;
+            pm.plastic = mat.kind == MaterialKind::Plastic && mat.coat;
+            pm.mirror = mat.kind == MaterialKind::Conductor;
+            pm.plain = mat.kind == MaterialKind::Standard || pm.plastic || pm.mirror;
             pm.flat = !m.normals && !m.uvs && mat.normal_map.empty();
             // Scene::bsdf_params' values where they are constant.
             if (pm.plain && mat.specular.is_constant()) {
@@ -110,9 +134,16 @@ struct PathBatch::Impl {
             if (pm.constant && pm.constant_specular) {
                 pm.fixed = true;
                 pm.reflects = plain_reflects(pm.diffuse, pm.specular);
-                if (pm.glossy) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
+                if (pm.glossy && !pm.plastic) pm.lobe_p = lobe_probability(pm.diffuse, pm.specular);
             }
+            if (pm.plastic && mat.ior.is_constant()) {
+                pm.constant_eta = true;
+                pm.eta = mat.ior.data[0];
+            }
+            if (pm.plastic && pm.constant_alpha) pm.rough = mat.roughness.data[0] > 0.f;
             plain_mesh.push_back(pm);
+            if (pm.plastic && !plastic_) plastic_ = std::make_unique<LaneGroup>();
+            if (pm.mirror && !mirror_) mirror_ = std::make_unique<LaneGroup>();
         }
         if (scene.light_distribution.valid() && scene.lights.size() <= kMaxLightEntries) {
             light_entries.resize(scene.lights.size());
@@ -162,16 +193,50 @@ struct PathBatch::Impl {
     // Puts live path j, at a plain vertex of material m, into the lanes (its random numbers
     // drawn in shade_vertex's order, its light picked and its environment sample taken).
     // False, with nothing drawn, for a light sample the vectors cannot take (an infinite
-    // distance to the light): shade_vertex then shades the vertex.
+    // distance to the light): shade_vertex then shades the vertex. Plastic: the vertex is a
+    // plastic's (into plastic_), otherwise the standard material's (into standard_).
+    template <bool Plastic>
     bool gather_plain(int j, const Material& m, Rng& rng);
+    // The same for a mirror's vertex (into mirror_): its specular, and shade_vertex's random
+    // numbers drawn (a delta material samples no light).
+    void gather_mirror(int j, const Material& m, Rng& rng);
 };
 
+void PathBatch::Impl::gather_mirror(int j, const Material& mat, Rng& rng) {
+    const PathState& ps = paths[live[j]];
+    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+    LaneGroup& group = *mirror_;
+    const int k = group.n++;
+    group.plain[k] = j;
+    ShadeLanes<kBatchSize>& l = group.lanes;
+    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
+        a[0][k] = v.x;
+        a[1][k] = v.y;
+        a[2][k] = v.z;
+    };
+    put3(l.p, ps.sp.p);
+    put3(l.p_error, ps.sp.p_error);
+    put3(l.ng, ps.sp.ng);
+    put3(l.ns, ps.sp.ns);
+    put3(l.dir, ps.dir);
+    put3(l.beta, ps.beta);
+    put3(l.specular, pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv));
+    l.two_sided[k] = lane_mask(mat.two_sided);
+    l.light_on[k] = l.env_on[k] = lane_mask(false);
+    // shade_vertex's: three for the lights, two more for the sky where the scene has both,
+    // three for the BSDF's sample (the mirror uses none).
+    for (int i = settings.both_lights ? 8 : 6; i > 0; --i) rng.next_float();
+}
+
+template <bool Plastic>
 bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const Rng start = rng;
-    const int k = nplain_++;
-    plain[k] = j;
     const PathState& ps = paths[live[j]];
-    ShadeLanes<kBatchSize>& l = lanes;
+    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+    LaneGroup& group = Plastic ? *plastic_ : standard_;
+    const int k = group.n++;
+    group.plain[k] = j;
+    ShadeLanes<kBatchSize>& l = group.lanes;
     auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
         a[0][k] = v.x;
         a[1][k] = v.y;
@@ -184,17 +249,35 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     put3(l.dir, ps.dir);
     put3(l.beta, ps.beta);
     // Scene::bsdf_params' reflectances and alpha, and the GGX lobe's probability.
-    const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
     const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);
     const Vec3f specular = pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv);
     const bool glossy = pm.constant_specular ? pm.glossy : !is_black(specular);
-    l.has_specular[k] = lane_mask(glossy);
-    if (glossy) {
-        glossy_ = true;
+    if constexpr (Plastic) {
+        // The plastic's (Scene::bsdf_params): its coating, index and roughness, and the means
+        // of its reflectances that choose its lobe (plastic_coat_probability).
         put3(l.specular, specular);
-        l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(eval_texture1(mat.roughness, ps.sp.uv));
-        l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
+        float roughness = 0.f;
+        if (!pm.constant_alpha) roughness = eval_texture1(mat.roughness, ps.sp.uv);
+        l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(roughness);
+        l.rough[k] = lane_mask(pm.constant_alpha ? pm.rough : roughness > 0.f);
+        l.eta[k] = pm.constant_eta ? pm.eta : eval_texture1(mat.ior, ps.sp.uv);
+        const CoatTable* coat = mat.coat.get();
+        l.coat[k] = coat;
+        l.coat_r[k] = coat->r;
+        l.coat_smooth[k] = lane_mask(coat->smooth);
+        l.coat_lobe[k] = lane_mask(!coat->smooth && !is_black(specular));
+        l.nonlinear[k] = lane_mask(mat.nonlinear);
+        l.ks[k] = plastic_mean(specular);
+        l.kd[k] = plastic_mean(diffuse);
+    } else {
+        l.has_specular[k] = lane_mask(glossy);
+        if (glossy) {
+            group.glossy = true;
+            put3(l.specular, specular);
+            l.alpha[k] = pm.constant_alpha ? pm.alpha : ggx_alpha(eval_texture1(mat.roughness, ps.sp.uv));
+            l.lobe_p[k] = pm.fixed ? pm.lobe_p : lobe_probability(diffuse, specular);
+        }
     }
     l.two_sided[k] = lane_mask(mat.two_sided);
     l.reflects[k] = pm.fixed ? pm.reflects : plain_reflects(diffuse, specular);
@@ -206,7 +289,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
         ue2 = rng.next_float();
     }
     const float ub0 = rng.next_float();  // the lobe's choice (the diffuse lobe the only one without GGX)
-    if (glossy) l.u_lobe[k] = ub0;
+    if (glossy || Plastic) l.u_lobe[k] = ub0;
     const float ub1 = rng.next_float();
     l.disk[0][k] = ub1;
     l.disk[1][k] = rng.next_float();
@@ -240,7 +323,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
             if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
                 if (!std::isfinite(ls.dist)) {  // shadow_ray would not aim at a point
                     rng = start;
-                    --nplain_;
+                    --group.n;
                     return false;
                 }
                 put3(l.given_dir, ls.dir);
@@ -308,89 +391,130 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Shading: each live path's BSDF sample, its continuation's ray, its light samples and
         // what each would add.
         int nshadow = 0, nnext = 0;
-        nplain_ = 0;
-        glossy_ = false;
+        standard_.n = 0;
+        if (plastic_) plastic_->n = 0;
+        if (mirror_) mirror_->n = 0;
+        standard_.glossy = false;
         // Path ps's continuation and a shadow ray (with what it adds if nothing hides it), into
         // the bounce's packets.
-        auto add_next = [&](PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
+        // (`count`: nnext or nshadow, or a copy of it kept in a register.)
+        auto add_next = [&](int& count, PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
             ps.goes_on = true;
             ps.next_beta = next_beta;
             ps.pdf = pdf;
             ps.delta = delta;
-            ps.next = nnext;
-            set_ray_extent(next[nnext / kLanes].rh.ray, nnext % kLanes, r);
-            ++nnext;
+            ps.next = count;
+            set_ray_extent(next[count / kLanes].rh.ray, count % kLanes, r);
+            ++count;
         };
-        auto add_shadow = [&](const Ray& r, const Vec3f& value) {
-            set_ray_extent(shadow[size_t(nshadow / kLanes)].r, nshadow % kLanes, r);
-            shadow_value[size_t(nshadow)] = value;
-            ++nshadow;
+        auto add_shadow = [&](int& count, const Ray& r, const Vec3f& value) {
+            set_ray_extent(shadow[size_t(count / kLanes)].r, count % kLanes, r);
+            shadow_value[size_t(count)] = value;
+            ++count;
         };
         for (int j = 0; j < nlive; ++j) {
             PathState& ps = paths[live[j]];
-            if (plain_mesh[size_t(ps.sp.mesh)].plain &&
-                gather_plain(j, scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)], samples[live[j]].rng))
-                continue;
+            const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
+            if (pm.plain) {
+                const Material& mat = scene.materials[size_t(scene.meshes[size_t(ps.sp.mesh)].material)];
+                Rng& rng = samples[live[j]].rng;
+                if (pm.mirror) {
+                    gather_mirror(j, mat, rng);
+                    continue;
+                }
+                if (pm.plastic ? gather_plain<true>(j, mat, rng) : gather_plain<false>(j, mat, rng)) continue;
+            }
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
             shade_vertex(
                 scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
                 [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
-                    add_next(ps, r, next_beta, bs.pdf, bs.delta);
+                    add_next(nnext, ps, r, next_beta, bs.pdf, bs.delta);
                 },
-                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) { add_shadow(r, value); });
+                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
+                    add_shadow(nshadow, r, value);
+                });
             ps.shadow_end = nshadow;
         }
-        // The plain vertices, a vector of them at a time; then their rays into the packets.
-        if (nplain_ > 0) {
-            ShadeLanes<kBatchSize>& l = lanes;
-            shade_lanes(l, nplain_, settings.mis, glossy_);
+        // The plain vertices, a vector of them at a time (the standard material's, then the
+        // plastic's); then their rays into the packets.
+        // (is_plastic, is_mirror: std::true_type for plastic_ or mirror_, whose continuations
+        // may be a delta lobe's; a mirror's vertex has no light samples. Inlined, each, and the
+        // ray counts copied in and out: the compiler then keeps them in registers, as it did
+        // with one group.)
+        auto read_back = [&](LaneGroup* group, auto is_plastic, auto is_mirror) EDGEPATH_ALWAYS_INLINE {
+            constexpr bool plastic = decltype(is_plastic)::value, mirror = decltype(is_mirror)::value;
+            if (group->n == 0) return;
+            ShadeLanes<kBatchSize>& l = group->lanes;
+            int shadows = nshadow, nexts = nnext;
+            if constexpr (plastic)
+                shade_plastic_lanes(l, group->n, settings.mis);
+            else if constexpr (mirror)
+                shade_mirror_lanes(l, group->n);
+            else
+                shade_lanes(l, group->n, settings.mis, group->glossy);
             auto get3 = [](const float (&a)[3][kBatchSize], int k) { return Vec3f(a[0][k], a[1][k], a[2][k]); };
-            for (int k = 0; k < nplain_; ++k) {
-                PathState& ps = paths[live[plain[k]]];
+            for (int k = 0; k < group->n; ++k) {
+                PathState& ps = paths[live[group->plain[k]]];
                 ps.sp.ns = get3(l.ns, k);
                 ps.goes_on = false;
-                ps.shadow_begin = nshadow;
+                ps.shadow_begin = shadows;
                 Ray r;
                 if (lane_set(l.goes_on, k)) {
                     ++counters.bounce;
                     r.origin = get3(l.next_origin, k);
                     r.dir = get3(l.next_dir, k);
-                    add_next(ps, r, get3(l.next_beta, k), l.next_pdf[k], false);
+                    add_next(nexts, ps, r, get3(l.next_beta, k), l.next_pdf[k], (plastic || mirror) && lane_set(l.next_delta, k));
                 }
                 if (lane_set(l.light_on, k)) {
                     r.origin = get3(l.light_origin, k);
                     r.dir = get3(l.light_dir, k);
                     r.tmax = l.light_tmax[k];
-                    add_shadow(r, get3(l.light_value, k));
+                    add_shadow(shadows, r, get3(l.light_value, k));
                 }
                 if (lane_set(l.env_on, k)) {
                     r.origin = get3(l.env_origin, k);
                     r.dir = get3(l.env_dir, k);
                     r.tmax = std::numeric_limits<float>::infinity();
-                    add_shadow(r, get3(l.env_value, k));
+                    add_shadow(shadows, r, get3(l.env_value, k));
                 }
-                counters.shadow += uint64_t(nshadow - ps.shadow_begin);
-                // The point lights, path by path (shade_vertex's own code).
-                if (!scene.point_lights.empty()) {
+                counters.shadow += uint64_t(shadows - ps.shadow_begin);
+                // The point lights, path by path (shade_vertex's own code), with Scene::bsdf_params'
+                // values.
+                if (!mirror && !scene.point_lights.empty()) {
                     const Frame frame(ps.sp.ns);
                     BsdfParams bp;
                     bp.diffuse = get3(l.diffuse, k);
-                    if (lane_set(l.has_specular, k)) {
+                    bp.two_sided = lane_set(l.two_sided, k);
+                    if constexpr (plastic) {
                         bp.specular = get3(l.specular, k);
                         bp.alpha = l.alpha[k];
+                        bp.kind = MaterialKind::Plastic;
+                        bp.eta = l.eta[k];
+                        bp.rough = lane_set(l.rough, k);
+                        bp.coat = l.coat[k];
+                        bp.nonlinear = lane_set(l.nonlinear, k);
                     } else {
-                        bp.specular = Vec3f(0.f);
+                        if (lane_set(l.has_specular, k)) {
+                            bp.specular = get3(l.specular, k);
+                            bp.alpha = l.alpha[k];
+                        } else {
+                            bp.specular = Vec3f(0.f);
+                        }
+                        bp.kind = MaterialKind::Standard;
                     }
-                    bp.two_sided = lane_set(l.two_sided, k);
-                    bp.kind = MaterialKind::Standard;
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
                                         [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*,
-                                            float) { add_shadow(shadow_ray, value); });
+                                            float) { add_shadow(shadows, shadow_ray, value); });
                 }
-                ps.shadow_end = nshadow;
+                ps.shadow_end = shadows;
             }
-        }
+            nshadow = shadows;
+            nnext = nexts;
+        };
+        read_back(&standard_, std::false_type{}, std::false_type{});
+        if (plastic_) read_back(plastic_.get(), std::true_type{}, std::false_type{});
+        if (mirror_) read_back(mirror_.get(), std::false_type{}, std::true_type{});
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;
         // then the shadow rays.

@@ -139,6 +139,68 @@ inline V ggx_visible_normal_lanes(const V& wo, F a, F u1, F cos_phi, F sin_phi) 
     return normalize(V(a * nh.x, a * nh.y, max_std(F(1e-7f), nh.z)));
 }
 
+// The plastic (scene/bsdf_diff.h's plastic_terms, scene/bsdf.h's bsdf_pdf): fresnel_dielectric
+// of the cosine c > 0 and the index e (1 under total internal reflection), and smith_g1 of a
+// direction at cosine c to the normal and ch to the microfacet normal.
+template <class F>
+inline F fresnel_lanes(F c, F e) {
+    const F one(1.f);
+    const F q = (one - c * c) / (e * e);
+    const F ct = sqrt(one - q), a = e * ct, b = e * c;
+    const F rs = (c - a) / (c + a), rp = (b - ct) / (b + ct);
+    return select(q >= one, one, (rs * rs + rp * rp) / F(2.f));
+}
+template <class F>
+inline F smith_g1_lanes(F c, F ch, F a) {
+    const F one(1.f), c2 = c * c;
+    const F t2 = (one - c2) / c2;
+    const F g = F(2.f) / (one + sqrt(one + a * a * t2));
+    return select(ch * c <= F(0.f), F(0.f), select(c2 >= one, one, g));
+}
+// A vector of plastic lanes' parameters, with T(co) (to) and the coating's probability ps for
+// their wo (both of its cosine co, the same for every wi).
+template <class F, class M, class V>
+struct PlasticLanes {
+    V diffuse, specular;
+    F alpha, eta, R, to, ps;
+    M rough, lobe, nonlinear;
+    bool any_rough, any_lobe, smooth;  // smooth: every lane's table smooth
+};
+// plastic_terms (f cos) for the oriented pair (o, i), co = o.z and ci = i.z, ti = T(ci), and
+// bsdf_pdf's density for it (both before the test that the pair is above the surface).
+template <class F, class M, class V>
+inline void plastic_oriented(const PlasticLanes<F, M, V>& P, const V& o, const V& i, F ti, V& value, F& density) {
+    const F zero(0.f), one(1.f);
+    const F co = o.z, ci = i.z;
+    // The base: kd / den T(co) T(ci) ci / (pi eta^2), den = 1 - R or (nonlinear) 1 - kd R.
+    const F k = P.to * ti * ci / (F(kPi) * P.eta * P.eta);
+    const V den = select(P.nonlinear, V(one) - P.diffuse * P.R, V(one - P.R));
+    const V diff(P.diffuse.x / den.x, P.diffuse.y / den.y, P.diffuse.z / den.z);
+    value = diff * k;
+    density = (one - P.ps) * ci * F(kInvPi);
+    if (!P.any_lobe && !P.any_rough) return;
+    const V H = o + i;
+    const F hl = length(H);
+    const V h = H / hl;
+    const M has_h = hl > zero;
+    if (P.any_lobe) {
+        // ggx_geometry with n = (0, 0, 1), and the coating's Fresnel factor: ks F(oh) S.
+        const F ch = zero * h.x + zero * h.y + one * h.z;
+        const F oh = dot(o, h);
+        const F D = ggx_D_lanes(ch, P.alpha);
+        const F Go = smith_g1_lanes(co, oh, P.alpha), Gi = smith_g1_lanes(ci, oh, P.alpha);
+        const F S = D * Go * Gi / (F(4.f) * co);
+        const F Fr = select(oh > zero, fresnel_lanes(oh, P.eta), zero);
+        value = select(P.lobe & has_h, value + P.specular * (Fr * S), value);
+    }
+    if (P.any_rough) {
+        // ggx_pdf: its half vector normalize(o + i), o + i itself where that has no length.
+        const V hn = select(has_h, h, H);
+        const F g = select(dot(o, hn) <= zero, zero, ggx_G1_lanes(o, hn, P.alpha) * ggx_D_lanes(hn.z, P.alpha) / (F(4.f) * o.z));
+        density = select(P.rough & (P.ps > zero), density + P.ps * g, density);
+    }
+}
+
 template <class F>
 inline F mis_power_lanes(F a, F b) {
     a = a * a;
@@ -152,12 +214,58 @@ inline F mis_power_lanes(F a, F b) {
 // F::width at a time: F a vector of floats, M its mask, V three of them (math/simd4.h's F, M,
 // V or math/simd8.h's F8, M8, V8). Glossy: whether any lane may have a GGX lobe (if not, the
 // Lambertian lobe alone, L.has_specular not read).
-template <class F, class M, class V, bool Glossy, int N>
+//
+// Plastic: every lane is a plastic vertex (L.rough, L.coat ... read; Glossy not used): T(co) and
+// the coating's probability per path first (a table lookup each, render/shade_lanes.cpp), then
+// the sample of the lobe chosen (the GGX visible normal where rough, the mirror where smooth,
+// or the cosine-weighted base), the value and density of plastic_terms and bsdf_pdf, T(ci) per
+// path.
+template <class F, class M, class V, bool Glossy, bool Plastic, int N>
 inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     using namespace lanes;
     constexpr int W = F::width;
     static_assert(N % W == 0, "whole vectors");
     const F zero(0.f), one(1.f);
+    // bend_normal (scene/bsdf_diff.h) of lane k's shading normal, wo_world = -dir.
+    auto bent_normal = [&](int k, const V& wo_world) {
+        const V ng = load3<V>(L.ng, k), ns0 = load3<V>(L.ns, k);
+        const F s = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
+        const M keep = s * d >= F(kMinShadingCosine);
+        return select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
+    };
+    // Whether every lane of the vector at lane k has a smooth coating: its T(c) is then
+    // 1 - fresnel_dielectric(c, eta) in vectors, otherwise each lane's table's, path by path.
+    constexpr int all_lanes = (1 << W) - 1;
+    auto all_smooth = [&](int k) { return M::load(L.coat_smooth + k).bits() == all_lanes; };
+    auto coat_t = [&](int k, bool smooth, F c) {
+        if (smooth) return one - fresnel_lanes(c, F::load(L.eta + k));
+        alignas(64) float a[W];
+        c.store(a);
+        plastic_coat_transmittances(L, k, W, a);
+        return F::load(a);
+    };
+    // The plastic's wo (its cosine co, mirrored for a two-sided one seen from below), T(co)
+    // and the coating's probability (plastic_coat_probability's operations).
+    alignas(64) float co[N], t_o[N], coat_p[N];
+    if constexpr (Plastic) {
+        for (int k = 0; k < n; k += W) {
+            const V wo_world = -load3<V>(L.dir, k);
+            const F z = dot(wo_world, bent_normal(k, wo_world));
+            const M flip = M::load(L.two_sided + k) & (z < zero);
+            const F c = select(flip, -z, z);
+            c.store(co + k);
+            if (all_smooth(k)) {
+                const F t = coat_t(k, true, c), ks = F::load(L.ks + k), kd = F::load(L.kd + k);
+                const F s = (one - t) * ks, d = t * kd;
+                t.store(t_o + k);
+                select(ks + kd > zero, select(s + d > zero, s / (s + d), zero), zero).store(coat_p + k);
+            } else {
+                const int count = std::min(W, n - k);
+                plastic_coat_probabilities(L, k, count, co, t_o, coat_p);
+                for (int j = k + count; j < k + W; ++j) t_o[j] = coat_p[j] = 0.f;
+            }
+        }
+    }
     // The BSDF sample's angle: square_to_disk's (sampling/warp.h) for the cosine-weighted lobe
     // or 2 pi u2 for the GGX visible normal, whichever lobe the path's number chose (u_lobe <
     // lobe_p: the GGX lobe); its cosine and sine; the disk's radius and point.
@@ -168,7 +276,10 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const M wide = abs(a) > abs(b);
         select(wide, a, b).store(radius + k);
         const F disk_angle = select(wide, F(kPi / 4.f) * (b / a), F(kPi / 2.f) - F(kPi / 4.f) * (a / b));
-        if constexpr (Glossy) {
+        if constexpr (Plastic) {
+            const M ggx = M::load(L.rough + k) & (F::load(L.u_lobe + k) < F::load(coat_p + k));
+            select(ggx, F(2.f * kPi) * u2, disk_angle).store(angle + k);
+        } else if constexpr (Glossy) {
             const M ggx = M::load(L.has_specular + k) & (F::load(L.u_lobe + k) < F::load(L.lobe_p + k));
             select(ggx, F(2.f * kPi) * u2, disk_angle).store(angle + k);
         } else {
@@ -191,11 +302,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         const V dir = load3<V>(L.dir, k), beta = load3<V>(L.beta, k), diffuse = load3<V>(L.diffuse, k);
         const V wo_world = -dir;
 
-        // bend_normal (scene/bsdf_diff.h).
-        const V ns0 = load3<V>(L.ns, k);
-        const F s = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
-        const M keep = s * d >= F(kMinShadingCosine);
-        const V ns = select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
+        const V ns = bent_normal(k, wo_world);
         store3(L.ns, k, ns);
 
         // Frame (math/frame.h) and wo.
@@ -214,7 +321,22 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         V specular(zero);
         F alpha = zero, lobe_p = zero;
         bool glossy = false;
-        if constexpr (Glossy) {
+        PlasticLanes<F, M, V> P;
+        if constexpr (Plastic) {
+            P.diffuse = diffuse;
+            P.specular = load3<V>(L.specular, k);
+            P.alpha = F::load(L.alpha + k);
+            P.eta = F::load(L.eta + k);
+            P.R = F::load(L.coat_r + k);
+            P.to = F::load(t_o + k);
+            P.ps = F::load(coat_p + k);
+            P.rough = M::load(L.rough + k);
+            P.lobe = M::load(L.coat_lobe + k);
+            P.nonlinear = M::load(L.nonlinear + k);
+            P.any_rough = P.rough.bits() != 0;
+            P.any_lobe = P.lobe.bits() != 0;
+            P.smooth = all_smooth(k);
+        } else if constexpr (Glossy) {
             has_spec = M::load(L.has_specular + k);
             lobe_p = select(has_spec, F::load(L.lobe_p + k), zero);
             glossy = has_spec.bits() != 0;
@@ -232,19 +354,49 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             const V wo_up(wo.x, wo.y, select(flip, -wo.z, wo.z));
             const F dx = F::load(disk_x + k), dy = F::load(disk_y + k);
             V wi(dx, dy, sqrt(max_std(zero, one - dx * dx - dy * dy)));
-            if (glossy) {
-                const M ggx = has_spec & (F::load(L.u_lobe + k) < lobe_p);
-                const V h = ggx_visible_normal_lanes(wo_up, alpha, F::load(L.disk[0] + k), F::load(cosine + k),
-                                                     F::load(sine + k));
-                wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
-            }
             V value;
             F pdf;
-            bsdf_oriented(wo_up, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, pdf);
-            const M ok = M::load(L.reflects + k) & !(wo_up.z <= zero) & !(wi.z <= zero) & (pdf > zero);
-            const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
+            M ok = M::load(L.reflects + k) & !(wo_up.z <= zero);
+            V nb;
+            if constexpr (Plastic) {
+                // The coating's lobe where u_lobe < ps: GGX where rough, the mirror where smooth.
+                const M chose = F::load(L.u_lobe + k) < P.ps;
+                const M ggx = P.rough & chose, mirror = and_not(chose, P.rough);
+                if (ggx.bits() != 0) {
+                    const V h = ggx_visible_normal_lanes(wo_up, P.alpha, F::load(L.disk[0] + k), F::load(cosine + k),
+                                                         F::load(sine + k));
+                    wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
+                }
+                plastic_oriented(P, wo_up, wi, coat_t(k, P.smooth, wi.z), value, pdf);
+                const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
+                ok = select(mirror, ok, ok & !(wi.z <= zero) & (pdf > zero));
+                nb = beta * (f / pdf);
+                if (mirror.bits() != 0) {
+                    // delta_scatter of the coating (n = (0, 0, 1), wo on its front): the mirror
+                    // direction, weight ks F(co) / ps, its probability ps.
+                    const F c = zero * wo_up.x + zero * wo_up.y + one * wo_up.z;
+                    const F m = F(2.f) * c;
+                    const V dir(zero * m - wo_up.x, zero * m - wo_up.y, one * m - wo_up.z);
+                    const V weight = P.specular * (fresnel_lanes(c, P.eta) * (one / P.ps));
+                    wi = select(mirror, dir, wi);
+                    nb = select(mirror, beta * weight, nb);
+                    pdf = select(mirror, P.ps, pdf);
+                }
+                (mirror & ok).store(L.next_delta + k);
+            } else {
+                if (glossy) {
+                    const M ggx = has_spec & (F::load(L.u_lobe + k) < lobe_p);
+                    const V h = ggx_visible_normal_lanes(wo_up, alpha, F::load(L.disk[0] + k), F::load(cosine + k),
+                                                         F::load(sine + k));
+                    wi = select(ggx, h * (F(2.f) * dot(wo_up, h)) - wo_up, wi);
+                }
+                bsdf_oriented(wo_up, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, value, pdf);
+                ok = ok & !(wi.z <= zero) & (pdf > zero);
+                const V f = select((wo_up.z > zero) & (wi.z > zero), value, V(zero));
+                nb = beta * (f / pdf);
+            }
             wi.z = select(flip, -wi.z, wi.z);
-            const V nb = select(ok, beta * (f / pdf), V(zero));
+            nb = select(ok, nb, V(zero));
             const M goes_on = ok & !is_black(nb);
             goes_on.store(L.goes_on + k);
             store3(L.next_beta, k, nb);
@@ -260,7 +412,17 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             const V wi = to_local(ldir);
             V f;
             F bpdf;
-            bsdf_lanes(flip, wo, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, f, bpdf);
+            if constexpr (Plastic) {
+                const V o(wo.x, wo.y, select(flip, -wo.z, wo.z)), i(wi.x, wi.y, select(flip, -wi.z, wi.z));
+                const M up = (o.z > zero) & (i.z > zero);
+                V value;
+                F density;
+                plastic_oriented(P, o, i, coat_t(k, P.smooth, i.z), value, density);
+                f = select(up, value, V(zero));
+                bpdf = select(up, density, zero);
+            } else {
+                bsdf_lanes(flip, wo, wi, diffuse, has_spec, specular, alpha, lobe_p, glossy, f, bpdf);
+            }
             on = on & !is_black(f);
             const F w = mis ? mis_power_lanes(lpdf, bpdf) : one;
             return beta * f * radiance * (w / lpdf);
@@ -319,6 +481,57 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             store3(L.env_value, k, value);
             store3(L.env_origin, k, offset_ray_origin(p, p_error, ng, ldir));
         }
+    }
+}
+
+// The smooth conductor's lanes (shade_mirror_lanes, MaterialKind::Conductor): bsdf_sample's
+// delta branch for the mirror (delta_scatter: the mirror direction about the bent shading
+// normal, on the back too where two-sided, weight Schlick's reflectance of `specular`), its ray
+// and throughput; no light sample (a delta material samples none). Lanes [0, n) of L, L.specular
+// and L.two_sided read; next_pdf is the lobe's probability, 1.
+template <class F, class M, class V, int N>
+inline void shade_mirror_lanes_kernel(ShadeLanes<N>& L, int n) {
+    using namespace lanes;
+    constexpr int W = F::width;
+    static_assert(N % W == 0, "whole vectors");
+    const F zero(0.f), one(1.f);
+    for (int k = 0; k < n; k += W) {
+        const V p = load3<V>(L.p, k), p_error = load3<V>(L.p_error, k), ng = load3<V>(L.ng, k);
+        const V beta = load3<V>(L.beta, k), specular = load3<V>(L.specular, k);
+        const V wo_world = -load3<V>(L.dir, k);
+        // bend_normal (scene/bsdf_diff.h).
+        const V ns0 = load3<V>(L.ns, k);
+        const F sd = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
+        const M keep = sd * d >= F(kMinShadingCosine);
+        const V ns = select(keep, ns0, normalize(ns0 + wo_world * (sd * F(kMinShadingCosine) - d)));
+        store3(L.ns, k, ns);
+        // Frame (math/frame.h) and wo.
+        const F sign = sign_of(ns.z);
+        const F a = F(-1.f) / (sign + ns.z);
+        const F b = ns.x * ns.y * a;
+        const V fs(one + sign * ns.x * ns.x * a, sign * b, -sign * ns.x);
+        const V ft(b, sign + ns.y * ns.y * a, -ns.y);
+        const V wo(dot(wo_world, fs), dot(wo_world, ft), dot(wo_world, ns));
+        // delta_scatter's mirror with n = (0, 0, 1): c = n . wo, turned to wo's side where
+        // two-sided; the direction n (2 s c) - wo; Schlick's weight, std::clamp as
+        // min(max(1 - c, 0), 1).
+        const F c0 = zero * wo.x + zero * wo.y + one * wo.z;
+        const F s = select(M::load(L.two_sided + k) & (c0 < zero), F(-1.f), one);
+        const F c = c0 * s;
+        const M ok = c > zero;
+        const F m2 = F(2.f) * s * c;
+        const V wi(zero * m2 - wo.x, zero * m2 - wo.y, one * m2 - wo.z);
+        const F m = min_std(max_std(one - c, zero), one);
+        const F m5 = m * m * m * m * m;
+        const V nb = select(ok, beta * (specular + (V(one) - specular) * m5), V(zero));
+        const M goes_on = ok & !is_black(nb);
+        goes_on.store(L.goes_on + k);
+        goes_on.store(L.next_delta + k);
+        store3(L.next_beta, k, nb);
+        one.store(L.next_pdf + k);
+        const V w = fs * wi.x + ft * wi.y + ns * wi.z;
+        store3(L.next_dir, k, w);
+        store3(L.next_origin, k, offset_ray_origin(p, p_error, ng, w));
     }
 }
 

@@ -17,6 +17,23 @@
 // selects with the same NaN semantics), so the samples are the same bit for bit
 // (Render.BatchedPlainPathsMatchTracePath, Render.BatchedGlossyPathsMatchTracePath).
 //
+// The plastic (MaterialKind::Plastic, rough or smooth coating: scene/plastic.h) has lanes of
+// its own (shade_plastic_lanes, the same kernel with its lobes): gathered likewise with its
+// index, coating table, R, the means of its reflectances and its masks (rough, smooth table,
+// the coating's GGX term, nonlinear). The table's T(c) is looked up path by path with the
+// scalar function itself (detail::coat_transmittance, in render/shade_lanes.cpp; in vectors,
+// 1 - F(c), where all of a vector's coatings are smooth): T(co) and the coating's probability
+// (plastic_coat_probability) before the sample's angle, which depends on the lobe chosen, then
+// T(ci) for the sample and each light sample. The rest is in vectors: the GGX visible normal
+// where rough, the smooth coating's mirror direction and weight ks F(co) / ps (next_delta: the
+// continuation is a delta lobe's), the cosine-weighted base, plastic_terms' value (the base's
+// kd / (1 - R) or kd / (1 - kd R) and the coating's GGX term with the dielectric's Fresnel
+// reflectance), bsdf_pdf's density and the MIS weights (Render.ShadePlasticLanesWidthsAgree,
+// Render.BatchedPlasticPathsMatchTracePath). The material is not a delta one: its vertices
+// sample the lights whichever lobe the continuation took, as shade_vertex's do. The mirror
+// (MaterialKind::Conductor) has lanes of its own as well (shade_mirror_lanes): its bent normal,
+// frame, delta_scatter's direction and weight and its ray; no light samples (a delta material).
+//
 // The vectors are eight floats (AVX2, render/shade_lanes_avx2.cpp) on a processor that has
 // AVX2 and four (SSE2, math/simd4.h) otherwise, chosen at run time: the same samples bit for
 // bit either way (Render.ShadeLanesWidthsAgree), since each lane's operations are the same.
@@ -26,6 +43,8 @@
 #include <cstring>
 
 namespace edgepath {
+
+struct CoatTable;
 
 template <int N>
 struct ShadeLanes {
@@ -55,6 +74,19 @@ struct ShadeLanes {
     alignas(64) float given_p[3][N], given_p_error[3][N], given_ng[3][N];
     // The environment's sample (mask env_on): its direction, value and density.
     alignas(64) float env_on[N], env_dir[3][N], env_radiance[3][N], env_pdf[N];
+    // The plastic's lanes (shade_plastic_lanes; MaterialKind::Plastic, Scene::bsdf_params'
+    // values): its relative index, the coating's R (CoatTable::r), the means of the specular
+    // and of the diffuse reflectance (plastic_coat_probability's ks and kd); masks of a rough
+    // coating (a roughness above 0), of a smooth table (T(c) = 1 - F(c), computed in vectors
+    // where every lane of a vector has one), of the rough coating's lobe in the value (the table
+    // not smooth, the specular not black) and of `nonlinear`; the coating's table. Their
+    // specular, alpha and lobe number are in specular, alpha and u_lobe above (has_specular,
+    // lobe_p not read).
+    alignas(64) float eta[N], coat_r[N], ks[N], kd[N], rough[N], coat_smooth[N], coat_lobe[N], nonlinear[N];
+    // Out: the mask of a continuation along the smooth coating's mirror direction (a delta
+    // lobe: next_pdf is its probability, next_beta its weight).
+    alignas(64) float next_delta[N];
+    const CoatTable* coat[N];
 
     // Out: the bent shading normal (into ns); the continuation (mask goes_on), its ray and
     // throughput past it and the BSDF sample's density; the area light's shadow ray (mask
@@ -97,6 +129,22 @@ enum class ShadeWidth { Auto, Sse2, Avx2 };
 void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy);
 // The same in vectors of width w (Auto: the width in force); w must be available.
 void shade_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy, ShadeWidth w);
+// Lanes [0, n) of L, every one a plastic vertex (MaterialKind::Plastic, rough or smooth
+// coating), shaded likewise: shade_vertex's operations for the plastic, bit for bit.
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis);
+void shade_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, bool mis, ShadeWidth w);
+// Lanes [0, n) of L, every one a smooth conductor's vertex (MaterialKind::Conductor: the
+// mirror), shaded likewise: its continuation only (no light samples; light_on and env_on not
+// written, next_delta set where it goes on).
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n);
+void shade_mirror_lanes(ShadeLanes<kShadeBatch>& L, int n, ShadeWidth w);
+// The scalar steps of the plastic's lanes, for the kernels (render/shade_lanes.cpp, compiled
+// for the baseline processor): T(c) (detail::coat_transmittance) of lanes [k, k + count) for
+// the cosines c (in place), and for lanes [k, k + count) T(co) and plastic_coat_probability's
+// value of each lane's co (the arrays indexed by lane).
+void plastic_coat_transmittances(const ShadeLanes<kShadeBatch>& L, int k, int count, float* c);
+void plastic_coat_probabilities(const ShadeLanes<kShadeBatch>& L, int k, int count, const float* co, float* t_o,
+                                float* ps);
 // Whether this build and processor can run width w (Sse2 and Auto always).
 bool shade_width_available(ShadeWidth w);
 // The width shade_lanes uses: the widest available unless another was forced.

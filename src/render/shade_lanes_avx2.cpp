@@ -32,9 +32,15 @@ namespace edgepath {
 
 void shade_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis, bool glossy) {
     if (glossy)
-        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, true>(L, n, mis);
+        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, true, false>(L, n, mis);
     else
-        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, false>(L, n, mis);
+        shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, false, false>(L, n, mis);
+}
+void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n, bool mis) {
+    shade_lanes_kernel<avx2::F8, avx2::M8, avx2::V8, false, true>(L, n, mis);
+}
+void shade_mirror_lanes_avx2(ShadeLanes<kShadeBatch>& L, int n) {
+    shade_mirror_lanes_kernel<avx2::F8, avx2::M8, avx2::V8>(L, n);
 }
 
 }  // namespace edgepath
@@ -53,6 +59,8 @@ bool shade_lanes_avx2_compiled() { return true; }
 #else
 bool shade_lanes_avx2_compiled() { return false; }
 void shade_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool, bool) {}  // never called: not compiled
+void shade_plastic_lanes_avx2(ShadeLanes<kShadeBatch>&, int, bool) {}
+void shade_mirror_lanes_avx2(ShadeLanes<kShadeBatch>&, int) {}
 #endif
 
 }  // namespace edgepath

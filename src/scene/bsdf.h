@@ -86,13 +86,18 @@ inline Vec3f fresnel_schlick(const Vec3f& f0, float cos_theta) {
 // Probability of choosing the plastic's coating (its reflection) when sampling, for wo at cosine
 // co > 0: the coating's reflectance 1 - T(co) weighted by the mean specular reflectance, against
 // the light it transmits weighted by the mean diffuse one (Mitsuba's choice).
-inline float plastic_coat_probability(const BsdfParams& p, float co) {
-    const float ks = (p.specular.x + p.specular.y + p.specular.z) / 3.f;
-    const float kd = (p.diffuse.x + p.diffuse.y + p.diffuse.z) / 3.f;
+// The means ks, kd of the reflectances, and from T(co) = t the probability itself (the
+// forward batches' plastic lanes compute the same, render/shade_lanes.h).
+inline float plastic_mean(const Vec3f& c) { return (c.x + c.y + c.z) / 3.f; }
+inline float plastic_coat_probability(float ks, float kd, float t) {
     if (!(ks + kd > 0.f)) return 0.f;
-    const float t = detail::coat_transmittance(*p.coat, co, p.eta);
     const float s = (1.f - t) * ks, d = t * kd;
     return s + d > 0.f ? s / (s + d) : 0.f;
+}
+inline float plastic_coat_probability(const BsdfParams& p, float co) {
+    const float ks = plastic_mean(p.specular), kd = plastic_mean(p.diffuse);
+    if (!(ks + kd > 0.f)) return 0.f;
+    return plastic_coat_probability(ks, kd, detail::coat_transmittance(*p.coat, co, p.eta));
 }
 
 // Probability of choosing the specular lobe when sampling.

@@ -14,6 +14,7 @@
 #include "render/path.h"
 #include "render/shade_lanes.h"
 #include "scene/gradients.h"
+#include "scene/plastic.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
@@ -901,9 +902,9 @@ int expect_strategies_match(const Scene& scene, RenderOptions opt, int variant, 
 }
 
 // The batches shade the vertices of a diffuse material four paths at a time in vectors
-// (render/shade_lanes.h), and the other vertices one by one: each path's radiance is still
-// trace_path's bit for bit, with both kinds in one batch (a glossy box with a textured
-// roughness, in the vectors, and a mirror, one by one, among diffuse surfaces),
+// (render/shade_lanes.h; a mirror's in vectors of its own, other kinds one by one): each
+// path's radiance is still trace_path's bit for bit, with several kinds in one batch (a glossy
+// box with a textured roughness, in the vectors, and a mirror, in its own, among diffuse surfaces),
 // a sphere with shading normals and vertex colours, a textured floor, a one-sided diffuse quad
 // seen from behind, a two-sided one, a black one, a lamp emitting on one side and one on both
 // (sampled by area in the vectors), with and without an environment, then with the lights whose
@@ -932,7 +933,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     d.materials[3].roughness = tex.bumpy_tex;
     d.materials.push_back(material(kd, black, r));     // 4: diffuse, textured
     d.materials[4].diffuse = tex.checker_tex;
-    d.materials.push_back(material(black, ks, r));     // 5: a mirror: shaded one by one
+    d.materials.push_back(material(black, ks, r));     // 5: a mirror: its own vectors
     d.materials[5].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(4));
     d.meshes.push_back(ball.desc(0));
@@ -992,7 +993,7 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
 // diffuse under a specular (the GGX lobe alone), a textured diffuse (the lobe's probability
 // per point) and vertex colours, one two-sided surface seen from both sides, a textured
 // roughness under a textured specular with a black texel (the GGX lobe there and not beside
-// it), among a diffuse wall and a mirror (shaded one by one); a lamp sampled by area in the vectors,
+// it), among a diffuse wall and a mirror (its own vectors); a lamp sampled by area in the vectors,
 // then a sky, then lights whose samples are given whole (a sphere light by solid angle, a
 // quad by spherical triangles) and point lights; each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedGlossyPathsMatchTracePath) {
@@ -1028,7 +1029,7 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.materials[6].roughness = tex.bumpy_tex;
     d.materials[6].specular = spec_tex;
     d.materials.push_back(material(black, black, r03));   // 7: the lamps'
-    d.materials.push_back(material(black, gold, r03));    // 8: a mirror: one by one
+    d.materials.push_back(material(black, gold, r03));    // 8: a mirror: its own vectors
     d.materials[8].kind = MaterialKind::Conductor;
     d.meshes.push_back(floor.desc(0));
     d.meshes.push_back(ball.desc(1));
@@ -1052,6 +1053,87 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
         compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
     }
     EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
+}
+
+// The batches shade plastic vertices (MaterialKind::Plastic) in vectors of their own
+// (shade_plastic_lanes): each path's radiance is still trace_path's bit for bit, on 1 and 2
+// threads. Rough coatings of roughness 0.05, 0.2, 0.3 and 1 (indices 1.5, 1.33), smooth ones
+// (the mirror lobe chosen by the coating's probability; indices 1.5 and 0.7, below 1), a
+// textured diffuse, vertex colours, nonlinear, a tinted and a black specular, a normal map,
+// one two-sided surface seen from both sides, among a standard glossy box (its own vectors)
+// and a two-sided mirror of textured specular (its own vectors too); a lamp sampled by area
+// in the vectors, then a sky, then lights whose samples are given whole and a point light;
+// each sampling strategy, 0 to 12 bounces.
+TEST(Render, BatchedPlasticPathsMatchTracePath) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
+    MeshData smooth_ball = make_sphere(Vec3f(-0.9f, -0.5f, 0.9f), 0.45f, 10, 20);
+    MeshData wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
+    MeshData panel = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
+    MeshData sheen = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
+    MeshData box = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    MeshData shelf = make_quad(Vec3f(0.6f, 0.3f, -1.f), Vec3f(0.9f, 0, 0), Vec3f(0, 0, 0.7f));
+    ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), black({0, 0, 0}), white({1, 1, 1}), le({6.f, 6.f, 6.f});
+    ConstTex tint({0.9f, 0.7f, 0.5f}), grey({0.5f, 0.5f, 0.5f}), light({0.9f, 0.9f, 0.8f});
+    ConstTex r0({0.f}), r005({0.05f}), r03({0.3f}), r1({1.f}), r02({0.2f});
+    ConstTex ior15({1.5f}), ior133({1.33f}), ior07({0.7f});
+    const BatchTextures tex(ball.num_vertices());
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
+    auto plastic = [&](const ConstTex& diffuse, const ConstTex& specular, const ConstTex& roughness,
+                       const ConstTex& ior) {
+        MaterialDesc m = material(diffuse, specular, roughness);
+        m.kind = MaterialKind::Plastic;
+        m.ior = ior.desc();
+        return m;
+    };
+    d.materials.push_back(plastic(kd, white, r005, ior15));  // 0: textured diffuse
+    d.materials[0].diffuse = tex.checker_tex;
+    d.materials.push_back(plastic(light, tint, r03, ior133));  // 1: vertex colours, nonlinear, tinted
+    d.materials[1].nonlinear = true;
+    d.materials.push_back(plastic(kd, tint, r0, ior15));      // 2: smooth, tinted
+    d.materials.push_back(plastic(red, white, r1, ior15));    // 3: the roughest, a normal map
+    const float bumps[12] = {0.65f, 0.5f, 1.f, 0.4f, 0.55f, 1.f, 0.5f, 0.35f, 1.f, 0.5f, 0.5f, 1.f};
+    TextureDesc bump_map;
+    bump_map.data = bumps;
+    bump_map.height = bump_map.width = 2;
+    bump_map.channels = 3;
+    d.materials[3].normal_map = bump_map;
+    d.materials.push_back(plastic(kd, white, r03, ior15));    // 4: two-sided
+    d.materials[4].two_sided = true;
+    d.materials.push_back(plastic(kd, black, r02, ior15));    // 5: black specular (the base alone)
+    d.materials.push_back(plastic(grey, white, r0, ior07));   // 6: smooth, two-sided, index below 1
+    d.materials[6].two_sided = true;
+    d.materials.push_back(material(kd, grey, r03));           // 7: standard, glossy
+    d.materials.push_back(material(black, black, r03));       // 8: the lamps'
+    d.materials.push_back(material(black, tint, r03));        // 9: a mirror: its own vectors
+    d.materials[9].kind = MaterialKind::Conductor;
+    d.materials[9].two_sided = true;
+    d.materials[9].specular = tex.checker_tex;
+    d.meshes.push_back(floor.desc(0));
+    d.meshes.push_back(ball.desc(1));
+    d.meshes[1].colors = tex.tint.data();
+    d.meshes.push_back(smooth_ball.desc(2));
+    d.meshes.push_back(wall.desc(3));
+    d.meshes.push_back(panel.desc(4));
+    d.meshes.push_back(sheen.desc(5));
+    d.meshes.push_back(shelf.desc(6));
+    d.meshes.push_back(box.desc(7));
+    d.meshes.push_back(lamp.desc(8));
+    d.meshes.back().emission = le.desc();
+    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
+    d.meshes.push_back(mirror.desc(9));
+    const LightVariants variants;
+    RenderOptions opt;
+    opt.spp = 3;
+    opt.seed = 17;
+    int compared = 0;
+    for (int variant = 0; variant < 3; ++variant) {
+        variants.apply(d, variant, 8);
+        compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
+    }
+    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
 }
 
 // shade_lanes' widths in force for the life of a test, then the processor's widest again.
@@ -1312,6 +1394,249 @@ TEST(Render, ShadeLanesWidthsAgree) {
     }
     EXPECT_EQ(images, 2 * 2 * 2);
     EXPECT_EQ(shade_width(), ShadeWidth::Avx2);
+}
+
+// The plastic's lanes (shade_plastic_lanes): random_lanes' paths made plastic, each with one of
+// a few coatings (rough of alpha 0.05, 0.3 and 1 with indices 1.5 and 1.33, smooth with 1.5,
+// 1.33 and 0.7; or the smooth ones alone, whose T(c) the kernel computes in vectors where a
+// whole vector has them), a specular of 1, tinted or black, nonlinear or not; their
+// BsdfParams (as Scene::bsdf_params makes a plastic's) for the scalar code.
+struct PlasticLaneCoats {
+    std::shared_ptr<const CoatTable> coats[6] = {coat_table(0.05f, 1.5f, false), coat_table(0.3f, 1.33f, false),
+                                                 coat_table(1.f, 1.5f, false),   coat_table(0.f, 1.5f, true),
+                                                 coat_table(0.f, 1.33f, true),   coat_table(0.f, 0.7f, true)};
+};
+std::vector<BsdfParams> random_plastic_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng, const PlasticLaneCoats& c,
+                                             bool smooth_only) {
+    random_lanes(L, n, rng);
+    std::vector<BsdfParams> params(static_cast<size_t>(n));
+    auto u = [&] { return rng.next_float(); };
+    auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
+    for (int k = 0; k < n; ++k) {
+        BsdfParams& bp = params[size_t(k)];
+        const float pick = u();
+        const CoatTable* coat = c.coats[smooth_only ? 3 + std::min(int(pick * 3.f), 2) : std::min(int(pick * 6.f), 5)].get();
+        const float s = u();
+        bp.diffuse = get(L.diffuse, k);
+        bp.specular = s < 0.5f ? Vec3f(1.f) : s < 0.85f ? Vec3f(u(), u(), u()) : Vec3f(0.f);
+        bp.alpha = coat->smooth ? kMinRoughness : ggx_alpha(coat->alpha);
+        bp.two_sided = lane_set(L.two_sided, k);
+        bp.kind = MaterialKind::Plastic;
+        bp.eta = coat->eta;
+        bp.rough = !coat->smooth;
+        bp.coat = coat;
+        bp.nonlinear = u() < 0.3f;
+        for (int ch = 0; ch < 3; ++ch) L.specular[ch][k] = bp.specular[ch];
+        L.alpha[k] = bp.alpha;
+        L.eta[k] = bp.eta;
+        L.coat[k] = coat;
+        L.coat_r[k] = coat->r;
+        L.rough[k] = lane_mask(bp.rough);
+        L.coat_smooth[k] = lane_mask(coat->smooth);
+        L.coat_lobe[k] = lane_mask(!coat->smooth && !is_black(bp.specular));
+        L.nonlinear[k] = lane_mask(bp.nonlinear);
+        L.ks[k] = plastic_mean(bp.specular);
+        L.kd[k] = plastic_mean(bp.diffuse);
+        // Scene::bsdf_params' reflecting (not always: the mask is obeyed)
+        L.reflects[k] = lane_mask(u() < 0.95f && !(luminance(bp.diffuse) + luminance(bp.specular) <= 0.f));
+    }
+    return params;
+}
+
+// The plastic's vertices are shaded in the vectors too, by the same kernel with the plastic's
+// lobes (render/shade_lanes.h): both widths give the same bits, and each lane the scalar
+// code's (bend_normal, Frame, bsdf_sample, bsdf_eval, bsdf_pdf, mis_power) bit for bit: its
+// continuation (the coating's GGX sample, the smooth coating's mirror with its weight, or the
+// base's cosine-weighted sample), its sky sample's and its given light sample's values, on 64
+// random paths and a partial batch of 13, with each strategy's weights; T(c) from the tables
+// path by path, and in vectors where all of a vector's coatings are smooth.
+TEST(Render, ShadePlasticLanesWidthsAgree) {
+    const bool avx2 = shade_width_available(ShadeWidth::Avx2);
+    const PlasticLaneCoats coats;
+    Rng rng(9, 4);
+    int goes_on = 0, ggx_on = 0, mirror_on = 0, base_on = 0, env_on = 0, given_on = 0, lobe_env = 0, compared = 0;
+    for (int round = 0; round < 40; ++round)
+        for (int n : {kShadeBatch, 13})
+            for (bool mis : {true, false}) {
+                auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
+                // One round in four with smooth coatings alone.
+                const std::vector<BsdfParams> params = random_plastic_lanes(*in, n, rng, coats, round % 4 == 3);
+                auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+                auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+                shade_plastic_lanes(*narrow, n, mis, ShadeWidth::Sse2);
+                shade_plastic_lanes(*wide, n, mis, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
+                int differing = 0;
+                auto same = [&](const float* x, const float* y, int k) {
+                    differing += std::memcmp(x + k, y + k, sizeof(float)) != 0;
+                };
+                auto same3 = [&](const float (&x)[3][kShadeBatch], const float (&y)[3][kShadeBatch], int k) {
+                    for (int c = 0; c < 3; ++c) same(x[c], y[c], k);
+                };
+                const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide;
+                for (int k = 0; k < n; ++k) {
+                    same3(a.ns, b.ns, k);
+                    same(a.goes_on, b.goes_on, k);
+                    same(a.next_delta, b.next_delta, k);
+                    same3(a.next_origin, b.next_origin, k);
+                    same3(a.next_dir, b.next_dir, k);
+                    same3(a.next_beta, b.next_beta, k);
+                    same(a.next_pdf, b.next_pdf, k);
+                    same(a.light_on, b.light_on, k);
+                    if (lane_set(a.light_on, k)) {
+                        same3(a.light_origin, b.light_origin, k);
+                        same3(a.light_dir, b.light_dir, k);
+                        same(a.light_tmax, b.light_tmax, k);
+                        same3(a.light_value, b.light_value, k);
+                    }
+                    same(a.env_on, b.env_on, k);
+                    if (lane_set(a.env_on, k)) {
+                        same3(a.env_origin, b.env_origin, k);
+                        same3(a.env_value, b.env_value, k);
+                    }
+                }
+                EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths, mis " << mis;
+                int unlike = 0;
+                auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
+                auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
+                    for (int c = 0; c < 3; ++c) bits(x[c], k, y[c]);
+                };
+                auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
+                for (int k = 0; k < n; ++k) {
+                    const ShadeLanes<kShadeBatch>& i = *in;
+                    const BsdfParams& bp = params[size_t(k)];
+                    const Vec3f dir = get(i.dir, k), beta = get(i.beta, k);
+                    const Vec3f ns = bend_normal(get(i.ns, k), get(i.ng, k), -dir);
+                    const Frame frame(ns);
+                    const Vec3f wo = frame.to_local(-dir);
+                    BsdfSample bs;
+                    Vec3f nb(0.f);
+                    const bool sampled =
+                        lane_set(i.reflects, k) && bsdf_sample(bp, wo, i.u_lobe[k], i.disk[0][k], i.disk[1][k], bs);
+                    if (sampled) nb = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
+                    bits3(a.ns, k, ns);
+                    const bool on = sampled && !is_black(nb);
+                    unlike += lane_set(a.goes_on, k) != on;
+                    if (on) {
+                        unlike += lane_set(a.next_delta, k) != bs.delta;
+                        bits3(a.next_dir, k, frame.to_world(bs.wi));
+                        bits3(a.next_beta, k, nb);
+                        bits(a.next_pdf, k, bs.pdf);
+                        ++goes_on;
+                        mirror_on += bs.delta;
+                        const bool coat_lobe = i.u_lobe[k] < plastic_coat_probability(bp, bp.two_sided ? std::abs(wo.z) : wo.z);
+                        ggx_on += !bs.delta && coat_lobe;
+                        base_on += !coat_lobe;
+                    }
+                    // next_event's value for a light sample (dir, pdf, radiance) of the lane's.
+                    auto expect_sample = [&](const float* mask, const float (&value)[3][kShadeBatch], const Vec3f& ldir,
+                                             float lpdf, const Vec3f& radiance) {
+                        const Vec3f wi = frame.to_local(ldir);
+                        const Vec3f f = bsdf_eval(bp, wo, wi);
+                        unlike += lane_set(mask, k) != !is_black(f);
+                        const float w = mis ? mis_power(lpdf, bsdf_pdf(bp, wo, wi)) : 1.f;
+                        if (!is_black(f)) bits3(value, k, beta * f * radiance * (w / lpdf));
+                        return !is_black(f);
+                    };
+                    if (lane_set(i.env_on, k) && i.env_pdf[k] > 0.f) {
+                        const bool lit = expect_sample(a.env_on, a.env_value, get(i.env_dir, k), i.env_pdf[k],
+                                                       get(i.env_radiance, k));
+                        env_on += lit;
+                        lobe_env += lit && lane_set(i.coat_lobe, k);
+                    }
+                    if (lane_set(i.light_given, k))
+                        given_on += expect_sample(a.light_on, a.light_value, get(i.given_dir, k), i.given_pdf[k],
+                                                  get(i.given_radiance, k));
+                }
+                EXPECT_EQ(unlike, 0) << "round " << round << ", " << n << " paths, mis " << mis << ": scalar";
+                ++compared;
+            }
+    EXPECT_EQ(compared, 40 * 2 * 2);
+    // Not a vacuous comparison: every lobe is sampled, many light samples are lit, not all.
+    const int paths = 40 * 2 * (kShadeBatch + 13);
+    EXPECT_GT(goes_on, paths / 4);
+    EXPECT_LT(goes_on, paths);
+    EXPECT_GT(ggx_on, paths / 40);
+    EXPECT_GT(mirror_on, paths / 40);
+    EXPECT_GT(base_on, paths / 8);
+    EXPECT_GT(env_on, paths / 8);
+    EXPECT_LT(env_on, paths);
+    EXPECT_GT(lobe_env, paths / 20);
+    EXPECT_GT(given_on, paths / 40);
+}
+
+// The mirror's lanes (shade_mirror_lanes, MaterialKind::Conductor): random_lanes' paths with a
+// random specular (black at times) and two-sided or not through both widths, the same bits,
+// and each lane's continuation the scalar bsdf_sample's delta branch bit for bit (its
+// direction, weight and probability; none where wo is behind a one-sided mirror).
+TEST(Render, ShadeMirrorLanesWidthsAgree) {
+    const bool avx2 = shade_width_available(ShadeWidth::Avx2);
+    Rng rng(3, 8);
+    int goes_on = 0, behind = 0, compared = 0;
+    auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
+    for (int round = 0; round < 20; ++round)
+        for (int n : {kShadeBatch, 13}) {
+            auto in = std::make_unique<ShadeLanes<kShadeBatch>>();
+            random_lanes(*in, n, rng);
+            for (int k = 0; k < n; ++k) {
+                const float g = rng.next_float();
+                const Vec3f s = g < 0.1f ? Vec3f(0.f) : Vec3f(rng.next_float(), rng.next_float(), rng.next_float());
+                for (int c = 0; c < 3; ++c) in->specular[c][k] = s[c];
+            }
+            auto narrow = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+            auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
+            shade_mirror_lanes(*narrow, n, ShadeWidth::Sse2);
+            shade_mirror_lanes(*wide, n, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
+            int differing = 0, unlike = 0;
+            auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
+            auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
+                for (int c = 0; c < 3; ++c) bits(x[c], k, y[c]);
+            };
+            const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide, &i = *in;
+            for (int k = 0; k < n; ++k) {
+                auto same = [&](const float* x, const float* y) { differing += std::memcmp(x + k, y + k, sizeof(float)) != 0; };
+                same(a.goes_on, b.goes_on);
+                same(a.next_delta, b.next_delta);
+                same(a.next_pdf, b.next_pdf);
+                for (int c = 0; c < 3; ++c) {
+                    same(a.ns[c], b.ns[c]);
+                    same(a.next_dir[c], b.next_dir[c]);
+                    same(a.next_beta[c], b.next_beta[c]);
+                    same(a.next_origin[c], b.next_origin[c]);
+                }
+                const Vec3f dir = get(i.dir, k), beta = get(i.beta, k);
+                const Vec3f ns = bend_normal(get(i.ns, k), get(i.ng, k), -dir);
+                const Frame frame(ns);
+                const Vec3f wo = frame.to_local(-dir);
+                BsdfParams bp;
+                bp.kind = MaterialKind::Conductor;
+                bp.specular = get(i.specular, k);
+                bp.two_sided = lane_set(i.two_sided, k);
+                BsdfSample bs;
+                Vec3f nb(0.f);
+                const bool sampled = bsdf_sample(bp, wo, i.u_lobe[k], i.disk[0][k], i.disk[1][k], bs);
+                if (sampled) nb = beta * bs.weight;
+                bits3(a.ns, k, ns);
+                const bool on = sampled && !is_black(nb);
+                unlike += lane_set(a.goes_on, k) != on || lane_set(a.next_delta, k) != on;
+                behind += !sampled;
+                if (on) {
+                    unlike += !bs.delta;
+                    bits3(a.next_dir, k, frame.to_world(bs.wi));
+                    bits3(a.next_origin, k,
+                          offset_ray_origin(get(i.p, k), get(i.p_error, k), get(i.ng, k), frame.to_world(bs.wi)));
+                    bits3(a.next_beta, k, nb);
+                    bits(a.next_pdf, k, bs.pdf);
+                    ++goes_on;
+                }
+            }
+            EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths";
+            EXPECT_EQ(unlike, 0) << "round " << round << ", " << n << " paths: scalar";
+            ++compared;
+        }
+    EXPECT_EQ(compared, 20 * 2);
+    const int paths = 20 * (kShadeBatch + 13);
+    EXPECT_GT(goes_on, paths / 3);
+    EXPECT_GT(behind, paths / 20);
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
