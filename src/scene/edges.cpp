@@ -40,13 +40,6 @@ struct HalfEdge {
     int32_t a, b;    // the face's own vertex indices, in the face's order
 };
 
-Vec3f face_normal(const MeshDesc& m, int64_t f) {
-    const int32_t* t = m.indices + 3 * f;
-    Vec3f p0 = Vec3f::load(m.vertices + 3 * int64_t(t[0])), p1 = Vec3f::load(m.vertices + 3 * int64_t(t[1])),
-          p2 = Vec3f::load(m.vertices + 3 * int64_t(t[2]));
-    return normalize(cross(p1 - p0, p2 - p0));
-}
-
 // Faces closer than this angle (radians) to one plane, facing the same way, are taken for one
 // plane. A plane given by float corners is flat to about 1e-6 of its faces' size; which side of
 // such a pair an eye is on is then rounding, not geometry. The bunny's chin had an outline on two

@@ -1133,7 +1133,7 @@ TEST(Render, BatchedPlasticPathsMatchTracePath) {
         variants.apply(d, variant, 8);
         compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
     }
-    EXPECT_EQ(compared, 3 * 2 * (4 + 3 + 3));
+    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
 }
 
 // shade_lanes' widths in force for the life of a test, then the processor's widest again.

@@ -456,7 +456,9 @@ TEST(Envmap, CompensatedDistributionSamplesTheLightAboveTheMean) {
         float pdf_back;
         env.eval(ws, pdf_back, true);
         const float sin_theta = std::sin(env.position(ws).y / float(env.rows) * kPi);
-        if (sin_theta > 0.1f) EXPECT_NEAR(pdf_back, pdf, 2e-3f * pdf);
+        if (sin_theta > 0.1f) {
+            EXPECT_NEAR(pdf_back, pdf, 2e-3f * pdf);
+        }
         // The cells' excess over the mean, as a function of direction: piecewise constant.
         auto excess = [&](const Vec3f& dir) {
             const Vec2f p = env.position(dir);
