@@ -200,27 +200,38 @@ struct PathBatch::Impl {
     // The same for a mirror's vertex (into mirror_): its specular, and shade_vertex's random
     // numbers drawn (a delta material samples no light).
     void gather_mirror(int j, const Material& m, Rng& rng);
+    // Claims the next lane of `group` for live path j and puts the path's point, direction and
+    // throughput there; returns the lane.
+    int take_lane(LaneGroup& group, int j);
 };
+
+// Lane k of the three arrays a gets v.
+static void set3(float (&a)[3][kBatchSize], int k, const Vec3f& v) {
+    a[0][k] = v.x;
+    a[1][k] = v.y;
+    a[2][k] = v.z;
+}
+
+int PathBatch::Impl::take_lane(LaneGroup& group, int j) {
+    const PathState& ps = paths[live[j]];
+    const int k = group.n++;
+    group.plain[k] = j;
+    ShadeLanes<kBatchSize>& l = group.lanes;
+    set3(l.p, k, ps.sp.p);
+    set3(l.p_error, k, ps.sp.p_error);
+    set3(l.ng, k, ps.sp.ng);
+    set3(l.ns, k, ps.sp.ns);
+    set3(l.dir, k, ps.dir);
+    set3(l.beta, k, ps.beta);
+    return k;
+}
 
 void PathBatch::Impl::gather_mirror(int j, const Material& mat, Rng& rng) {
     const PathState& ps = paths[live[j]];
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
-    LaneGroup& group = *mirror_;
-    const int k = group.n++;
-    group.plain[k] = j;
-    ShadeLanes<kBatchSize>& l = group.lanes;
-    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
-        a[0][k] = v.x;
-        a[1][k] = v.y;
-        a[2][k] = v.z;
-    };
-    put3(l.p, ps.sp.p);
-    put3(l.p_error, ps.sp.p_error);
-    put3(l.ng, ps.sp.ng);
-    put3(l.ns, ps.sp.ns);
-    put3(l.dir, ps.dir);
-    put3(l.beta, ps.beta);
-    put3(l.specular, pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv));
+    const int k = take_lane(*mirror_, j);
+    ShadeLanes<kBatchSize>& l = mirror_->lanes;
+    set3(l.specular, k, pm.constant_specular ? pm.specular : eval_texture3(mat.specular, ps.sp.uv));
     l.two_sided[k] = lane_mask(mat.two_sided);
     l.light_on[k] = l.env_on[k] = lane_mask(false);
     // shade_vertex's: three for the lights, two more for the sky where the scene has both,
@@ -234,20 +245,9 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
     const PathState& ps = paths[live[j]];
     const PlainMesh& pm = plain_mesh[size_t(ps.sp.mesh)];
     LaneGroup& group = Plastic ? *plastic_ : standard_;
-    const int k = group.n++;
-    group.plain[k] = j;
+    const int k = take_lane(group, j);
     ShadeLanes<kBatchSize>& l = group.lanes;
-    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) {
-        a[0][k] = v.x;
-        a[1][k] = v.y;
-        a[2][k] = v.z;
-    };
-    put3(l.p, ps.sp.p);
-    put3(l.p_error, ps.sp.p_error);
-    put3(l.ng, ps.sp.ng);
-    put3(l.ns, ps.sp.ns);
-    put3(l.dir, ps.dir);
-    put3(l.beta, ps.beta);
+    auto put3 = [k](float (&a)[3][kBatchSize], const Vec3f& v) { set3(a, k, v); };
     // Scene::bsdf_params' reflectances and alpha, and the GGX lobe's probability.
     const Vec3f diffuse = pm.constant ? pm.diffuse : scene.diffuse_reflectance(ps.sp);
     put3(l.diffuse, diffuse);

@@ -32,6 +32,27 @@ inline void store3(float (&a)[3][N], int k, const V& v) {
     v.z.store(a[2] + k);
 }
 
+// bend_normal (scene/bsdf_diff.h) of the shading normal ns0 at a point of geometric normal ng,
+// seen along wo_world = -dir.
+template <class V>
+inline V bend_normal_lanes(const V& ns0, const V& ng, const V& wo_world) {
+    using F = decltype(V::x);
+    const F s = select(dot(wo_world, ng) < F(0.f), F(-1.f), F(1.f)), d = dot(wo_world, ns0);
+    const auto keep = s * d >= F(kMinShadingCosine);
+    return select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
+}
+
+// The tangents fs, ft of the frame about ns (math/frame.h).
+template <class V>
+inline void frame_lanes(const V& ns, V& fs, V& ft) {
+    using F = decltype(V::x);
+    const F sign = sign_of(ns.z);
+    const F a = F(-1.f) / (sign + ns.z);
+    const F b = ns.x * ns.y * a;
+    fs = V(F(1.f) + sign * ns.x * ns.x * a, sign * b, -sign * ns.x);
+    ft = V(b, sign + ns.y * ns.y * a, -ns.y);
+}
+
 // offset_ray_origin (math/ray.h).
 template <class V>
 inline V offset_ray_origin(const V& p, const V& p_error, const V& n, const V& w) {
@@ -228,10 +249,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
     const F zero(0.f), one(1.f);
     // bend_normal (scene/bsdf_diff.h) of lane k's shading normal, wo_world = -dir.
     auto bent_normal = [&](int k, const V& wo_world) {
-        const V ng = load3<V>(L.ng, k), ns0 = load3<V>(L.ns, k);
-        const F s = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
-        const M keep = s * d >= F(kMinShadingCosine);
-        return select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
+        return bend_normal_lanes(load3<V>(L.ns, k), load3<V>(L.ng, k), wo_world);
     };
     // Whether every lane of the vector at lane k has a smooth coating: its T(c) is then
     // 1 - fresnel_dielectric(c, eta) in vectors, otherwise each lane's table's, path by path.
@@ -306,11 +324,8 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         store3(L.ns, k, ns);
 
         // Frame (math/frame.h) and wo.
-        const F sign = sign_of(ns.z);
-        const F a = F(-1.f) / (sign + ns.z);
-        const F b = ns.x * ns.y * a;
-        const V fs(one + sign * ns.x * ns.x * a, sign * b, -sign * ns.x);
-        const V ft(b, sign + ns.y * ns.y * a, -ns.y);
+        V fs, ft;
+        frame_lanes(ns, fs, ft);
         auto to_local = [&](const V& v) { return V(dot(v, fs), dot(v, ft), dot(v, ns)); };
         const V wo = to_local(wo_world);
         const M flip = M::load(L.two_sided + k) & (wo.z < zero);
@@ -499,18 +514,11 @@ inline void shade_mirror_lanes_kernel(ShadeLanes<N>& L, int n) {
         const V p = load3<V>(L.p, k), p_error = load3<V>(L.p_error, k), ng = load3<V>(L.ng, k);
         const V beta = load3<V>(L.beta, k), specular = load3<V>(L.specular, k);
         const V wo_world = -load3<V>(L.dir, k);
-        // bend_normal (scene/bsdf_diff.h).
-        const V ns0 = load3<V>(L.ns, k);
-        const F sd = select(dot(wo_world, ng) < zero, F(-1.f), one), d = dot(wo_world, ns0);
-        const M keep = sd * d >= F(kMinShadingCosine);
-        const V ns = select(keep, ns0, normalize(ns0 + wo_world * (sd * F(kMinShadingCosine) - d)));
+        const V ns = bend_normal_lanes(load3<V>(L.ns, k), ng, wo_world);
         store3(L.ns, k, ns);
         // Frame (math/frame.h) and wo.
-        const F sign = sign_of(ns.z);
-        const F a = F(-1.f) / (sign + ns.z);
-        const F b = ns.x * ns.y * a;
-        const V fs(one + sign * ns.x * ns.x * a, sign * b, -sign * ns.x);
-        const V ft(b, sign + ns.y * ns.y * a, -ns.y);
+        V fs, ft;
+        frame_lanes(ns, fs, ft);
         const V wo(dot(wo_world, fs), dot(wo_world, ft), dot(wo_world, ns));
         // delta_scatter's mirror with n = (0, 0, 1): c = n . wo, turned to wo's side where
         // two-sided; the direction n (2 s c) - wo; Schlick's weight, std::clamp as
