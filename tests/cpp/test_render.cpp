@@ -1224,6 +1224,41 @@ void random_lanes(ShadeLanes<kShadeBatch>& L, int n, Rng& rng) {
 // weights), each lane against the scalar BSDF code (its continuation and its sky sample's
 // value, bit for bit), and on whole images, each width forced in turn: both bit for bit
 // trace_path's.
+// How many of the values the batch reads back from lanes [0, n) differ, bit for bit, between
+// two shadings of the same lanes: the bent normal, the continuation (its mask, whether it is a
+// delta lobe's, its ray, throughput and density), the shadow rays' masks and, where a mask is
+// set, their rays and values. (A vector in which no path has a light sample leaves those arrays
+// as they were: the two widths group the paths differently.)
+int lanes_differing(const ShadeLanes<kShadeBatch>& a, const ShadeLanes<kShadeBatch>& b, int n) {
+    int differing = 0;
+    for (int k = 0; k < n; ++k) {
+        auto same = [&](const float* x, const float* y) { differing += std::memcmp(x + k, y + k, sizeof(float)) != 0; };
+        auto same3 = [&](const float (&x)[3][kShadeBatch], const float (&y)[3][kShadeBatch]) {
+            for (int c = 0; c < 3; ++c) same(x[c], y[c]);
+        };
+        same3(a.ns, b.ns);
+        same(a.goes_on, b.goes_on);
+        same(a.next_delta, b.next_delta);
+        same3(a.next_origin, b.next_origin);
+        same3(a.next_dir, b.next_dir);
+        same3(a.next_beta, b.next_beta);
+        same(a.next_pdf, b.next_pdf);
+        same(a.light_on, b.light_on);
+        if (lane_set(a.light_on, k)) {
+            same3(a.light_origin, b.light_origin);
+            same3(a.light_dir, b.light_dir);
+            same(a.light_tmax, b.light_tmax);
+            same3(a.light_value, b.light_value);
+        }
+        same(a.env_on, b.env_on);
+        if (lane_set(a.env_on, k)) {
+            same3(a.env_origin, b.env_origin);
+            same3(a.env_value, b.env_value);
+        }
+    }
+    return differing;
+}
+
 TEST(Render, ShadeLanesWidthsAgree) {
     EXPECT_TRUE(shade_width_available(ShadeWidth::Sse2));
     const bool avx2 = shade_width_available(ShadeWidth::Avx2);
@@ -1248,39 +1283,8 @@ TEST(Render, ShadeLanesWidthsAgree) {
                 auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
                 shade_lanes(*narrow, n, mis, glossy, ShadeWidth::Sse2);
                 shade_lanes(*wide, n, mis, glossy, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
-                // What the batch reads back: the bent normal, the continuation, the masks of the
-                // shadow rays and, where a mask is set, its ray and value. (A vector in which no
-                // path has a light sample leaves those arrays as they were: the two widths group
-                // the paths differently.)
-                int differing = 0;
-                auto same = [&](const float* x, const float* y, int k) {
-                    differing += std::memcmp(x + k, y + k, sizeof(float)) != 0;
-                };
-                auto same3 = [&](const float (&x)[3][kShadeBatch], const float (&y)[3][kShadeBatch], int k) {
-                    for (int c = 0; c < 3; ++c) same(x[c], y[c], k);
-                };
                 const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide;
-                for (int k = 0; k < n; ++k) {
-                    same3(a.ns, b.ns, k);
-                    same(a.goes_on, b.goes_on, k);
-                    same3(a.next_origin, b.next_origin, k);
-                    same3(a.next_dir, b.next_dir, k);
-                    same3(a.next_beta, b.next_beta, k);
-                    same(a.next_pdf, b.next_pdf, k);
-                    same(a.light_on, b.light_on, k);
-                    if (lane_set(a.light_on, k)) {
-                        same3(a.light_origin, b.light_origin, k);
-                        same3(a.light_dir, b.light_dir, k);
-                        same(a.light_tmax, b.light_tmax, k);
-                        same3(a.light_value, b.light_value, k);
-                    }
-                    same(a.env_on, b.env_on, k);
-                    if (lane_set(a.env_on, k)) {
-                        same3(a.env_origin, b.env_origin, k);
-                        same3(a.env_value, b.env_value, k);
-                    }
-                }
-                EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths, mis " << mis;
+                EXPECT_EQ(lanes_differing(a, b, n), 0) << "round " << round << ", " << n << " paths, mis " << mis;
                 // And each lane's the scalar code's (shade_vertex's bend_normal, Frame,
                 // bsdf_sample, bsdf_eval, bsdf_pdf and mis_power), bit for bit.
                 int unlike = 0;
@@ -1465,36 +1469,8 @@ TEST(Render, ShadePlasticLanesWidthsAgree) {
                 auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
                 shade_plastic_lanes(*narrow, n, mis, ShadeWidth::Sse2);
                 shade_plastic_lanes(*wide, n, mis, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
-                int differing = 0;
-                auto same = [&](const float* x, const float* y, int k) {
-                    differing += std::memcmp(x + k, y + k, sizeof(float)) != 0;
-                };
-                auto same3 = [&](const float (&x)[3][kShadeBatch], const float (&y)[3][kShadeBatch], int k) {
-                    for (int c = 0; c < 3; ++c) same(x[c], y[c], k);
-                };
                 const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide;
-                for (int k = 0; k < n; ++k) {
-                    same3(a.ns, b.ns, k);
-                    same(a.goes_on, b.goes_on, k);
-                    same(a.next_delta, b.next_delta, k);
-                    same3(a.next_origin, b.next_origin, k);
-                    same3(a.next_dir, b.next_dir, k);
-                    same3(a.next_beta, b.next_beta, k);
-                    same(a.next_pdf, b.next_pdf, k);
-                    same(a.light_on, b.light_on, k);
-                    if (lane_set(a.light_on, k)) {
-                        same3(a.light_origin, b.light_origin, k);
-                        same3(a.light_dir, b.light_dir, k);
-                        same(a.light_tmax, b.light_tmax, k);
-                        same3(a.light_value, b.light_value, k);
-                    }
-                    same(a.env_on, b.env_on, k);
-                    if (lane_set(a.env_on, k)) {
-                        same3(a.env_origin, b.env_origin, k);
-                        same3(a.env_value, b.env_value, k);
-                    }
-                }
-                EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths, mis " << mis;
+                EXPECT_EQ(lanes_differing(a, b, n), 0) << "round " << round << ", " << n << " paths, mis " << mis;
                 int unlike = 0;
                 auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
                 auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
@@ -1586,23 +1562,13 @@ TEST(Render, ShadeMirrorLanesWidthsAgree) {
             auto wide = std::make_unique<ShadeLanes<kShadeBatch>>(*in);
             shade_mirror_lanes(*narrow, n, ShadeWidth::Sse2);
             shade_mirror_lanes(*wide, n, avx2 ? ShadeWidth::Avx2 : ShadeWidth::Sse2);
-            int differing = 0, unlike = 0;
+            int unlike = 0;
             auto bits = [&](const float* x, int k, float y) { unlike += std::memcmp(x + k, &y, sizeof y) != 0; };
             auto bits3 = [&](const float (&x)[3][kShadeBatch], int k, const Vec3f& y) {
                 for (int c = 0; c < 3; ++c) bits(x[c], k, y[c]);
             };
             const ShadeLanes<kShadeBatch>&a = *narrow, &b = *wide, &i = *in;
             for (int k = 0; k < n; ++k) {
-                auto same = [&](const float* x, const float* y) { differing += std::memcmp(x + k, y + k, sizeof(float)) != 0; };
-                same(a.goes_on, b.goes_on);
-                same(a.next_delta, b.next_delta);
-                same(a.next_pdf, b.next_pdf);
-                for (int c = 0; c < 3; ++c) {
-                    same(a.ns[c], b.ns[c]);
-                    same(a.next_dir[c], b.next_dir[c]);
-                    same(a.next_beta[c], b.next_beta[c]);
-                    same(a.next_origin[c], b.next_origin[c]);
-                }
                 const Vec3f dir = get(i.dir, k), beta = get(i.beta, k);
                 const Vec3f ns = bend_normal(get(i.ns, k), get(i.ng, k), -dir);
                 const Frame frame(ns);
@@ -1629,7 +1595,7 @@ TEST(Render, ShadeMirrorLanesWidthsAgree) {
                     ++goes_on;
                 }
             }
-            EXPECT_EQ(differing, 0) << "round " << round << ", " << n << " paths";
+            EXPECT_EQ(lanes_differing(a, b, n), 0) << "round " << round << ", " << n << " paths";
             EXPECT_EQ(unlike, 0) << "round " << round << ", " << n << " paths: scalar";
             ++compared;
         }
