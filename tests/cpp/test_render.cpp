@@ -986,6 +986,35 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
     EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
 }
 
+// The room of the glossy and plastic batched-paths tests: a floor, two balls, a wall, a panel,
+// a sheet just above the floor, a box, a lamp and a mirror.
+struct BatchRoom {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
+    MeshData other_ball = make_sphere(Vec3f(-0.9f, -0.5f, 0.9f), 0.45f, 10, 20);
+    MeshData wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
+    MeshData panel = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
+    MeshData sheen = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
+    MeshData box = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
+};
+
+// expect_strategies_match on the three LightVariants of d (their lights of material
+// `light_material`), at 3 spp with this seed and up to 12 bounces; each must compare its renders.
+void expect_variants_match(SceneDesc& d, uint64_t seed, int light_material) {
+    const LightVariants variants;
+    RenderOptions opt;
+    opt.spp = 3;
+    opt.seed = seed;
+    int compared = 0;
+    for (int variant = 0; variant < 3; ++variant) {
+        variants.apply(d, variant, light_material);
+        compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
+    }
+    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
+}
+
 // The batches shade glossy vertices (the standard material: the diffuse and GGX lobes, its
 // reflectances and roughness constant or textured) in the vectors too: each path's radiance is still
 // trace_path's bit for bit, on 1 and 2 threads. Glossy surfaces of roughness 0 (alpha clamped
@@ -997,18 +1026,11 @@ TEST(Render, BatchedPlainPathsMatchTracePath) {
 // then a sky, then lights whose samples are given whole (a sphere light by solid angle, a
 // quad by spherical triangles) and point lights; each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedGlossyPathsMatchTracePath) {
-    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
-    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
-    MeshData matte_ball = make_sphere(Vec3f(-0.9f, -0.5f, 0.9f), 0.45f, 10, 20);
-    MeshData wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
-    MeshData panel = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
-    MeshData sheen = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
-    MeshData box = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
-    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    const BatchRoom room;
     ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), black({0, 0, 0}), le({6.f, 6.f, 6.f});
     ConstTex weak({0.04f, 0.04f, 0.04f}), gold({0.9f, 0.6f, 0.2f}), grey({0.5f, 0.5f, 0.5f}), bright({0.8f, 0.8f, 0.8f});
     ConstTex r0({0.f}), r005({0.05f}), r02({0.2f}), r1({1.f}), r03({0.3f});
-    const BatchTextures tex(ball.num_vertices());
+    const BatchTextures tex(room.ball.num_vertices());
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     d.materials.push_back(material(kd, weak, r005));   // 0: textured diffuse, weak specular
@@ -1031,28 +1053,18 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
     d.materials.push_back(material(black, black, r03));   // 7: the lamps'
     d.materials.push_back(material(black, gold, r03));    // 8: a mirror: its own vectors
     d.materials[8].kind = MaterialKind::Conductor;
-    d.meshes.push_back(floor.desc(0));
-    d.meshes.push_back(ball.desc(1));
+    d.meshes.push_back(room.floor.desc(0));
+    d.meshes.push_back(room.ball.desc(1));
     d.meshes[1].colors = tex.tint.data();
-    d.meshes.push_back(matte_ball.desc(2));
-    d.meshes.push_back(wall.desc(3));
-    d.meshes.push_back(panel.desc(4));
-    d.meshes.push_back(sheen.desc(5));
-    d.meshes.push_back(box.desc(6));
-    d.meshes.push_back(lamp.desc(7));
+    d.meshes.push_back(room.other_ball.desc(2));
+    d.meshes.push_back(room.wall.desc(3));
+    d.meshes.push_back(room.panel.desc(4));
+    d.meshes.push_back(room.sheen.desc(5));
+    d.meshes.push_back(room.box.desc(6));
+    d.meshes.push_back(room.lamp.desc(7));
     d.meshes.back().emission = le.desc();
-    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
-    d.meshes.push_back(mirror.desc(8));
-    const LightVariants variants;
-    RenderOptions opt;
-    opt.spp = 3;
-    opt.seed = 13;
-    int compared = 0;
-    for (int variant = 0; variant < 3; ++variant) {
-        variants.apply(d, variant, 7);
-        compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
-    }
-    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
+    d.meshes.push_back(room.mirror.desc(8));
+    expect_variants_match(d, 13, 7);
 }
 
 // The batches shade plastic vertices (MaterialKind::Plastic) in vectors of their own
@@ -1065,20 +1077,13 @@ TEST(Render, BatchedGlossyPathsMatchTracePath) {
 // in the vectors, then a sky, then lights whose samples are given whole and a point light;
 // each sampling strategy, 0 to 12 bounces.
 TEST(Render, BatchedPlasticPathsMatchTracePath) {
-    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
-    MeshData ball = make_sphere(Vec3f(0.9f, -0.4f, 0.6f), 0.5f, 10, 20);
-    MeshData smooth_ball = make_sphere(Vec3f(-0.9f, -0.5f, 0.9f), 0.45f, 10, 20);
-    MeshData wall = make_quad(Vec3f(-2.5f, -1, -1.5f), Vec3f(0, 2.5f, 0), Vec3f(1.5f, 0, -1.f));
-    MeshData panel = make_quad(Vec3f(1.2f, -1, -1.2f), Vec3f(0, 2.f, 0), Vec3f(1.2f, 0, 0.5f));
-    MeshData sheen = make_quad(Vec3f(-1.6f, -0.99f, 0.6f), Vec3f(0, 0, 0.8f), Vec3f(0.8f, 0, 0));
-    MeshData box = make_box(Vec3f(-0.3f, -1, -0.8f), Vec3f(0.4f, -0.2f, -0.1f));
-    MeshData lamp = make_quad(Vec3f(-0.5f, 1.8f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    const BatchRoom room;
     MeshData shelf = make_quad(Vec3f(0.6f, 0.3f, -1.f), Vec3f(0.9f, 0, 0), Vec3f(0, 0, 0.7f));
     ConstTex kd({0.6f, 0.6f, 0.5f}), red({0.7f, 0.1f, 0.1f}), black({0, 0, 0}), white({1, 1, 1}), le({6.f, 6.f, 6.f});
     ConstTex tint({0.9f, 0.7f, 0.5f}), grey({0.5f, 0.5f, 0.5f}), light({0.9f, 0.9f, 0.8f});
     ConstTex r0({0.f}), r005({0.05f}), r03({0.3f}), r1({1.f}), r02({0.2f});
     ConstTex ior15({1.5f}), ior133({1.33f}), ior07({0.7f});
-    const BatchTextures tex(ball.num_vertices());
+    const BatchTextures tex(room.ball.num_vertices());
     SceneDesc d;
     d.camera = camera(Vec3f(0, 1.2f, 5), Vec3f(0, 0, 0), 26, 23, 70);
     auto plastic = [&](const ConstTex& diffuse, const ConstTex& specular, const ConstTex& roughness,
@@ -1111,29 +1116,19 @@ TEST(Render, BatchedPlasticPathsMatchTracePath) {
     d.materials[9].kind = MaterialKind::Conductor;
     d.materials[9].two_sided = true;
     d.materials[9].specular = tex.checker_tex;
-    d.meshes.push_back(floor.desc(0));
-    d.meshes.push_back(ball.desc(1));
+    d.meshes.push_back(room.floor.desc(0));
+    d.meshes.push_back(room.ball.desc(1));
     d.meshes[1].colors = tex.tint.data();
-    d.meshes.push_back(smooth_ball.desc(2));
-    d.meshes.push_back(wall.desc(3));
-    d.meshes.push_back(panel.desc(4));
-    d.meshes.push_back(sheen.desc(5));
+    d.meshes.push_back(room.other_ball.desc(2));
+    d.meshes.push_back(room.wall.desc(3));
+    d.meshes.push_back(room.panel.desc(4));
+    d.meshes.push_back(room.sheen.desc(5));
     d.meshes.push_back(shelf.desc(6));
-    d.meshes.push_back(box.desc(7));
-    d.meshes.push_back(lamp.desc(8));
+    d.meshes.push_back(room.box.desc(7));
+    d.meshes.push_back(room.lamp.desc(8));
     d.meshes.back().emission = le.desc();
-    MeshData mirror = make_quad(Vec3f(1.7f, -1, 0.2f), Vec3f(0, 1.4f, 0), Vec3f(-0.3f, 0, 0.9f));
-    d.meshes.push_back(mirror.desc(9));
-    const LightVariants variants;
-    RenderOptions opt;
-    opt.spp = 3;
-    opt.seed = 17;
-    int compared = 0;
-    for (int variant = 0; variant < 3; ++variant) {
-        variants.apply(d, variant, 8);
-        compared += expect_strategies_match(*build_scene(d), opt, variant, 12);
-    }
-    EXPECT_EQ(compared, 3 * 2 * (5 + 3 + 3));
+    d.meshes.push_back(room.mirror.desc(9));
+    expect_variants_match(d, 17, 8);
 }
 
 // shade_lanes' widths in force for the life of a test, then the processor's widest again.
