@@ -544,7 +544,8 @@ uint64_t trace_rays(RTCScene rtc, const std::vector<Ray>& rays, bool occlusion, 
 
 // The camera rays again, in packets of kPacketSize as the renderer traces them
 // (intersect_packet). Returns the number of hits.
-uint64_t trace_camera_packets(const Scene& scene, const std::vector<Ray>& rays, tbb::task_arena& arena, size_t chunk) {
+uint64_t trace_camera_packets(const Scene& scene, Tracing tracing, const std::vector<Ray>& rays, tbb::task_arena& arena,
+                              size_t chunk) {
     std::atomic<uint64_t> hits{0};
     const size_t n_chunks = (rays.size() + chunk - 1) / chunk;
     arena.execute([&] {
@@ -555,7 +556,7 @@ uint64_t trace_camera_packets(const Scene& scene, const std::vector<Ray>& rays, 
                 const size_t end = std::min(rays.size(), (c + 1) * chunk);
                 for (size_t i = c * chunk; i < end; i += kPacketSize) {
                     const int n = int(std::min<size_t>(kPacketSize, end - i));
-                    intersect_packet(scene, rays.data() + i, n, first);
+                    intersect_packet(scene, tracing, rays.data() + i, n, first);
                     for (int k = 0; k < n; ++k) local += first[k].found;
                 }
             }
@@ -1224,13 +1225,14 @@ int main(int argc, char** argv) {
                 // machine load; the fraction is the median of the per-run fractions.
                 tbb::task_arena arena(r.threads);
                 const size_t chunk = size_t(kRenderTile) * kRenderTile * size_t(o.spp);
-                RTCScene rtc = scene->rtc_scene();
+                const Tracing tracing = tracing_of(ro);  // the BVH the render traces
+                RTCScene rtc = scene->bvh(tracing);
                 std::vector<double> t_render, t_camera, t_packets, t_shadow, t_bounce, fractions, cpu_render, cpu_embree,
                     cpu_fractions;
                 for (int run = 0; run <= o.runs; ++run) {  // run 0 warms up
                     Timing tr = time_once_cpu([&] { r.stats = render(*scene, ro, image.data()); });
                     Timing tc = time_once_cpu([&] { r.embree_hits = trace_rays(rtc, rays.camera, false, arena, chunk); });
-                    Timing tp = time_once_cpu([&] { trace_camera_packets(*scene, rays.camera, arena, chunk); });
+                    Timing tp = time_once_cpu([&] { trace_camera_packets(*scene, tracing, rays.camera, arena, chunk); });
                     Timing ts = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.shadow, true, arena, chunk); });
                     Timing tb = time_once_cpu([&] { r.embree_hits += trace_rays(rtc, rays.bounce, false, arena, chunk); });
                     if (run == 0) continue;

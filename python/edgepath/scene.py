@@ -260,10 +260,12 @@ class Scene:
         self._core_cache = None
 
     def build_counts(self) -> dict:
-        """How often renders of this scene built its ray-tracing structures afresh
-        (``"builds"``: the first render, and any change of topology), refitted them (``"refits"``:
-        only vertex positions moved) and reused them (``"reuses"``: only materials, lights,
-        textures, the environment or the camera changed, or nothing)."""
+        """How often renders of this scene built its ray-tracing BVHs afresh (``"builds"``: the
+        first render, and any change of topology), refitted them (``"refits"``: only vertex
+        positions moved) and reused them (``"reuses"``: only materials, lights, textures, the
+        environment or the camera changed, or nothing). Two BVHs, each built at its first use and
+        counted apart: an exact one for renders a gradient follows, and a fast one for images
+        alone (docs/python-api.md)."""
         cache = getattr(self, "_core_cache", None)
         return cache.counts() if cache is not None else {"builds": 0, "refits": 0, "reuses": 0}
 

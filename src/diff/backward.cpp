@@ -101,11 +101,23 @@ void calibrate_survival(const Scene& scene, const RenderOptions& opt, const Scen
     secondary.set_survival(std::move(p));
 }
 
+// The options a gradient pass traces its paths with, checked: replayable whatever the caller
+// set (its paths are the replayable image's: render/path.h, env_nee and tracing_of). Builds the
+// exact BVH if the scene has none yet, before the pass's threads start (built by one of them,
+// Embree's build would have that thread alone: the others would wait for it).
+RenderOptions retraced(const Scene& scene, const RenderOptions& options) {
+    check_options(options);
+    RenderOptions opt = options;
+    opt.replayable = true;
+    scene.bvh(Tracing::Exact);
+    return opt;
+}
+
 }  // namespace
 
-void channel_gradients(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout,
+void channel_gradients(const Scene& scene, const RenderOptions& options, const ChannelLayout& layout,
                        const float* adjoint, const SceneGradients& grads) {
-    check_options(opt);
+    const RenderOptions opt = retraced(scene, options);
     check_layout(layout);
     const float inv_spp = 1.f / float(opt.spp);
     const int nv = layout.num_values;
@@ -145,9 +157,9 @@ void channel_gradients(const Scene& scene, const RenderOptions& opt, const Chann
     primary_edge_pass(scene, opt, grads, layout, adjoint, nullptr);
 }
 
-void channel_derivative_image(const Scene& scene, const RenderOptions& opt, const ChannelLayout& layout,
+void channel_derivative_image(const Scene& scene, const RenderOptions& options, const ChannelLayout& layout,
                               const SceneGradients& dirs, float* out) {
-    check_options(opt);
+    const RenderOptions opt = retraced(scene, options);
     check_layout(layout);
     const float inv_spp = 1.f / float(opt.spp);
     const int nv = layout.num_values;

@@ -360,7 +360,7 @@ void PathBatch::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& count
 // trace_path (render/path.cpp) for n paths at once: the same operations, path by path, in the
 // same order; only the rays are traced between the steps, in packets.
 void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters) {
-    const RTCScene rtc = scene.rtc_scene();
+    const RTCScene rtc = scene.bvh(settings.tracing);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT;

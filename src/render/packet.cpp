@@ -4,7 +4,7 @@
 
 namespace edgepath {
 
-void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* first) {
+void intersect_packet(const Scene& scene, Tracing tracing, const Ray* rays, int n, FirstHit* first) {
     static_assert(kPacketSize == lanes_of<RTCRay8>(), "intersect_packet traces RTCRayHit8 packets");
     alignas(32) int valid[kPacketSize];
     alignas(32) RTCRayHit8 rh;
@@ -15,7 +15,7 @@ void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* firs
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     ctx.flags = RTC_INTERSECT_CONTEXT_FLAG_COHERENT;
-    rtcIntersect8(valid, scene.rtc_scene(), &ctx, &rh);
+    rtcIntersect8(valid, scene.bvh(tracing), &ctx, &rh);
     for (int i = 0; i < n; ++i) {
         FirstHit& f = first[i];
         f.hit = Hit();

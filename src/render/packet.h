@@ -24,8 +24,8 @@ namespace edgepath {
 constexpr int kPacketSize = 8;
 
 // Intersects rays[0..n) (n <= kPacketSize) as one coherent packet; first[i] is what
-// Scene::intersect(rays[i]) finds, bit for bit (Render.PacketsMatchSingleRays checks it).
-void intersect_packet(const Scene& scene, const Ray* rays, int n, FirstHit* first);
+// Scene::intersect(rays[i], tracing) finds, bit for bit (Render.PacketsMatchSingleRays checks it).
+void intersect_packet(const Scene& scene, Tracing tracing, const Ray* rays, int n, FirstHit* first);
 
 // Index of output pixel (x, y) in the full film: it seeds the pixel's random streams, so a crop
 // renders the same samples as the full image.
@@ -81,8 +81,8 @@ inline void record_camera_path(const Scene& scene, const RenderOptions& opt, uin
 // Calls fn(samples, n) for the camera samples of the output pixels [x0, x1) x [y0, y1), in
 // order (rows, pixels, samples), `capacity` (a multiple of kPacketSize) at a time in `samples`
 // (n <= capacity; fewer at the end), with the random numbers of Rng::for_sample(opt.seed, pixel,
-// s) and the first hits traced in packets of kPacketSize (with opt.hide_emitters, past the
-// emitters, as first_hit finds them). A sample outside the camera's image
+// s) and the first hits traced in packets of kPacketSize in the BVH tracing_of(opt) names (with
+// opt.hide_emitters, past the emitters, as first_hit finds them). A sample outside the camera's image
 // (CameraSample::outside) has no hit; the passes count it black. Stops (returns false) once opt
 // is cancelled.
 template <class BatchFn>
@@ -91,6 +91,7 @@ bool for_each_camera_batch(const Scene& scene, const RenderOptions& opt, int x0,
     Ray rays[kPacketSize];
     FirstHit first[kPacketSize];
     const int spp = opt.spp;
+    const Tracing tracing = tracing_of(opt);
     const int64_t count = int64_t(x1 - x0) * (y1 - y0) * spp;
     // The next sample: sample s of pixel (x, y).
     int x = x0, y = y0, s = 0;
@@ -112,12 +113,12 @@ bool for_each_camera_batch(const Scene& scene, const RenderOptions& opt, int x0,
                 rays[i] = batch[i].ray;
                 if (batch[i].outside) rays[i].tmax = -1.f;  // an inactive lane (tnear > tfar)
             }
-            intersect_packet(scene, rays, m, first);
+            intersect_packet(scene, tracing, rays, m, first);
             for (int i = 0; i < m; ++i) {
                 if (batch[i].outside) first[i] = FirstHit();
                 batch[i].first = first[i];
                 if (opt.hide_emitters && first[i].found && scene.meshes[size_t(first[i].hit.mesh)].is_emitter())
-                    batch[i].first = first_hit(scene, rays[i], true);
+                    batch[i].first = first_hit(scene, rays[i], true, tracing);
             }
         }
         fn(samples, n);

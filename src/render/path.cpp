@@ -18,7 +18,7 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
     }
     FirstHit traced;
     if (!first) {
-        traced = first_hit(scene, ray, opt.hide_emitters);
+        traced = first_hit(scene, ray, opt.hide_emitters, settings.tracing);
         first = &traced;
     }
     if (!first->found) {
@@ -64,11 +64,11 @@ Vec3f trace_path(const Scene& scene, const RenderOptions& opt, Ray ray, Rng& rng
             next_beta = nb;
             next_ray = r;
             dir = r.dir;
-            found = scene.intersect(next_ray, next_hit);
+            found = scene.intersect(next_ray, next_hit, settings.tracing);
             if (found) scene.prefetch(next_hit);
         };
         auto on_shadow = [&](ShadowKind kind, const Ray& shadow, const Vec3f& value, const LightSample* ls, float scale) {
-            if (scene.occluded(shadow)) return;
+            if (scene.occluded(shadow, settings.tracing)) return;
             L += value;
             if (!rv || kind == ShadowKind::Point) return;
             NeeRecord* nr = kind == ShadowKind::Area ? &rv->nee_area : &rv->nee_env;

@@ -64,15 +64,23 @@ struct FirstHit {
 // resumes: a surface closer behind it than this is skipped with it.
 constexpr float kHiddenEmitterSkip = 1e-5f;
 
+// The BVH the paths of a pass trace (scene.h, Tracing): the fast one for an image no gradient
+// pass retraces (RenderOptions::replayable false), the exact one for the rest, and for the
+// paths recorded for the adjoint sweep (`recorded`) whatever the options.
+inline Tracing tracing_of(const RenderOptions& opt, bool recorded = false) {
+    return recorded || opt.replayable ? Tracing::Exact : Tracing::Fast;
+}
+
 // With `hide_emitters`, area lights are transparent to the camera ray (Mitsuba's
 // hide_emitters skips them): the first intersection past them, its t along the same ray.
-inline FirstHit first_hit(const Scene& scene, const Ray& ray, bool hide_emitters = false) {
+inline FirstHit first_hit(const Scene& scene, const Ray& ray, bool hide_emitters = false,
+                          Tracing tracing = Tracing::Exact) {
     FirstHit f;
-    f.found = scene.intersect(ray, f.hit);
+    f.found = scene.intersect(ray, f.hit, tracing);
     Ray past = ray;
     while (hide_emitters && f.found && scene.meshes[size_t(f.hit.mesh)].is_emitter()) {
         past.tmin = std::max(std::nextafter(f.hit.t, INFINITY), f.hit.t * (1.f + kHiddenEmitterSkip));
-        f.found = scene.intersect(past, f.hit);
+        f.found = scene.intersect(past, f.hit, tracing);
     }
     return f;
 }
@@ -137,13 +145,15 @@ inline bool env_nee(const Scene& scene, const RenderOptions& opt, bool recorded,
 // recorded for the adjoint sweep).
 struct PathSettings {
     bool env_compensated, use_env, use_nee, use_hits, mis, both_lights;
+    Tracing tracing;
     PathSettings(const Scene& scene, const RenderOptions& opt, bool recorded = false)
         : env_compensated(false),
           use_env(env_nee(scene, opt, recorded, env_compensated)),
           use_nee(opt.sampling != LightSampling::BSDFOnly && (scene.light_distribution.valid() || use_env)),
           use_hits(opt.sampling != LightSampling::LightOnly),
           mis(opt.sampling == LightSampling::MIS),
-          both_lights(scene.light_distribution.valid() && use_env) {}
+          both_lights(scene.light_distribution.valid() && use_env),
+          tracing(tracing_of(opt, recorded)) {}
 };
 
 // Light met by a BSDF-sampled continuation (of density `pdf`, smooth if `delta`), as trace_path

@@ -209,7 +209,7 @@ const std::vector<Edge>& Scene::edges() const {
             d.colors = m.colors;
             // A scene whose vertices move keeps its nearly flat edges (marked): the same list
             // from step to step, so that the edge hierarchy is refit.
-            build_mesh_edges(d, int32_t(i), edges_, refittable_);
+            build_mesh_edges(d, int32_t(i), edges_, moving_);
         }
         edges_ready_.store(true, std::memory_order_release);
     }
@@ -221,9 +221,7 @@ Scene::HierarchyStats Scene::hierarchy_stats() const {
     return hierarchy_stats_;
 }
 
-Scene::~Scene() {
-    if (rtc_) rtcReleaseScene(rtc_);
-}
+Scene::~Scene() { drop_bvhs(); }
 
 namespace {
 
@@ -309,15 +307,6 @@ bool same(const std::vector<T>& kept, const T* data, int64_t n) {
     return kept.size() == size_t(n) && std::equal(kept.begin(), kept.end(), data);
 }
 
-// The index buffer Embree gets for triangle t: a degenerate triangle collapsed to its first
-// vertex (it keeps its primitive id, so hits index the caller's triangles, and has exactly zero
-// area, so no ray hits it). Returns whether it is degenerate.
-bool embree_triangle(const Mesh& m, int64_t t, uint32_t* out) {
-    const int32_t* tri = m.indices + 3 * t;
-    const bool skip = m.is_degenerate(t);
-    for (int k = 0; k < 3; ++k) out[k] = uint32_t(tri[skip ? 0 : k]);
-    return skip;
-}
 
 }  // namespace
 
@@ -331,7 +320,7 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
 Scene::Update Scene::update(const SceneDesc& desc) {
     validate(desc);
     const size_t n = desc.meshes.size();
-    bool same_topology = rtc_ != nullptr && kept_.size() == n;
+    bool same_topology = updated_ && kept_.size() == n;
     bool same_vertices = same_topology, same_shading = same_topology;
     for (size_t i = 0; i < n && same_topology; ++i) {
         const MeshDesc& md = desc.meshes[i];
@@ -349,14 +338,24 @@ Scene::Update Scene::update(const SceneDesc& desc) {
                        same(k.colors, md.colors, 3 * md.num_vertices);
     }
     set_views(desc);
-    Update what = Update::Reused;
-    if (!same_topology || (!same_vertices && !refit_geometry())) {
-        // A scene whose vertices have moved once is built for refitting from then on (Embree's
-        // refittable BVH traces a little slower than its static one).
-        build_geometry(refittable_ || (same_topology && !same_vertices));
-        what = Update::Built;
-    } else if (!same_vertices) {
-        what = Update::Refit;
+    Update what = !same_topology ? Update::Built : !same_vertices ? Update::Refit : Update::Reused;
+    // Which triangles are degenerate (skipped by the BVHs, collapsed in their index buffers:
+    // build_bvh) depends on the positions; a change of that is a build, as is the first move (a
+    // scene whose vertices have moved once is built for refitting from then on).
+    std::vector<std::vector<uint8_t>> degenerate(n);
+    if (what != Update::Reused) {
+        for (size_t i = 0; i < n; ++i) {
+            Mesh& m = meshes[i];
+            degenerate[i].resize(size_t(m.num_triangles));
+            m.num_degenerate = 0;
+            for (int64_t t = 0; t < m.num_triangles; ++t) {
+                degenerate[i][size_t(t)] = m.is_degenerate(t);
+                m.num_degenerate += degenerate[i][size_t(t)];
+            }
+            if (what == Update::Refit && degenerate[i] != kept_[i].degenerate) what = Update::Built;
+        }
+        if (what == Update::Refit && !moving_) what = Update::Built;
+        moving_ = moving_ || same_topology;
     }
     if (what != Update::Reused || !same_shading) {
         // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use.
@@ -376,6 +375,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.num_normals = md.normals ? md.num_normals : -1;
             k.normals = copy_of(md.normals, 3 * md.num_normals);
             k.colors = copy_of(md.colors, 3 * md.num_vertices);
+            if (what != Update::Reused) k.degenerate = std::move(degenerate[i]);
             k.triangle_data.resize(size_t(md.num_triangles));
             for (int64_t t = 0; t < md.num_triangles; ++t) {
                 TriangleData& td = k.triangle_data[size_t(t)];
@@ -389,8 +389,14 @@ Scene::Update Scene::update(const SceneDesc& desc) {
         }
     }
     for (size_t i = 0; i < n; ++i) meshes[i].triangle_data = kept_[i].triangle_data.data();
+    updated_ = true;
+    if (what == Update::Built) drop_bvhs();
+    if (what == Update::Refit) refit_bvhs();
     build_lights();
-    ++(what == Update::Built ? stats_.builds : what == Update::Refit ? stats_.refits : stats_.reuses);
+    if (what == Update::Reused) {
+        std::lock_guard<std::mutex> lock(bvh_mutex_);
+        ++stats_.reuses;
+    }
     return what;
 }
 
@@ -457,63 +463,77 @@ void Scene::set_views(const SceneDesc& desc) {
     }
 }
 
-void Scene::build_geometry(bool refittable) {
+RTCScene Scene::build_bvh(Tracing tracing) const {
+    std::lock_guard<std::mutex> lock(bvh_mutex_);
+    BvhSlot& slot = bvh_[int(tracing)];
+    if (slot.ready.load(std::memory_order_relaxed)) return slot.rtc;
     RTCDevice device = shared_device();
-    if (rtc_) rtcReleaseScene(rtc_);
-    rtc_ = rtcNewScene(device);
-    // The context filter serves intersect_excluding; other queries pass none.
-    const RTCSceneFlags flags = RTCSceneFlags(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION);
-    rtcSetSceneFlags(rtc_, refittable ? RTCSceneFlags(flags | RTC_SCENE_FLAG_DYNAMIC) : flags);
+    RTCScene rtc = rtcNewScene(device);
+    // The context filter serves intersect_excluding, whose queries are exact; others pass none.
+    RTCSceneFlags flags = tracing == Tracing::Exact
+                              ? RTCSceneFlags(RTC_SCENE_FLAG_ROBUST | RTC_SCENE_FLAG_CONTEXT_FILTER_FUNCTION)
+                              : RTC_SCENE_FLAG_NONE;
+    if (moving_) flags = RTCSceneFlags(flags | RTC_SCENE_FLAG_DYNAMIC);
+    rtcSetSceneFlags(rtc, flags);
     // Refittable: Embree's two-level BVH, one SAH-built BVH per mesh (RTC_BUILD_QUALITY_REFIT)
     // under a top level over the meshes. The scene's quality must be low for that: at the
     // default (medium) quality a dynamic scene is rebuilt whole at every commit (measured on a
     // 100k-triangle mesh: 200 ms a commit, against 20 ms at low quality).
-    if (refittable) rtcSetSceneBuildQuality(rtc_, RTC_BUILD_QUALITY_LOW);
-    for (size_t i = 0; i < meshes.size(); ++i) {
-        Mesh& m = meshes[i];
+    if (moving_) rtcSetSceneBuildQuality(rtc, RTC_BUILD_QUALITY_LOW);
+    for (size_t i = 0; i < kept_.size(); ++i) {
+        const Kept& k = kept_[i];
+        const size_t triangles = k.degenerate.size();
         RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
-        if (refittable) rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
+        if (moving_) rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
         float* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                                3 * sizeof(float), size_t(m.num_vertices)));
-        std::copy(m.vertices, m.vertices + 3 * m.num_vertices, vb);
+                                                                3 * sizeof(float), size_t(k.num_vertices)));
+        std::copy(k.vertices.begin(), k.vertices.end(), vb);
         uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
-                                                                      3 * sizeof(uint32_t), size_t(m.num_triangles)));
-        m.num_degenerate = 0;
-        for (int64_t t = 0; t < m.num_triangles; ++t) m.num_degenerate += embree_triangle(m, t, ib + 3 * t);
+                                                                      3 * sizeof(uint32_t), triangles));
+        // A degenerate triangle collapsed to its first vertex: it keeps its primitive id, so
+        // hits index the caller's triangles, and has exactly zero area, so no ray hits it.
+        for (size_t t = 0; t < triangles; ++t)
+            for (int c = 0; c < 3; ++c) ib[3 * t + c] = uint32_t(k.indices[3 * t + (k.degenerate[t] ? 0 : c)]);
         rtcCommitGeometry(g);
-        rtcAttachGeometryByID(rtc_, g, unsigned(i));
+        rtcAttachGeometryByID(rtc, g, unsigned(i));
         rtcReleaseGeometry(g);
     }
-    rtcCommitScene(rtc_);
-    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene build failed");
-    refittable_ = refittable;
+    rtcCommitScene(rtc);
+    if (rtcGetDeviceError(device) != RTC_ERROR_NONE) {
+        rtcReleaseScene(rtc);
+        throw std::runtime_error("Embree: scene build failed");
+    }
+    slot.rtc = rtc;
+    ++stats_.builds;
+    slot.ready.store(true, std::memory_order_release);
+    return rtc;
 }
 
-bool Scene::refit_geometry() {
-    if (!refittable_) return false;
-    // Which triangles are degenerate depends on the positions; a change of that changes the
-    // index buffer Embree holds, which a refit does not take: rebuilt instead.
-    for (size_t i = 0; i < meshes.size(); ++i) {
-        const Mesh& m = meshes[i];
-        const uint32_t* ib =
-            static_cast<const uint32_t*>(rtcGetGeometryBufferData(rtcGetGeometry(rtc_, unsigned(i)), RTC_BUFFER_TYPE_INDEX, 0));
-        uint32_t tri[3];
-        for (int64_t t = 0; t < m.num_triangles; ++t) {
-            embree_triangle(m, t, tri);
-            if (tri[0] != ib[3 * t] || tri[1] != ib[3 * t + 1] || tri[2] != ib[3 * t + 2]) return false;
+void Scene::drop_bvhs() {
+    std::lock_guard<std::mutex> lock(bvh_mutex_);
+    for (BvhSlot& slot : bvh_) {
+        if (slot.rtc) rtcReleaseScene(slot.rtc);
+        slot.rtc = nullptr;
+        slot.ready.store(false, std::memory_order_relaxed);
+    }
+}
+
+// The BVHs built (refittable: update() builds anew otherwise), to the kept positions.
+void Scene::refit_bvhs() {
+    std::lock_guard<std::mutex> lock(bvh_mutex_);
+    for (BvhSlot& slot : bvh_) {
+        if (!slot.ready.load(std::memory_order_relaxed)) continue;
+        for (size_t i = 0; i < kept_.size(); ++i) {
+            RTCGeometry g = rtcGetGeometry(slot.rtc, unsigned(i));
+            float* vb = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
+            std::copy(kept_[i].vertices.begin(), kept_[i].vertices.end(), vb);
+            rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
+            rtcCommitGeometry(g);
         }
+        rtcCommitScene(slot.rtc);
+        if (rtcGetDeviceError(shared_device()) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene refit failed");
+        ++stats_.refits;
     }
-    for (size_t i = 0; i < meshes.size(); ++i) {
-        const Mesh& m = meshes[i];
-        RTCGeometry g = rtcGetGeometry(rtc_, unsigned(i));
-        float* vb = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
-        std::copy(m.vertices, m.vertices + 3 * m.num_vertices, vb);
-        rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
-        rtcCommitGeometry(g);
-    }
-    rtcCommitScene(rtc_);
-    if (rtcGetDeviceError(shared_device()) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene refit failed");
-    return true;
 }
 
 void Scene::build_lights() {
@@ -574,11 +594,11 @@ bool hit_of(const RTCRayHit& rh, Hit& hit) {
 }
 }  // namespace
 
-bool Scene::intersect(const Ray& ray, Hit& hit) const {
+bool Scene::intersect(const Ray& ray, Hit& hit, Tracing tracing) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRayHit rh = to_rtc_ray_hit(ray);
-    rtcIntersect1(rtc_, &ctx, &rh);
+    rtcIntersect1(bvh(tracing), &ctx, &rh);
     return hit_of(rh, hit);
 }
 
@@ -609,15 +629,15 @@ bool Scene::intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1
     c.f0 = f0 < 0 ? RTC_INVALID_GEOMETRY_ID : unsigned(f0);
     c.f1 = f1 < 0 ? RTC_INVALID_GEOMETRY_ID : unsigned(f1);
     RTCRayHit rh = to_rtc_ray_hit(ray);
-    rtcIntersect1(rtc_, &c.rtc, &rh);
+    rtcIntersect1(bvh(Tracing::Exact), &c.rtc, &rh);
     return hit_of(rh, hit);
 }
 
-bool Scene::occluded(const Ray& ray) const {
+bool Scene::occluded(const Ray& ray, Tracing tracing) const {
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
     RTCRay r = to_rtc_ray(ray);
-    rtcOccluded1(rtc_, &ctx, &r);
+    rtcOccluded1(bvh(tracing), &ctx, &r);
     return r.tfar < 0.f;
 }
 

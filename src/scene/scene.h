@@ -167,6 +167,17 @@ inline Ray shadow_ray(const SurfacePoint& sp, const LightSample& ls) {
 
 class EdgeHierarchy;
 
+// Which of the scene's two BVHs a query traces. Exact: Embree's robust mode, watertight (a ray
+// through an edge shared by two triangles meets one of them), for the edge samples' side rays
+// and every path a gradient pass traces or retraces. Fast: Embree's default intersection, for
+// images no gradient follows (RenderOptions::replayable false, render/path.h tracing_of): 9%
+// less CPU time on the Cornell box, but a ray aimed at a shared edge may slip through by a
+// rounding (measured on a flat grid of quads: 17% of the rays aimed at points of shared edges,
+// and 5 in 1.35 million aimed at random points; docs/gradients.md), as in Mitsuba, which asks
+// for no robust mode. Each is built on its first use, so a scene that only makes images holds
+// the fast one alone, and one that only takes gradients the exact one alone.
+enum class Tracing { Exact, Fast };
+
 class Scene {
 public:
     ~Scene();
@@ -183,14 +194,21 @@ public:
     // normals are given); the edge list alone when uvs, normals or vertex colours change; an Embree refit when only vertex positions move (the first time, a
     // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
     // one); nothing for materials, textures, emission, lights, the environment and the camera,
-    // which are only views. Returns what it did. Not thread-safe: no other call may use the
-    // scene meanwhile. If it throws, the scene must not be used until an update succeeds.
+    // which are only views. Returns what it did: Built, the BVHs dropped, each built anew on
+    // its first use (bvh()); Refit, those built refitted. Not thread-safe: no other call may use
+    // the scene meanwhile. If it throws, the scene must not be used until an update succeeds.
     enum class Update { Built, Refit, Reused };
     Update update(const SceneDesc& desc);
     struct BuildStats {
-        uint64_t builds = 0, refits = 0, reuses = 0;  // update() calls (build() counts one build)
+        // BVHs built (each kind of Tracing a call uses, on its first use after a Built update)
+        // and refitted (an update's Refit, per BVH held); update() calls that changed nothing
+        // the BVHs depend on.
+        uint64_t builds = 0, refits = 0, reuses = 0;
     };
-    const BuildStats& build_stats() const { return stats_; }
+    BuildStats build_stats() const {
+        std::lock_guard<std::mutex> lock(bvh_mutex_);
+        return stats_;
+    }
     // Another view of the same scene: validates `camera` and replaces the camera, its film and
     // crop window (nothing else depends on them). Not thread-safe, as update().
     void set_camera(const CameraDesc& camera);
@@ -218,12 +236,12 @@ public:
     // env_nee's decision (render/path.h).
     bool env_sampled = false;
 
-    bool intersect(const Ray& ray, Hit& hit) const;
+    bool intersect(const Ray& ray, Hit& hit, Tracing tracing = Tracing::Exact) const;
     // The first hit on anything but faces f0 and f1 of mesh `mesh` (-1: none), however close to
     // theirs: a surface meeting the ray where they do is found, which stepping the ray's start
     // past their hit cannot do (edges/sides.h: a floor through a wall's lower edge).
     bool intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1, Hit& hit) const;
-    bool occluded(const Ray& ray) const;
+    bool occluded(const Ray& ray, Tracing tracing = Tracing::Exact) const;
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
     // What surface_point sets of every point, into sp: its triangle, barycentrics, point, the
@@ -290,7 +308,14 @@ public:
                                                     : lights[size_t(m.light_offset + prim)].area;
     }
 
-    RTCScene rtc_scene() const { return rtc_; }
+    // The Embree scene of that kind of tracing, built (thread-safe) if it is not yet: from the
+    // positions of the last update, refittable once the vertices have moved.
+    RTCScene bvh(Tracing tracing) const {
+        const BvhSlot& s = bvh_[int(tracing)];
+        return s.ready.load(std::memory_order_acquire) ? s.rtc : build_bvh(tracing);
+    }
+    // Whether that kind's BVH is built (a query builds it).
+    bool has_bvh(Tracing tracing) const { return bvh_[int(tracing)].ready.load(std::memory_order_acquire); }
 
     // The edges of all meshes (see scene/edges.h), built on first use: only gradient passes
     // that want geometry or camera derivatives pay for them. Once vertices have moved (the BVH
@@ -316,8 +341,9 @@ public:
 private:
     Scene() = default;
     void set_views(const SceneDesc& desc);
-    void build_geometry(bool refittable);
-    bool refit_geometry();  // false: it cannot (a build is needed)
+    RTCScene build_bvh(Tracing tracing) const;
+    void drop_bvhs();
+    void refit_bvhs();
     void build_lights();
     // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and
     // 1 - cos of its half angle; false if p is inside the sphere.
@@ -333,8 +359,18 @@ private:
     bool sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
                                LightSample& ls, const SphericalTriangle* seen = nullptr) const;
 
-    RTCScene rtc_ = nullptr;
-    bool refittable_ = false;  // the BVH was built for refitting
+    // The BVH of each kind of Tracing: null until built (ready).
+    struct BvhSlot {
+        RTCScene rtc = nullptr;
+        std::atomic<bool> ready{false};
+    };
+    mutable BvhSlot bvh_[2];
+    mutable std::mutex bvh_mutex_;
+    bool updated_ = false;  // an update succeeded: kept_ holds the geometry
+    // The vertices have moved once: the BVHs are built for refitting from then on (Embree's
+    // refittable BVH traces a little slower than its static one), and the edge list keeps its
+    // nearly flat edges.
+    bool moving_ = false;
     // The arrays of the last build that the BVH and the edge list depend on, per mesh (uvs and
     // normals count -1 when not given).
     struct Kept {
@@ -342,9 +378,10 @@ private:
         std::vector<float> vertices, uvs, normals, colors;
         std::vector<int32_t> indices, uv_indices, normal_indices;
         std::vector<TriangleData> triangle_data;  // Mesh::triangle_data
+        std::vector<uint8_t> degenerate;  // Mesh::is_degenerate, triangle by triangle
     };
     std::vector<Kept> kept_;
-    BuildStats stats_;
+    mutable BuildStats stats_;
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;

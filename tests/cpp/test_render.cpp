@@ -402,6 +402,69 @@ TEST(Render, SamplingStrategiesAgree) {
     }
 }
 
+// The two BVHs (scene.h, Tracing): each built on its first use, the fast one by images no
+// gradient follows, the exact one by the rest; the gradient passes trace the exact one whatever
+// the options say; and the two give the same image but for the last bits of the intersections.
+TEST(SceneUpdate, EachKindOfTracingBuildsItsBvhOnFirstUse) {
+    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
+    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
+    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 48, 40, 45);
+    d.materials = {material(kd, ks, rough), material(black, black, rough)};
+    d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
+    d.meshes[2].emission = light.desc();
+    const std::shared_ptr<Scene> scene = build_scene(d);
+    EXPECT_FALSE(scene->has_bvh(Tracing::Exact));
+    EXPECT_FALSE(scene->has_bvh(Tracing::Fast));
+    RenderOptions opt;
+    opt.spp = 4;
+    opt.max_bounces = 2;
+    opt.num_threads = 1;
+    opt.replayable = false;
+    const size_t n = 48 * 40 * 3;
+    std::vector<float> fast(n), exact(n);
+    render(*scene, opt, fast.data());
+    EXPECT_TRUE(scene->has_bvh(Tracing::Fast));
+    EXPECT_FALSE(scene->has_bvh(Tracing::Exact));
+    EXPECT_EQ(scene_build_counts(*scene).builds, 1u);
+    opt.replayable = true;
+    render(*scene, opt, exact.data());
+    EXPECT_TRUE(scene->has_bvh(Tracing::Exact));
+    EXPECT_EQ(scene_build_counts(*scene).builds, 2u);
+    // The same paths, but for the last bits of each hit (the two intersection tests round
+    // differently): nearly every value within 1e-4 of the other (all of them, when this was
+    // written), the means within 1e-6 (5e-8).
+    double sum_fast = 0, sum_exact = 0;
+    int far = 0;
+    for (size_t i = 0; i < n; ++i) {
+        sum_fast += fast[i];
+        sum_exact += exact[i];
+        far += std::abs(fast[i] - exact[i]) > 1e-4f * (1.f + std::abs(exact[i]));
+    }
+    EXPECT_GT(sum_exact, 0.0);
+    EXPECT_LT(std::abs(sum_fast - sum_exact), 1e-6 * sum_exact);
+    EXPECT_LE(far, int(n / 1000));
+    // A gradient pass asked for replayable false traces the exact BVH all the same, and gives
+    // the gradients it gives with replayable true, bit for bit.
+    const std::shared_ptr<Scene> other = build_scene(d);
+    std::vector<float> adjoint(n, 1.f), ga(ball.vertices.size(), 0.f), gb(ga);
+    SceneGradients g;
+    g.meshes.resize(3);
+    g.meshes[0].vertices.grad = ga.data();
+    render_gradients(*scene, opt, adjoint.data(), g);
+    opt.replayable = false;
+    g.meshes[0].vertices.grad = gb.data();
+    render_gradients(*other, opt, adjoint.data(), g);
+    EXPECT_EQ(ga, gb);
+    EXPECT_TRUE(other->has_bvh(Tracing::Exact));
+    EXPECT_FALSE(other->has_bvh(Tracing::Fast));
+    double total = 0;
+    for (float v : ga) total += std::abs(v);
+    EXPECT_GT(total, 0.0);
+}
+
 // A scene updated across calls (update_scene) renders and differentiates exactly as one built
 // afresh from the same description, and rebuilds only what changed.
 TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
@@ -465,6 +528,13 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
         render(scene, opt, a.data());
         const auto fresh = fresh_build(d, moved);
         render(*fresh, opt, b.data());
+        EXPECT_EQ(a, b);
+        // The image alone, which traces the other BVH (scene.h, Tracing), kept, refitted and
+        // rebuilt alike.
+        RenderOptions alone = opt;
+        alone.replayable = false;
+        render(scene, alone, a.data());
+        render(*fresh, alone, b.data());
         EXPECT_EQ(a, b);
         std::vector<float> ga(ball.vertices.size(), 0.f), gb(ball.vertices.size(), 0.f), gt(ga);
         SceneGradients g;
@@ -532,9 +602,10 @@ TEST(SceneUpdate, EqualsAFreshBuildAndRebuildsOnlyWhatChanged) {
     EXPECT_EQ(update(d), SceneUpdate::Built);
     expect_fresh(*scene, d);
 
+    // Six builds of each of the two BVHs, each refitted twice.
     const SceneBuildCounts n = scene_build_counts(*scene);
-    EXPECT_EQ(n.builds, 6u);
-    EXPECT_EQ(n.refits, 2u);
+    EXPECT_EQ(n.builds, 12u);
+    EXPECT_EQ(n.refits, 4u);
     EXPECT_EQ(n.reuses, 3u);
     // The edge hierarchy: built on the first gradient pass, rebuilt on the first move (the
     // edge list of a moving scene keeps its nearly flat edges) and refit after the others,
@@ -582,12 +653,13 @@ TEST(Render, PacketsMatchSingleRays) {
     for (int y = 0; y < H; ++y)
         for (int x = 0; x < W; ++x) rays.push_back(scene->camera.generate_ray(float(x) + 0.3f, float(y) + 0.6f));
     int misses = 0;
+    for (Tracing tracing : {Tracing::Exact, Tracing::Fast})
     for (int n = 1; n <= kPacketSize; ++n)
         for (size_t begin = 0; begin + size_t(n) <= rays.size(); begin += size_t(n)) {
             FirstHit packet[kPacketSize];
-            intersect_packet(*scene, rays.data() + begin, n, packet);
+            intersect_packet(*scene, tracing, rays.data() + begin, n, packet);
             for (int i = 0; i < n; ++i) {
-                const FirstHit single = first_hit(*scene, rays[begin + size_t(i)]);
+                const FirstHit single = first_hit(*scene, rays[begin + size_t(i)], false, tracing);
                 ASSERT_EQ(packet[i].found, single.found) << "ray " << begin + size_t(i);
                 misses += !single.found;
                 if (!single.found) continue;
@@ -600,10 +672,13 @@ TEST(Render, PacketsMatchSingleRays) {
         }
     EXPECT_GT(misses, 0);
 
+    // Each of the two BVHs (scene.h, Tracing): an image no gradient follows traces the fast one.
+    for (bool replayable : {true, false}) {
     RenderOptions opt;
     opt.spp = 3;
     opt.max_bounces = 2;
     opt.seed = 11;
+    opt.replayable = replayable;
     std::vector<float> reference(size_t(W) * H * 3);
     RayCounters counters;
     for (int y = 0; y < H; ++y)
@@ -628,7 +703,8 @@ TEST(Render, PacketsMatchSingleRays) {
         render(*scene, opt, image.data());
         int differing = 0;
         for (size_t i = 0; i < image.size(); ++i) differing += image[i] != reference[i];
-        EXPECT_EQ(differing, 0) << threads << " threads";
+        EXPECT_EQ(differing, 0) << threads << " threads, replayable " << replayable;
+    }
     }
 }
 
