@@ -1,4 +1,4 @@
-// Lanes of Embree's ray packets (RTCRayHit8, RTCRayHit16, RTCRay16), as the camera's packets
+// Lanes of Embree's ray packets (RTCRayHit16, RTCRay16), as the camera's packets
 // (render/packet.cpp) and the forward pass's batches (render/batch.cpp) fill and read them.
 #pragma once
 #include <embree3/rtcore.h>
