@@ -202,13 +202,17 @@ struct Envmap {
         return d.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
     }
 
-    // A direction by `dist`, or by compensated() (then never a constant map's).
-    bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out, bool compensated = false) const {
+    // A direction by `dist`, or by compensated() (then never a constant map's); `value`, if
+    // given, gets the map's value there (eval's, from the sampled position itself: no arc
+    // tangent and arc cosine of the direction to find it again).
+    bool sample(float u1, float u2, Vec3f& world_dir, float& pdf_out, bool compensated = false,
+                Vec3f* value = nullptr) const {
         const Distribution2D& d = compensated ? this->compensated() : dist;
         if (!d.valid()) return false;
         if (constant()) {  // uniform: no rotation needed
             world_dir = square_to_sphere(u1, u2);
             pdf_out = kUniformPdf;
+            if (value) *value = texel(0) * scale;
             return true;
         }
         int r = 0, c = 0;
@@ -221,6 +225,8 @@ struct Envmap {
         Vec3f local(sin_theta * std::sin(phi), std::cos(theta), -sin_theta * std::cos(phi));
         world_dir = to_world_dir(local);
         pdf_out = d.pmf(r, c) * float(rows * cols) / (2.f * kPi * kPi * sin_theta);
+        // The texel-space position of the direction (position()'s): x * cols - 1/2, y * rows.
+        if (value) *value = eval_at(Vec2f(std::min(float(c) + u2, std::nextafter(float(cols), 0.f)), float(r) + u1));
         return pdf_out > 0.f;
     }
 

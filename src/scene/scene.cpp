@@ -730,12 +730,12 @@ Vec3f Scene::emitted(const SurfacePoint& sp, const Vec3f& w) const {
 
 bool Scene::sample_env(float u1, float u2, LightSample& ls, bool compensated) const {
     if (!env_sampled) return false;
-    Vec3f dir;
+    Vec3f dir, radiance;
     float pdf;
-    if (!envmap.sample(u1, u2, dir, pdf, compensated)) return false;
+    if (!envmap.sample(u1, u2, dir, pdf, compensated, &radiance)) return false;
     ls.dir = dir;
     ls.dist = std::numeric_limits<float>::infinity();
-    ls.radiance = envmap.eval(dir);
+    ls.radiance = radiance;
     ls.pdf = pdf;
     ls.hit = Hit();
     return ls.pdf > 0.f;

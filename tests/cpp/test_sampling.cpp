@@ -383,16 +383,19 @@ TEST(Envmap, PdfIntegratesToOneAndMatchesSampler) {
         Vec3f w = square_to_sphere(rng.next_float(), rng.next_float());
         pdf_int.add(env.pdf(w) * 4 * kPi);
         L_uniform.add(luminance(env.eval(w)) * 4 * kPi);
-        Vec3f ws;
+        Vec3f ws, value;
         float pdf;
-        ASSERT_TRUE(env.sample(rng.next_float(), rng.next_float(), ws, pdf));
+        ASSERT_TRUE(env.sample(rng.next_float(), rng.next_float(), ws, pdf, false, &value));
         // The density is exact; near the poles its float round trip through the rotation loses
-        // digits (1 / sin(theta)), so compare away from them.
+        // digits (1 / sin(theta)), so compare away from them. So does the value the sampler
+        // gives (looked up at the sampled position, not the direction's), which is eval's.
         float sin_theta = std::sin(env.position(ws).y / float(env.rows) * kPi);
         if (sin_theta > 0.1f) {
             EXPECT_NEAR(env.pdf(ws), pdf, 2e-3f * pdf);
+            const Vec3f looked_up = env.eval(ws);
+            for (int k = 0; k < 3; ++k) ASSERT_NEAR(value[k], looked_up[k], 2e-3f * (looked_up[k] + 0.1f)) << i;
         }
-        L_sampled.add(luminance(env.eval(ws)) / pdf);
+        L_sampled.add(luminance(value) / pdf);
     }
     EXPECT_NEAR(pdf_int.mean(), 1.0, 5 * pdf_int.se());
     EXPECT_NEAR(L_uniform.mean(), L_sampled.mean(), 5 * std::hypot(L_uniform.se(), L_sampled.se()));
