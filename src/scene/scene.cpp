@@ -340,7 +340,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
     set_views(desc);
     Update what = !same_topology ? Update::Built : !same_vertices ? Update::Refit : Update::Reused;
     // Which triangles are degenerate (skipped by the BVHs, collapsed in their index buffers:
-    // build_bvh) depends on the positions; a change of that is a build, as is the first move (a
+    // prepare_bvh) depends on the positions; a change of that is a build, as is the first move (a
     // scene whose vertices have moved once is built for refitting from then on).
     std::vector<std::vector<uint8_t>> degenerate(n);
     if (what != Update::Reused) {
@@ -391,7 +391,10 @@ Scene::Update Scene::update(const SceneDesc& desc) {
     for (size_t i = 0; i < n; ++i) meshes[i].triangle_data = kept_[i].triangle_data.data();
     updated_ = true;
     if (what == Update::Built) drop_bvhs();
-    if (what == Update::Refit) refit_bvhs();
+    if (what == Update::Refit) {
+        std::lock_guard<std::mutex> lock(bvh_mutex_);
+        for (BvhSlot& slot : bvh_) slot.ready.store(false, std::memory_order_relaxed);  // refitted on use
+    }
     build_lights();
     if (what == Update::Reused) {
         std::lock_guard<std::mutex> lock(bvh_mutex_);
@@ -463,11 +466,27 @@ void Scene::set_views(const SceneDesc& desc) {
     }
 }
 
-RTCScene Scene::build_bvh(Tracing tracing) const {
+RTCScene Scene::prepare_bvh(Tracing tracing) const {
     std::lock_guard<std::mutex> lock(bvh_mutex_);
     BvhSlot& slot = bvh_[int(tracing)];
     if (slot.ready.load(std::memory_order_relaxed)) return slot.rtc;
     RTCDevice device = shared_device();
+    if (slot.rtc) {
+        // Held since before the vertices moved (refittable: update() drops it otherwise): to
+        // the kept positions.
+        for (size_t i = 0; i < kept_.size(); ++i) {
+            RTCGeometry g = rtcGetGeometry(slot.rtc, unsigned(i));
+            float* vb = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
+            std::copy(kept_[i].vertices.begin(), kept_[i].vertices.end(), vb);
+            rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
+            rtcCommitGeometry(g);
+        }
+        rtcCommitScene(slot.rtc);
+        if (rtcGetDeviceError(device) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene refit failed");
+        ++stats_.refits;
+        slot.ready.store(true, std::memory_order_release);
+        return slot.rtc;
+    }
     RTCScene rtc = rtcNewScene(device);
     // The context filter serves intersect_excluding, whose queries are exact; others pass none.
     RTCSceneFlags flags = tracing == Tracing::Exact
@@ -515,24 +534,6 @@ void Scene::drop_bvhs() {
         if (slot.rtc) rtcReleaseScene(slot.rtc);
         slot.rtc = nullptr;
         slot.ready.store(false, std::memory_order_relaxed);
-    }
-}
-
-// The BVHs built (refittable: update() builds anew otherwise), to the kept positions.
-void Scene::refit_bvhs() {
-    std::lock_guard<std::mutex> lock(bvh_mutex_);
-    for (BvhSlot& slot : bvh_) {
-        if (!slot.ready.load(std::memory_order_relaxed)) continue;
-        for (size_t i = 0; i < kept_.size(); ++i) {
-            RTCGeometry g = rtcGetGeometry(slot.rtc, unsigned(i));
-            float* vb = static_cast<float*>(rtcGetGeometryBufferData(g, RTC_BUFFER_TYPE_VERTEX, 0));
-            std::copy(kept_[i].vertices.begin(), kept_[i].vertices.end(), vb);
-            rtcUpdateGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0);
-            rtcCommitGeometry(g);
-        }
-        rtcCommitScene(slot.rtc);
-        if (rtcGetDeviceError(shared_device()) != RTC_ERROR_NONE) throw std::runtime_error("Embree: scene refit failed");
-        ++stats_.refits;
     }
 }
 

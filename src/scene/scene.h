@@ -195,14 +195,14 @@ public:
     // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
     // one); nothing for materials, textures, emission, lights, the environment and the camera,
     // which are only views. Returns what it did: Built, the BVHs dropped, each built anew on
-    // its first use (bvh()); Refit, those built refitted. Not thread-safe: no other call may use
+    // its first use (bvh()); Refit, those held refitted, each on its first use. Not thread-safe: no other call may use
     // the scene meanwhile. If it throws, the scene must not be used until an update succeeds.
     enum class Update { Built, Refit, Reused };
     Update update(const SceneDesc& desc);
     struct BuildStats {
         // BVHs built (each kind of Tracing a call uses, on its first use after a Built update)
-        // and refitted (an update's Refit, per BVH held); update() calls that changed nothing
-        // the BVHs depend on.
+        // and refitted (on a BVH's first use after a Refit update); update() calls that
+        // changed nothing the BVHs depend on.
         uint64_t builds = 0, refits = 0, reuses = 0;
     };
     BuildStats build_stats() const {
@@ -308,14 +308,19 @@ public:
                                                     : lights[size_t(m.light_offset + prim)].area;
     }
 
-    // The Embree scene of that kind of tracing, built (thread-safe) if it is not yet: from the
-    // positions of the last update, refittable once the vertices have moved.
+    // The Embree scene of that kind of tracing, at the positions of the last update: built
+    // (thread-safe) if the scene holds none yet, refittable once the vertices have moved, or
+    // refitted if the vertices moved since it was last used.
     RTCScene bvh(Tracing tracing) const {
         const BvhSlot& s = bvh_[int(tracing)];
-        return s.ready.load(std::memory_order_acquire) ? s.rtc : build_bvh(tracing);
+        return s.ready.load(std::memory_order_acquire) ? s.rtc : prepare_bvh(tracing);
     }
-    // Whether that kind's BVH is built (a query builds it).
-    bool has_bvh(Tracing tracing) const { return bvh_[int(tracing)].ready.load(std::memory_order_acquire); }
+    // Whether the scene holds that kind's BVH (a query builds it; one held since before the
+    // vertices moved is refitted at its next query).
+    bool has_bvh(Tracing tracing) const {
+        std::lock_guard<std::mutex> lock(bvh_mutex_);
+        return bvh_[int(tracing)].rtc != nullptr;
+    }
 
     // The edges of all meshes (see scene/edges.h), built on first use: only gradient passes
     // that want geometry or camera derivatives pay for them. Once vertices have moved (the BVH
@@ -341,9 +346,8 @@ public:
 private:
     Scene() = default;
     void set_views(const SceneDesc& desc);
-    RTCScene build_bvh(Tracing tracing) const;
+    RTCScene prepare_bvh(Tracing tracing) const;
     void drop_bvhs();
-    void refit_bvhs();
     void build_lights();
     // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and
     // 1 - cos of its half angle; false if p is inside the sphere.
@@ -359,7 +363,9 @@ private:
     bool sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float u1, float u2, double pmf,
                                LightSample& ls, const SphericalTriangle* seen = nullptr) const;
 
-    // The BVH of each kind of Tracing: null until built (ready).
+    // The BVH of each kind of Tracing: null until built; not ready while its vertices wait for
+    // a refit (update() leaves that to its next use: a BVH that only some calls trace, the
+    // previews of an optimisation, is not refitted at every step).
     struct BvhSlot {
         RTCScene rtc = nullptr;
         std::atomic<bool> ready{false};

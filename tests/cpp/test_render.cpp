@@ -463,6 +463,33 @@ TEST(SceneUpdate, EachKindOfTracingBuildsItsBvhOnFirstUse) {
     double total = 0;
     for (float v : ga) total += std::abs(v);
     EXPECT_GT(total, 0.0);
+
+    // Vertices moved: the first time both are dropped (a refittable build follows on use);
+    // then each held one is refitted on its next use, not by the update: one only an
+    // occasional call traces is not refitted at every move.
+    auto move = [&] {
+        for (size_t i = 1; i < ball.vertices.size(); i += 3) ball.vertices[i] += 0.01f;
+        return update_scene(*scene, d);
+    };
+    EXPECT_EQ(move(), SceneUpdate::Built);
+    EXPECT_FALSE(scene->has_bvh(Tracing::Exact));
+    opt.replayable = false;
+    render(*scene, opt, fast.data());
+    render_gradients(*scene, opt, adjoint.data(), g);
+    EXPECT_EQ(scene_build_counts(*scene).builds, 4u);
+    for (int round = 0; round < 3; ++round) EXPECT_EQ(move(), SceneUpdate::Refit);
+    EXPECT_TRUE(scene->has_bvh(Tracing::Exact) && scene->has_bvh(Tracing::Fast));
+    EXPECT_EQ(scene_build_counts(*scene).refits, 0u);
+    render(*scene, opt, fast.data());
+    EXPECT_EQ(scene_build_counts(*scene).refits, 1u);
+    render_gradients(*scene, opt, adjoint.data(), g);
+    EXPECT_EQ(scene_build_counts(*scene).refits, 2u);
+    EXPECT_EQ(scene_build_counts(*scene).builds, 4u);
+    // Refitted to the last positions: the image of a scene built afresh there in the moving
+    // form (built at other positions, then updated), bit for bit.
+    const std::shared_ptr<Scene> fresh = build_moved(d);
+    render(*fresh, opt, exact.data());
+    EXPECT_EQ(fast, exact);
 }
 
 // A scene updated across calls (update_scene) renders and differentiates exactly as one built
