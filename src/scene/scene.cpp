@@ -307,7 +307,6 @@ bool same(const std::vector<T>& kept, const T* data, int64_t n) {
     return kept.size() == size_t(n) && std::equal(kept.begin(), kept.end(), data);
 }
 
-
 }  // namespace
 
 std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {

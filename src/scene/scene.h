@@ -195,8 +195,9 @@ public:
     // build of a refittable BVH; a build too when a triangle becomes degenerate or stops being
     // one); nothing for materials, textures, emission, lights, the environment and the camera,
     // which are only views. Returns what it did: Built, the BVHs dropped, each built anew on
-    // its first use (bvh()); Refit, those held refitted, each on its first use. Not thread-safe: no other call may use
-    // the scene meanwhile. If it throws, the scene must not be used until an update succeeds.
+    // its first use (bvh()); Refit, those held refitted, each on its first use. Not
+    // thread-safe: no other call may use the scene meanwhile. If it throws, the scene must not
+    // be used until an update succeeds.
     enum class Update { Built, Refit, Reused };
     Update update(const SceneDesc& desc);
     struct BuildStats {
