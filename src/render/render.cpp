@@ -39,7 +39,8 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
     if (layout.num_ids > 0 && !ids) throw std::invalid_argument("ids: missing (the channels include ids)");
     // The BVH built, if it is not yet, before the threads start (built by one of them, Embree's
     // build would have that thread alone: the others would wait for it).
-    scene.bvh(tracing_of(opt));
+    const Tracing tracing = tracing_of(opt);
+    scene.bvh(tracing);
     const int nv = layout.num_values, ni = layout.num_ids;
     const bool radiance = layout.has(Channel::Radiance), hit_values = layout.has_hit_values();
     const int ro = layout.offset[int(Channel::Radiance)];
@@ -77,7 +78,7 @@ RenderStats render_channels(const Scene& scene, const RenderOptions& opt, const 
                 const float fx = float(x + scene.crop_x) + 0.5f, fy = float(y + scene.crop_y) + 0.5f;
                 FirstHit first;
                 if (scene.camera.sees(fx, fy)) {
-                    first = first_hit(scene, scene.camera.generate_ray(fx, fy), opt.hide_emitters, tracing_of(opt));
+                    first = first_hit(scene, scene.camera.generate_ray(fx, fy), opt.hide_emitters, tracing);
                     ++c.camera;
                 }
                 eval_hit_ids(scene, layout, first.found, first.hit, ids + (int64_t(y) * scene.out_width + x) * ni);
