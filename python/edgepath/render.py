@@ -102,9 +102,10 @@ class RenderOptions:
     hide_emitters: bool = False
     secondary_survival: Optional[float] = None  # None: the core's default
     # The image's paths are those a gradient pass (or a derivative image) with the same seed
-    # retraces. False only for an image no gradient follows: the environment is then sampled by
-    # its light above its mean, a uniform sky not at all (docs/conventions.md, "How lights are
-    # sampled").
+    # retraces. False for an image whose paths no gradient pass retraces (none follows it, or
+    # its gradient pass has a seed of its own): the environment is then sampled by its light
+    # above its mean, a uniform sky not at all (docs/conventions.md, "How lights are sampled"),
+    # and the rays trace the BVH built for images alone.
     replayable: bool = True
 
     def core(self) -> dict:
@@ -136,11 +137,13 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
 
     Differentiable: if a scene tensor requires grad, ``loss.backward()`` runs the gradient pass
     with ``backward_spp`` samples per pixel (default: ``spp``). Its random numbers are
-    independent of the image's by default (an unbiased gradient of the expected image);
-    ``backward_seed=seed`` makes it differentiate exactly the paths of the returned image. (An
-    image no gradient follows, with ``sampling="mis"``, samples the environment by its light
-    above its mean, and a uniform sky not at all, where the gradient pass samples its whole
-    radiance: other paths, less noise; docs/conventions.md.)
+    independent of the image's by default (an unbiased gradient of the expected image), and the
+    image is then the one rendered without a gradient, bit for bit; ``backward_seed=seed`` makes
+    the pass differentiate exactly the paths of the returned image. (An image whose paths no
+    gradient pass retraces, with ``sampling="mis"``, samples the environment by its light above
+    its mean, and a uniform sky not at all, where the gradient pass samples its whole radiance:
+    other paths, less noise; docs/conventions.md. With ``backward_seed=seed`` the image samples
+    it as the pass does.)
     The gradient includes the boundary terms of edges that move (edge sampling):
     ``primary_edges`` (silhouettes seen by the camera) and ``secondary_edges`` (seen from
     shading points: shadows, reflections, indirect light) switch them off for speed or
@@ -186,6 +189,7 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                   num_threads, sampling, primary_edges, secondary_edges,
                                   edge_samples, edge_sampling, hide_emitters, secondary_survival)
+    options.replayable = _retraced(options, grad_options)
     slots = [slot for slot, _ in attached]
     if cameras is not None:
         return _RenderViewsFunction.apply(flat, views, options, grad_options, slots,
@@ -391,11 +395,11 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
                     secondary_survival: Optional[float] = None) -> Dict[str, torch.Tensor]:
     """Renders output channels: a dict {name: (H, W, C) tensor} for the names in ``channels``
     (a list; default: all of ``CHANNELS``), in that order. "radiance" is ``render``'s image for
-    the same options, bit for bit (both with a gradient wanted, or both without); "alpha", "depth", "position", "geometry_normal",
-    "shading_normal", "uv", "albedo", "barycentrics", "vertex_color", "roughness" and "specular"
-    are float32, averaged over the same camera samples (filtered like radiance); "mesh_id",
-    "triangle_id" and "material_id" are int32 (-1 where nothing is hit), those of the ray through
-    the pixel centre. Meanings and units: docs/conventions.md.
+    the same options, bit for bit (``backward_seed`` included); "alpha", "depth", "position",
+    "geometry_normal", "shading_normal", "uv", "albedo", "barycentrics", "vertex_color",
+    "roughness" and "specular" are float32, averaged over the same camera samples (filtered like
+    radiance); "mesh_id", "triangle_id" and "material_id" are int32 (-1 where nothing is hit),
+    those of the ray through the pixel centre. Meanings and units: docs/conventions.md.
 
     Differentiable like ``render`` (same options): a loss on any continuous channel
     backpropagates into the scene, including the boundary terms of silhouettes (alpha, depth,
@@ -415,6 +419,7 @@ def render_channels(scene: Scene, channels=None, spp: int = 16, max_bounces: int
                                       _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                       num_threads, sampling, primary_edges, secondary_edges,
                                       edge_samples, edge_sampling, hide_emitters, secondary_survival)
+        options.replayable = _retraced(options, grad_options)
         slots = [slot for slot, _ in attached]
         values, ids = _ChannelsFunction.apply(flat, names, options, grad_options, slots,
                                               *[t for _, t in attached])
@@ -642,6 +647,14 @@ def _seed(seed) -> int:
     if seed >= 2**64:
         v.fail("seed", f"must be < 2**64, got {seed}")
     return seed
+
+
+def _retraced(options: RenderOptions, grad_options: RenderOptions) -> bool:
+    """Whether the gradient pass retraces the image's paths (it has the image's seed: its
+    samples are the image's, or the first of them): only then is the image traced as that pass
+    traces (``RenderOptions.replayable``). Otherwise the image is the one rendered without a
+    gradient, bit for bit."""
+    return grad_options.seed == options.seed
 
 
 def _backward_seed(seed: int) -> int:

@@ -213,6 +213,45 @@ def test_default_backward_seed_is_independent_and_unbiased():
     assert float(grads[0].sum()) == pytest.approx(float(grads[1].sum()), rel=0.05)
 
 
+def test_an_image_is_the_same_whether_or_not_a_gradient_is_wanted():
+    """With its gradient pass on a seed of its own (the default), a render's image is the image
+    rendered without a gradient, bit for bit (the BVH built for images, the sky sampled by its
+    light above its mean): for render, render with cameras=[...] and render_channels, and also
+    after the gradient pass has built the exact BVH. With backward_seed=seed the image is traced
+    as that pass traces it, and differs."""
+    sphere_v, sphere_i = shapes.sphere(center=(0.0, 0.6, 0.0), radius=0.6, rings=10, segments=20)[:2]
+    floor_v, floor_i = shapes.quad([[-3, 0, -3], [-3, 0, 3], [3, 0, 3], [3, 0, -3]])
+    lamp_v, lamp_i = shapes.quad([[-0.4, 3, -0.4], [0.4, 3, -0.4], [0.4, 3, 0.4], [-0.4, 3, 0.4]])
+    sky = torch.rand(8, 16, 3, generator=torch.Generator().manual_seed(3)) ** 4 * 4.0
+    vertices = sphere_v.clone()
+    camera = ep.Camera(position=torch.tensor([0.5, 1.5, 3.5]), look_at=torch.tensor([0.0, 0.5, 0.0]),
+                       fov=45.0, resolution=(12, 16))
+    glossy = ep.Material(diffuse=0.5, specular=0.3, roughness=0.3)
+    lamp = ep.Mesh(lamp_v, lamp_i, emission=torch.tensor([5.0, 5.0, 4.0]))
+    scene = ep.Scene(camera, [ep.Mesh(vertices, sphere_i, material=glossy), ep.Mesh(floor_v, floor_i), lamp],
+                     ep.EnvironmentMap(sky))
+    views = [camera, ep.Camera(position=torch.tensor([-2.0, 1.0, 2.5]), look_at=torch.zeros(3), fov=40.0,
+                               resolution=(12, 16))]
+    options = dict(spp=3, max_bounces=2, seed=5)
+    kinds = {"render": lambda: ep.render(scene, **options),
+             "views": lambda: ep.render(scene, cameras=views, **options),
+             "channels": lambda: ep.render_channels(scene, channels=["radiance", "depth"], **options)["radiance"]}
+    alone = {name: f() for name, f in kinds.items()}
+    vertices.requires_grad_(True)
+    for name, f in kinds.items():
+        followed = f()
+        assert followed.requires_grad, name
+        assert torch.equal(followed.detach(), alone[name]), name
+        followed.sum().backward()
+        assert vertices.grad is not None and vertices.grad.abs().sum() > 0, name
+        vertices.grad = None
+        with torch.no_grad():
+            assert torch.equal(f(), alone[name]), name
+    retraced = ep.render(scene, backward_seed=options["seed"], **options).detach()
+    assert not torch.equal(retraced, alone["render"])
+    assert float(retraced.mean()) == pytest.approx(float(alone["render"].mean()), rel=0.1)
+
+
 def test_no_grad_and_partial_requires_grad():
     scene = floor_scene()
     vertices = scene.meshes[0].vertices.requires_grad_(True)

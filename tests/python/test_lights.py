@@ -117,20 +117,24 @@ def test_an_image_alone_leaves_a_uniform_sky_to_the_bsdf():
     # docs/conventions.md, "How lights are sampled": a flat-shaded sphere (convex) of albedo 0.6
     # under a white uniform sky. In an image no gradient follows, the sky is left to the BSDF's
     # samples, each of which escapes with the weight 0.6: inside the outline every pixel is 0.6
-    # to rounding. An image whose gradient is wanted samples the sky as its gradient pass does
-    # (so that backward_seed=seed retraces its paths): noisy, the same on average.
+    # to rounding. So is an image whose gradient is wanted, its gradient pass having a seed of
+    # its own (the default): the same image, bit for bit. With backward_seed=seed the image
+    # samples the sky as its gradient pass does (which then retraces its paths): noisy, the same
+    # on average.
     v, i = shapes.sphere(radius=1.0, rings=12, segments=24)[:2]
     cam = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3), fov=40.0, resolution=(32, 32))
     albedo = torch.tensor([0.6, 0.6, 0.6])
     sky = ep.EnvironmentMap(torch.ones((1, 1, 3)))
 
-    def image(diffuse):
+    def image(diffuse, **kwargs):
         return ep.render(ep.Scene(cam, [ep.Mesh(v, i, material=ep.Material(diffuse=diffuse))], sky),
-                         spp=4, max_bounces=2, seed=1)
+                         spp=4, max_bounces=2, seed=1, **kwargs)
 
     inside = (slice(12, 20), slice(12, 20))
-    alone = image(albedo)[inside]
-    assert (alone - 0.6).abs().max() < 1e-5
-    followed = image(albedo.clone().requires_grad_())[inside].detach()
-    assert (followed - 0.6).abs().max() > 1e-2
-    assert abs(followed.mean().item() - 0.6) < 0.02
+    alone = image(albedo)
+    assert (alone[inside] - 0.6).abs().max() < 1e-5
+    followed = image(albedo.clone().requires_grad_()).detach()
+    assert torch.equal(followed, alone)
+    retraced = image(albedo.clone().requires_grad_(), backward_seed=1)[inside].detach()
+    assert (retraced - 0.6).abs().max() > 1e-2
+    assert abs(retraced.mean().item() - 0.6) < 0.02

@@ -322,7 +322,7 @@ def test_views_and_gradients_of_many_views_see_the_point_lights():
     its backward pass reaches them."""
     scene = spot_scene(intensity=torch.tensor(4.0, requires_grad=True))
     views = ep.render(scene, spp=4, seed=3, backward_seed=3, cameras=[scene.camera, scene.camera])
-    single = ep.render(scene, spp=4, seed=3)
+    single = ep.render(scene, spp=4, seed=3, backward_seed=3)
     assert float(single.sum()) > 1.0
     assert torch.equal(views[0], single.detach()) and torch.equal(views[1], single.detach())
     views.sum().backward()
