@@ -98,6 +98,7 @@ struct Options {
     bool secondary_only = false;   // only: secondary-edge samplers' equal-time MSE (--size, --spp)
     bool backward_only = false;    // only: the backward-pass timings (for profilers)
     bool forward_only = false;     // only: the forward-pass tables (for A/B runs of two builds)
+    bool edges_only = false;       // only: the million-edge extraction, hierarchy and vertex step
     int seeds = 8;                 // --secondary-only: renders per sampler
     int only_case = -1;            // --secondary-only: just this scene (0: a, 1: b, 2: b', 3: c)
     float secondary_survival = 1.f;  // RenderOptions::secondary_survival of the backward table
@@ -114,7 +115,8 @@ struct Options {
                  "                      [--render-only] [--backward-only] [--forward-only]\n"
                  "                      [--secondary-survival P]  (the backward table's roulette floor, default 1)\n"
                  "                      [--survival-compare]  (alone: that roulette against none at equal time)\n"
-                 "                      [--digest]  (alone: hashes of gradient passes' outputs, to compare builds)\n",
+                 "                      [--digest]  (alone: hashes of gradient passes' outputs, to compare builds)\n"
+                 "                      [--edges-only]  (alone: a million edges extracted, their hierarchy built and refit)\n",
                  msg);
     std::exit(status);
 }
@@ -149,6 +151,7 @@ Options parse_options(int argc, char** argv) {
         else if (a == "--backward-only") o.backward_only = true;
         else if (a == "--survival-compare") o.survival_compare = true;
         else if (a == "--forward-only") o.forward_only = true;
+        else if (a == "--edges-only") o.edges_only = true;
         else if (a == "--digest") o.digest = true;
         else if (a == "--seeds") o.seeds = parse_int(value(), "--seeds", 2, 1000);
         else if (a == "--case") o.only_case = parse_int(value(), "--case", 0, 3);
@@ -1120,6 +1123,68 @@ int digest(const Options& o, BenchScene& bs) {
     return 0;
 }
 
+// Edge extraction and the edge hierarchy for about a million edges (a sphere of 1.15M triangles),
+// built, then an optimisation step's share of them. `base`: a scene description whose meshes
+// are replaced by the sphere.
+void edges_section(const SceneDesc& base,
+                   const std::function<void(const std::string&, const std::string&, const std::string&, double,
+                                            const std::string&)>& record) {
+    MeshData big = make_sphere(Vec3f(0, 0, 0), 1.f, 760, 760);
+    SceneDesc d = base;
+    d.meshes = {big.desc(0)};
+    std::shared_ptr<const Scene> scene = build_scene(d);
+    auto t0 = std::chrono::steady_clock::now();
+    const size_t edges = scene->edges().size();
+    const double extract_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+    std::vector<int32_t> ids(edges);
+    for (size_t i = 0; i < edges; ++i) ids[i] = int32_t(i);
+    EdgeHierarchy h;
+    h.build(*scene, ids);
+    std::printf("\nEdges of a %s-triangle mesh: %s edges extracted (welded, classified) in %.0f ms; edge "
+                "hierarchy built in %.0f ms (parallel)\n",
+                grouped(uint64_t(big.num_triangles())).c_str(), grouped(uint64_t(edges)).c_str(), extract_ms,
+                h.build_ms());
+    record("edges", "sphere", "edges", double(edges), "");
+    record("edges", "sphere", "extract_ms", extract_ms, "ms");
+    record("edges", "sphere", "hierarchy_build_ms", h.build_ms(), "ms");
+
+    // An optimisation step's share of that on the kept scene, the vertices all moved (by
+    // the order of rounding: scaled by 1 +- 1e-4 in turn): the scene's update, its edge
+    // list and its edge hierarchy (refit), medians of five steps after two (the first
+    // move builds the refittable form).
+    std::shared_ptr<Scene> kept = build_scene(d);
+    std::vector<float> moved(big.vertices);
+    std::vector<double> update_ms, list_ms, refit_ms;
+    for (int step = 0; step < 7; ++step) {
+        const float scale = 1.f + (step % 2 ? -1e-4f : 1e-4f);
+        for (float& x : moved) x *= scale;
+        SceneDesc md = d;
+        md.meshes[0].vertices = moved.data();
+        const auto a = std::chrono::steady_clock::now();
+        update_scene(*kept, md);
+        const auto b = std::chrono::steady_clock::now();
+        const size_t n = kept->edges().size();
+        const auto c = std::chrono::steady_clock::now();
+        std::vector<int32_t> all(n);
+        for (size_t i = 0; i < n; ++i) all[i] = int32_t(i);
+        kept->edge_hierarchy(all, 0);
+        const auto e = std::chrono::steady_clock::now();
+        if (step < 2) continue;
+        auto ms = [](auto x, auto y) { return std::chrono::duration<double, std::milli>(y - x).count(); };
+        update_ms.push_back(ms(a, b));
+        list_ms.push_back(ms(b, c));
+        refit_ms.push_back(ms(c, e));
+    }
+    const SceneBuildCounts counts = scene_hierarchy_counts(*kept);
+    std::printf("A vertex step on it (kept scene, every vertex moved; medians of 5 steps): scene update %.0f ms, "
+                "edge list %.0f ms, edge hierarchy %.0f ms (hierarchy builds %llu, refits %llu)\n",
+                median(update_ms), median(list_ms), median(refit_ms), (unsigned long long)counts.builds,
+                (unsigned long long)counts.refits);
+    record("edges", "sphere vertex step", "scene_update_ms", median(update_ms), "ms");
+    record("edges", "sphere vertex step", "edge_list_ms", median(list_ms), "ms");
+    record("edges", "sphere vertex step", "hierarchy_refit_ms", median(refit_ms), "ms");
+}
+
 int main(int argc, char** argv) {
     const Options o = parse_options(argc, argv);
     if (o.digest) {
@@ -1133,6 +1198,12 @@ int main(int argc, char** argv) {
         return backward_memory(o, bs);
     }
     if (o.secondary_only) return secondary_only(o);
+    if (o.edges_only) {
+        const TriangleScene tri(8);
+        edges_section(tri.desc, [](const std::string&, const std::string&, const std::string&, double,
+                                   const std::string&) {});
+        return 0;
+    }
     if (o.survival_compare) {
         BenchScene bs;
         build_bench_scene(bs, o);
@@ -1346,27 +1417,7 @@ int main(int argc, char** argv) {
         record("edge_variance", "single triangle", "equal_time_ratio", ratio, "");
         record("edge_variance", "single triangle", "edge_term_equal_time_ratio", edge_ratio, "");
 
-        // Edge extraction and the edge hierarchy for about a million edges (a sphere of 1.15M triangles).
-        {
-            MeshData big = make_sphere(Vec3f(0, 0, 0), 1.f, 760, 760);
-            SceneDesc d = tri.desc;
-            d.meshes = {big.desc(0)};
-            std::shared_ptr<const Scene> scene = build_scene(d);
-            auto t0 = std::chrono::steady_clock::now();
-            const size_t edges = scene->edges().size();
-            const double extract_ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
-            std::vector<int32_t> ids(edges);
-            for (size_t i = 0; i < edges; ++i) ids[i] = int32_t(i);
-            EdgeHierarchy h;
-            h.build(*scene, ids);
-            std::printf("\nEdges of a %s-triangle mesh: %s edges extracted (welded, classified) in %.0f ms; edge "
-                        "hierarchy built in %.0f ms (parallel)\n",
-                        grouped(uint64_t(big.num_triangles())).c_str(), grouped(uint64_t(edges)).c_str(), extract_ms,
-                        h.build_ms());
-            record("edges", "sphere", "edges", double(edges), "");
-            record("edges", "sphere", "extract_ms", extract_ms, "ms");
-            record("edges", "sphere", "hierarchy_build_ms", h.build_ms(), "ms");
-        }
+        edges_section(tri.desc, record);
 
         record("memory", "", "peak_rss_mib", peak_rss_mib(), "MiB");
         std::printf("\nlast image mean %.4f; peak RSS %.0f MiB\n", mean, peak_rss_mib());

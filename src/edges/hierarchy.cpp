@@ -272,40 +272,41 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
     }
     finish_inner(index);
     // The children are done: items [begin, end) are in the leaves' order.
-    if (!node.always || node.crease) fit_cone(in, items, begin, end, index);
+    if (!node.always || node.crease)
+        fit_cone(node, end - begin, in.n0.data(), in.n1.data(), in.p0.data(),
+                 [&](int k) { return size_t(items[size_t(begin + k)]); });
 }
 
 // A tight normal cone and the range of the plane equations at the centre, over the faces of the
-// node's (smooth) edges, items [begin, end): O(n) per node, O(n log n) in all.
-void EdgeHierarchy::fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index) {
-    Node& n = nodes_[size_t(index)];
+// node's (smooth) edges: O(n) per node, O(n log n) in all. `item(k)`, k in [0, count), gives the
+// k-th of the node's edges in the leaves' order, as an index into the arrays n0, n1, p0 (the
+// build's Input's, through its items; the refit's copies in the leaves' order, read straight
+// through): the same operations in the same order either way.
+template <class Item>
+void EdgeHierarchy::fit_cone(Node& n, int count, const Vec3f* n0, const Vec3f* n1, const Vec3f* p0, Item&& item) {
     Vec3f sum(0.f);
-    for (int k = begin; k < end; ++k) {
-        const size_t i = size_t(items[size_t(k)]);
-        sum += in.n0[i] + in.n1[i];
+    for (int k = 0; k < count; ++k) {
+        const size_t i = item(k);
+        sum += n0[i] + n1[i];
     }
     n.cone_cos = -1.f;
     n.cone = Cone();
-    if (length(sum) > 1e-6f) {
-        n.cone.axis = normalize(sum);
-        float lo = 1.f;
-        for (int k = begin; k < end; ++k) {
-            const size_t i = size_t(items[size_t(k)]);
-            lo = std::min(lo, std::min(dot(n.cone.axis, in.n0[i]), dot(n.cone.axis, in.n1[i])));
-        }
+    const bool axis = length(sum) > 1e-6f;
+    n.cone.axis = axis ? normalize(sum) : Vec3f(0.f, 0.f, 1.f);
+    // The normals' least cosine to the axis and the planes' range, in one sweep.
+    float lo = 1.f, plo = 1e30f, phi = -1e30f;
+    for (int k = 0; k < count; ++k) {
+        const size_t i = item(k);
+        if (axis) lo = std::min(lo, std::min(dot(n.cone.axis, n0[i]), dot(n.cone.axis, n1[i])));
+        const Vec3f to_c = n.center - p0[i];
+        const float a = dot(n0[i], to_c), b = dot(n1[i], to_c);
+        plo = std::min(plo, std::min(a, b));
+        phi = std::max(phi, std::max(a, b));
+    }
+    if (axis) {
         // A little slack for rounding.
         n.cone_cos = std::max(-1.f, lo - 1e-5f);
         n.cone.sin = sine(n.cone_cos);
-    } else {
-        n.cone.axis = Vec3f(0.f, 0.f, 1.f);
-    }
-    float plo = 1e30f, phi = -1e30f;
-    for (int k = begin; k < end; ++k) {
-        const size_t i = size_t(items[size_t(k)]);
-        const Vec3f to_c = n.center - in.p0[i];
-        const float a = dot(in.n0[i], to_c), b = dot(in.n1[i], to_c);
-        plo = std::min(plo, std::min(a, b));
-        phi = std::max(phi, std::max(a, b));
     }
     const float slack = 1e-5f * (n.radius + length(n.center));
     n.cone.plane_lo = plo - slack;
@@ -470,14 +471,32 @@ void EdgeHierarchy::refit(const Input& in) {
     // Children come after their parent: bottom-up in reverse.
     for (size_t k = nodes_.size(); k-- > 0;)
         if (nodes_[k].left >= 0) finish_inner(int32_t(k));
-    // The cones of the nodes build_range made, over their leaves' items, as the build fits them.
-    auto cones = [&](size_t b, size_t e) {
+    // The cones of the nodes build_range made, over their leaves' items, as the build fits them:
+    // from copies of the items' normals and first ends in the leaves' order, which each node
+    // then reads in one sweep (read through order_, every node's items were scattered over the
+    // edge list: most of a refit's time at a million edges).
+    std::vector<Vec3f> n0(n), n1(n), p0(n);
+    auto gather = [&](size_t b, size_t e) {
         for (size_t k = b; k < e; ++k) {
-            const Node& node = nodes_[k];
-            if (node.left >= 0 && !node.mixed && (!node.always || node.crease))
-                fit_cone(in, order_, node.first, node.first + node.count, int32_t(k));
+            const size_t i = size_t(order_[k]);
+            n0[k] = in.n0[i];
+            n1[k] = in.n1[i];
+            p0[k] = in.p0[i];
         }
     };
+    auto cones = [&](size_t b, size_t e) {
+        for (size_t k = b; k < e; ++k) {
+            Node& node = nodes_[k];
+            if (node.left >= 0 && !node.mixed && (!node.always || node.crease))
+                fit_cone(node, node.count, n0.data() + node.first, n1.data() + node.first, p0.data() + node.first,
+                         [](int j) { return size_t(j); });
+        }
+    };
+    if (n > size_t(kParallelRange))
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                          [&](const tbb::blocked_range<size_t>& r) { gather(r.begin(), r.end()); });
+    else
+        gather(0, n);
     if (n > size_t(kParallelRange))
         tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 64),
                           [&](const tbb::blocked_range<size_t>& r) { cones(r.begin(), r.end()); });

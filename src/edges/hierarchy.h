@@ -401,7 +401,8 @@ private:
     void build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end, int32_t index,
                      int32_t parent, int32_t next);
     void finish_inner(int32_t index);
-    void fit_cone(const Input& in, const std::vector<int32_t>& items, int begin, int end, int32_t index);
+    template <class Item>
+    static void fit_cone(Node& n, int count, const Vec3f* n0, const Vec3f* n1, const Vec3f* p0, Item&& item);
     // Whether a descent with strategy k that has split `used` times splits at n, whose children
     // have importances il, ir; `whole`: the root's importances.
     bool splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2], int k,

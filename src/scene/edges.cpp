@@ -2,7 +2,6 @@
 
 #include <algorithm>
 #include <cstring>
-#include <unordered_map>
 #include "scene/desc.h"
 #include "scene/geometry.h"
 
@@ -76,26 +75,56 @@ Vec2f face_uv(const MeshDesc& m, int64_t f, int32_t v) {
     return Vec2f(0.f, 0.f);
 }
 
-}  // namespace
-
-void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat) {
-    // Weld vertices by position.
-    std::vector<int64_t> weld(size_t(m.num_vertices));
-    {
-        std::unordered_map<PositionKey, int64_t, PositionHash> ids;
-        ids.reserve(size_t(m.num_vertices));
-        for (int64_t v = 0; v < m.num_vertices; ++v)
-            weld[size_t(v)] = ids.emplace(key_of(m.vertices + 3 * v), int64_t(ids.size())).first->second;
+// The welded vertex ids: the vertices at one position share one, numbered in the order of their
+// first occurrence (an open-addressing table of the first vertex at each position).
+std::vector<int64_t> weld_positions(const MeshDesc& m) {
+    const size_t n = size_t(m.num_vertices);
+    std::vector<int64_t> weld(n);
+    size_t capacity = 16;
+    while (capacity < 2 * n) capacity <<= 1;
+    std::vector<int64_t> first(capacity, -1);
+    const PositionHash hash;
+    int64_t ids = 0;
+    for (size_t v = 0; v < n; ++v) {
+        const PositionKey key = key_of(m.vertices + 3 * v);
+        for (size_t h = hash(key) & (capacity - 1);; h = (h + 1) & (capacity - 1)) {
+            if (first[h] < 0) {
+                first[h] = int64_t(v);
+                weld[v] = ids++;
+                break;
+            }
+            if (key_of(m.vertices + 3 * first[h]) == key) {
+                weld[v] = weld[size_t(first[h])];
+                break;
+            }
+        }
     }
+    return weld;
+}
+
+// Which faces are degenerate: they are not there (the scene skips them), so their neighbours'
+// edges with them are boundaries.
+std::vector<uint8_t> degenerate_faces(const MeshDesc& m) {
+    std::vector<uint8_t> out(size_t(m.num_triangles));
+    for (int64_t f = 0; f < m.num_triangles; ++f) {
+        const int32_t* t = m.indices + 3 * f;
+        out[size_t(f)] = is_degenerate_triangle(Vec3f::load(m.vertices + 3 * int64_t(t[0])),
+                                                Vec3f::load(m.vertices + 3 * int64_t(t[1])),
+                                                Vec3f::load(m.vertices + 3 * int64_t(t[2])));
+    }
+    return out;
+}
+
+// build_mesh_edges from the welding and the degenerate faces; with `flattenable`, also appends
+// for each edge whether it is flat where its faces are nearly coplanar.
+void pair_faces(const MeshDesc& m, int32_t mesh_index, const std::vector<int64_t>& weld,
+                const std::vector<uint8_t>& degenerate, std::vector<Edge>& out, bool keep_flat,
+                std::vector<uint8_t>* flattenable) {
     std::vector<HalfEdge> half;
     half.reserve(size_t(m.num_triangles) * 3);
     for (int64_t f = 0; f < m.num_triangles; ++f) {
         const int32_t* t = m.indices + 3 * f;
-        // A degenerate face is not there (the scene skips it): its neighbours' edges with it
-        // are boundaries.
-        if (is_degenerate_triangle(Vec3f::load(m.vertices + 3 * int64_t(t[0])), Vec3f::load(m.vertices + 3 * int64_t(t[1])),
-                                   Vec3f::load(m.vertices + 3 * int64_t(t[2]))))
-            continue;
+        if (degenerate[size_t(f)]) continue;
         for (int k = 0; k < 3; ++k) {
             int32_t a = t[k], b = t[(k + 1) % 3];
             int64_t wa = weld[size_t(a)], wb = weld[size_t(b)];
@@ -143,8 +172,8 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
             // Two faces at an angle fold where the eye lies between their planes (a scan's nearly
             // flat neighbours seen edge-on at its outline): only faces within kCoplanarAngle of
             // one plane, the rounding of a plane's float corners, drop their edge.
-            const bool coplanar = nearly_coplanar(m, h0.face, h1.face);
-            const bool flat = coplanar && !value_jump && !(shading_jump && m.normals != nullptr);
+            const bool can_be_flat = !value_jump && !(shading_jump && m.normals != nullptr);
+            const bool flat = can_be_flat && nearly_coplanar(m, h0.face, h1.face);
             if (!flat || keep_flat) {
                 Edge e;
                 e.mesh = mesh_index;
@@ -156,6 +185,7 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 e.seam = value_jump || (shading_jump && m.normals != nullptr);
                 e.flat = flat;
                 out.push_back(e);
+                if (flattenable) flattenable->push_back(can_be_flat);
             }
         } else {
             // A boundary (one face), or an edge shared by more than two faces: each face's side
@@ -169,10 +199,49 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
                 e.f0 = half[k].face;
                 e.kind = EdgeKind::Boundary;
                 out.push_back(e);
+                if (flattenable) flattenable->push_back(0);
             }
         }
         i = j;
     }
+}
+
+}  // namespace
+
+void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat) {
+    pair_faces(m, mesh_index, weld_positions(m), degenerate_faces(m), out, keep_flat, nullptr);
+}
+
+bool MeshEdgeList::append(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
+    std::vector<int64_t> weld = weld_positions(m);
+    std::vector<uint8_t> degenerate = degenerate_faces(m);
+    if (kept_ && weld == weld_ && degenerate == degenerate_) {
+        // The same pairs of faces: only where they lie changed.
+        const size_t start = out.size();
+        out.insert(out.end(), edges_.begin(), edges_.end());
+        for (size_t k = 0; k < edges_.size(); ++k) {
+            Edge& e = out[start + k];
+            e.mesh = mesh_index;
+            e.flat = flattenable_[k] && nearly_coplanar(m, e.f0, e.f1);
+        }
+        return true;
+    }
+    edges_.clear();
+    flattenable_.clear();
+    pair_faces(m, mesh_index, weld, degenerate, edges_, true, &flattenable_);
+    out.insert(out.end(), edges_.begin(), edges_.end());
+    weld_ = std::move(weld);
+    degenerate_ = std::move(degenerate);
+    kept_ = true;
+    return false;
+}
+
+void MeshEdgeList::forget() {
+    kept_ = false;
+    weld_ = std::vector<int64_t>();
+    degenerate_ = std::vector<uint8_t>();
+    edges_ = std::vector<Edge>();
+    flattenable_ = std::vector<uint8_t>();
 }
 
 }  // namespace edgepath

@@ -54,6 +54,30 @@ struct Edge {
 // that become or stop being degenerate, and positions that start or stop coinciding).
 void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat = false);
 
+// One mesh's edges as build_mesh_edges makes them with keep_flat, kept across the moves of a
+// scene whose vertices move. The list depends on the positions only through the welding (which
+// vertices share a position), the degenerate faces and the flat marks: a move that keeps the
+// first two (nearly every optimisation step) needs the marks alone recomputed, not the pairing
+// of the faces (a sort of every half-edge: most of a list's time). The owner calls forget()
+// whenever the mesh's triangles, uvs, normals or colours change.
+class MeshEdgeList {
+public:
+    // Appends to `out` what build_mesh_edges(mesh, mesh_index, out, true) appends, bit for bit:
+    // from the kept list (the flat marks recomputed) where the welding and the degenerate faces
+    // are those it was built with, by building it otherwise. Returns whether the kept list served.
+    bool append(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
+    void forget();
+
+private:
+    bool kept_ = false;
+    std::vector<int64_t> weld_;
+    std::vector<uint8_t> degenerate_;
+    std::vector<Edge> edges_;
+    // Per edge of two faces: whether it is flat where its faces are nearly coplanar (the same
+    // shading, uvs and colours on both sides).
+    std::vector<uint8_t> flattenable_;
+};
+
 // Whether the edge is a silhouette seen from point `p`: a boundary always; otherwise when p is
 // in front of exactly one of the two faces (planes through the edge).
 inline bool is_silhouette(const Vec3f& p, const Vec3f& e0, const Vec3f& n0, const Vec3f& n1, EdgeKind kind) {

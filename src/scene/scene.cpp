@@ -208,8 +208,14 @@ const std::vector<Edge>& Scene::edges() const {
             d.uv_indices = m.uv_indices;
             d.colors = m.colors;
             // A scene whose vertices move keeps its nearly flat edges (marked): the same list
-            // from step to step, so that the edge hierarchy is refit.
-            build_mesh_edges(d, int32_t(i), edges_, moving_);
+            // from step to step, so that the edge hierarchy is refit; and each mesh's list, whose
+            // pairs of faces a move nearly always leaves as they are.
+            if (moving_) {
+                edge_lists_.resize(meshes.size());
+                edge_lists_[i].append(d, int32_t(i), edges_);
+            } else {
+                build_mesh_edges(d, int32_t(i), edges_);
+            }
         }
         edges_ready_.store(true, std::memory_order_release);
     }
@@ -357,8 +363,10 @@ Scene::Update Scene::update(const SceneDesc& desc) {
         moving_ = moving_ || same_topology;
     }
     if (what != Update::Reused || !same_shading) {
-        // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use.
+        // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use,
+        // from the meshes' kept lists where only the positions changed.
         edges_ready_.store(false, std::memory_order_relaxed);
+        if (what == Update::Built || !same_shading) edge_lists_.clear();
         ++geometry_version_;
         kept_.resize(n);
         for (size_t i = 0; i < n; ++i) {

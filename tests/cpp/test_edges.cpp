@@ -2,6 +2,7 @@
 #include <gtest/gtest.h>
 
 #include <map>
+#include <string>
 #include <vector>
 
 #include "scene/edges.h"
@@ -119,6 +120,83 @@ TEST(Edges, KeepFlatKeepsTheListWhateverTheLift) {
     int flat = 0;
     for (const Edge& e : out) flat += e.flat;
     EXPECT_EQ(flat, 1);  // the diagonal of the one plane
+}
+
+// Two edge lists the same, field by field.
+void expect_same_edges(const std::vector<Edge>& got, const std::vector<Edge>& want, const std::string& what) {
+    ASSERT_EQ(got.size(), want.size()) << what;
+    for (size_t i = 0; i < got.size(); ++i) {
+        const Edge &a = got[i], &b = want[i];
+        EXPECT_TRUE(a.mesh == b.mesh && a.v0 == b.v0 && a.v1 == b.v1 && a.f0 == b.f0 && a.f1 == b.f1 &&
+                    a.kind == b.kind && a.seam == b.seam && a.flat == b.flat)
+            << what << ": edge " << i;
+    }
+}
+
+TEST(Edges, KeptListEqualsAFreshBuildAfterEveryKindOfMove) {
+    // A mesh list kept across moves (a scene whose vertices move) gives what build_mesh_edges
+    // with keep_flat gives, bit for bit: from its kept pairs of faces where a move keeps the
+    // welding and the degenerate faces (the flat marks recomputed), built anew where it does not.
+    // A small sphere whose faces own their corners (welded by position, flat shaded), and a
+    // folded quad whose diagonal turns flat and back.
+    const MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 6, 8);
+    MeshData m;
+    for (int32_t i : sphere.indices) {
+        m.vertices.insert(m.vertices.end(), sphere.vertices.begin() + 3 * i, sphere.vertices.begin() + 3 * i + 3);
+        m.indices.push_back(int32_t(m.indices.size()));
+    }
+    MeshData quad;
+    quad.vertices = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 1e-3f};
+    quad.indices = {0, 1, 2, 2, 1, 3};
+    MeshEdgeList list, quad_list;
+    auto check = [](MeshEdgeList& l, const MeshData& mesh, bool kept, const std::string& what) {
+        std::vector<Edge> fresh, got(1);  // an edge already in the list: appended after it
+        build_mesh_edges(mesh.desc(0), 3, fresh, true);
+        EXPECT_EQ(l.append(mesh.desc(0), 3, got), kept) << what;
+        got.erase(got.begin());
+        expect_same_edges(got, fresh, what);
+        return fresh;
+    };
+    check(list, m, false, "the first list");
+    check(list, m, true, "nothing moved");
+    for (float& x : m.vertices) x *= 1.f + 1e-4f;
+    check(list, m, true, "every vertex moved");
+    // One corner's copy moved off the others: its faces no longer share their edges there.
+    const float x0 = m.vertices[0];
+    m.vertices[0] += 1e-3f;
+    check(list, m, false, "a welded position split");
+    m.vertices[0] = x0;
+    check(list, m, false, "welded again");
+    // Face 10's third corner (every copy of its position) onto the midpoint of the other two:
+    // a degenerate face, its neighbours' edges with it boundaries.
+    const int32_t* t = m.indices.data() + 30;
+    const Vec3f p0 = Vec3f::load(&m.vertices[3 * size_t(t[0])]), p1 = Vec3f::load(&m.vertices[3 * size_t(t[1])]);
+    const Vec3f p2 = Vec3f::load(&m.vertices[3 * size_t(t[2])]), mid = (p0 + p1) * 0.5f;
+    int moved = 0;
+    for (size_t v = 0; v < m.vertices.size(); v += 3)
+        if (m.vertices[v] == p2.x && m.vertices[v + 1] == p2.y && m.vertices[v + 2] == p2.z) {
+            m.vertices[v] = mid.x, m.vertices[v + 1] = mid.y, m.vertices[v + 2] = mid.z;
+            ++moved;
+        }
+    EXPECT_GE(moved, 3);
+    const std::vector<Edge> degenerate = check(list, m, false, "a degenerate face");
+    EXPECT_GT(count_kinds(degenerate)[EdgeKind::Boundary], 0);
+    for (float& x : m.vertices) x *= 1.f - 1e-4f;
+    check(list, m, true, "moved again");
+    // The quad's diagonal: a fold, flat, a fold again; the kept list serves each time.
+    const std::vector<Edge> fold = check(quad_list, quad, false, "a fold");
+    quad.vertices[11] = 0.f;
+    const std::vector<Edge> flat = check(quad_list, quad, true, "flat");
+    quad.vertices[11] = 1e-3f;
+    check(quad_list, quad, true, "a fold again");
+    int flats[2] = {0, 0};
+    for (const Edge& e : fold) flats[0] += e.flat;
+    for (const Edge& e : flat) flats[1] += e.flat;
+    EXPECT_EQ(flats[0], 0);
+    EXPECT_EQ(flats[1], 1);
+    // Forgotten (the triangles changed): built anew.
+    quad_list.forget();
+    check(quad_list, quad, false, "forgotten");
 }
 
 TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
