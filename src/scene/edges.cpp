@@ -212,36 +212,23 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
     pair_faces(m, mesh_index, weld_positions(m), degenerate_faces(m), out, keep_flat, nullptr);
 }
 
-bool MeshEdgeList::append(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
-    std::vector<int64_t> weld = weld_positions(m);
-    std::vector<uint8_t> degenerate = degenerate_faces(m);
-    if (kept_ && weld == weld_ && degenerate == degenerate_) {
-        // The same pairs of faces: only where they lie changed.
-        const size_t start = out.size();
-        out.insert(out.end(), edges_.begin(), edges_.end());
-        for (size_t k = 0; k < edges_.size(); ++k) {
-            Edge& e = out[start + k];
-            e.mesh = mesh_index;
-            e.flat = flattenable_[k] && nearly_coplanar(m, e.f0, e.f1);
-        }
-        return true;
-    }
-    edges_.clear();
+void MeshEdgeList::build(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
+    weld_ = weld_positions(m);
+    degenerate_ = degenerate_faces(m);
     flattenable_.clear();
-    pair_faces(m, mesh_index, weld, degenerate, edges_, true, &flattenable_);
-    out.insert(out.end(), edges_.begin(), edges_.end());
-    weld_ = std::move(weld);
-    degenerate_ = std::move(degenerate);
-    kept_ = true;
-    return false;
+    begin_ = out.size();
+    pair_faces(m, mesh_index, weld_, degenerate_, out, true, &flattenable_);
+    count_ = out.size() - begin_;
 }
 
-void MeshEdgeList::forget() {
-    kept_ = false;
-    weld_ = std::vector<int64_t>();
-    degenerate_ = std::vector<uint8_t>();
-    edges_ = std::vector<Edge>();
-    flattenable_ = std::vector<uint8_t>();
+bool MeshEdgeList::refresh(const MeshDesc& m, std::vector<Edge>& all) const {
+    if (begin_ + count_ > all.size() || weld_positions(m) != weld_ || degenerate_faces(m) != degenerate_) return false;
+    // The same pairs of faces: only where they lie changed.
+    for (size_t k = 0; k < count_; ++k) {
+        Edge& e = all[begin_ + k];
+        e.flat = flattenable_[k] && nearly_coplanar(m, e.f0, e.f1);
+    }
+    return true;
 }
 
 }  // namespace edgepath

@@ -54,27 +54,28 @@ struct Edge {
 // that become or stop being degenerate, and positions that start or stop coinciding).
 void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat = false);
 
-// One mesh's edges as build_mesh_edges makes them with keep_flat, kept across the moves of a
-// scene whose vertices move. The list depends on the positions only through the welding (which
-// vertices share a position), the degenerate faces and the flat marks: a move that keeps the
-// first two (nearly every optimisation step) needs the marks alone recomputed, not the pairing
-// of the faces (a sort of every half-edge: most of a list's time). The owner calls forget()
-// whenever the mesh's triangles, uvs, normals or colours change.
+// What one mesh's part of an edge list (build_mesh_edges with keep_flat) was made from, kept
+// across the moves of a scene whose vertices move. The part depends on the positions only
+// through the welding (which vertices share a position), the degenerate faces and the flat
+// marks: a move that keeps the first two (nearly every optimisation step) needs the marks alone
+// recomputed, not the pairing of the faces (a sort of every half-edge: most of a list's time).
+// Its owner drops it whenever the mesh's triangles, uvs, normals or colours change.
 class MeshEdgeList {
 public:
-    // Appends to `out` what build_mesh_edges(mesh, mesh_index, out, true) appends, bit for bit:
-    // from the kept list (the flat marks recomputed) where the welding and the degenerate faces
-    // are those it was built with, by building it otherwise. Returns whether the kept list served.
-    bool append(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
-    void forget();
+    // Appends build_mesh_edges(mesh, mesh_index, out, true)'s edges to `out` and keeps what they
+    // were made from.
+    void build(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
+    // Where the welding and the degenerate faces of `mesh` are those the part was built with,
+    // brings the part (in `all`, where build() put it) to what build() would make now, bit for
+    // bit: only the flat marks can differ. False, with nothing changed, where they are not.
+    bool refresh(const MeshDesc& mesh, std::vector<Edge>& all) const;
 
 private:
-    bool kept_ = false;
+    size_t begin_ = 0, count_ = 0;  // the part's place in the list
     std::vector<int64_t> weld_;
     std::vector<uint8_t> degenerate_;
-    std::vector<Edge> edges_;
-    // Per edge of two faces: whether it is flat where its faces are nearly coplanar (the same
-    // shading, uvs and colours on both sides).
+    // Per edge of the part: whether it is flat where its faces are nearly coplanar (two faces,
+    // the same shading, uvs and colours on both sides).
     std::vector<uint8_t> flattenable_;
 };
 

@@ -194,8 +194,7 @@ const std::vector<Edge>& Scene::edges() const {
     if (edges_ready_.load(std::memory_order_acquire)) return edges_;
     std::lock_guard<std::mutex> lock(edges_mutex_);
     if (!edges_ready_.load(std::memory_order_relaxed)) {
-        edges_.clear();
-        for (size_t i = 0; i < meshes.size(); ++i) {
+        auto desc_of = [&](size_t i) {
             const Mesh& m = meshes[i];
             MeshDesc d;
             d.vertices = m.vertices;
@@ -207,14 +206,22 @@ const std::vector<Edge>& Scene::edges() const {
             d.uvs = m.uvs;
             d.uv_indices = m.uv_indices;
             d.colors = m.colors;
-            // A scene whose vertices move keeps its nearly flat edges (marked): the same list
-            // from step to step, so that the edge hierarchy is refit; and each mesh's list, whose
-            // pairs of faces a move nearly always leaves as they are.
-            if (moving_) {
-                edge_lists_.resize(meshes.size());
-                edge_lists_[i].append(d, int32_t(i), edges_);
-            } else {
-                build_mesh_edges(d, int32_t(i), edges_);
+            return d;
+        };
+        // A scene whose vertices move keeps its nearly flat edges (marked): the same list from
+        // step to step, so that the edge hierarchy is refit. Its list is brought up to date in
+        // place where every mesh's pairs of faces are those it was built with (a move nearly
+        // always leaves them so); it is built anew otherwise.
+        bool refreshed = moving_ && edge_lists_.size() == meshes.size();
+        for (size_t i = 0; i < meshes.size() && refreshed; ++i) refreshed = edge_lists_[i].refresh(desc_of(i), edges_);
+        if (!refreshed) {
+            edges_.clear();
+            edge_lists_.assign(moving_ ? meshes.size() : 0, MeshEdgeList());
+            for (size_t i = 0; i < meshes.size(); ++i) {
+                if (moving_)
+                    edge_lists_[i].build(desc_of(i), int32_t(i), edges_);
+                else
+                    build_mesh_edges(desc_of(i), int32_t(i), edges_);
             }
         }
         edges_ready_.store(true, std::memory_order_release);

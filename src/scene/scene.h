@@ -392,8 +392,8 @@ private:
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
-    // Per mesh, its part of edges_ kept for the moves of a scene whose vertices move (moving_):
-    // forgotten when the triangles, uvs, normals or colours change.
+    // Per mesh, what its part of edges_ was made from, for the moves of a scene whose vertices
+    // move (moving_): dropped when the triangles, uvs, normals or colours change.
     mutable std::vector<MeshEdgeList> edge_lists_;
     // The edge hierarchies kept for edge_hierarchy() (defined with it, in edges/hierarchy.cpp:
     // the scene layer does not see the edges layer).
