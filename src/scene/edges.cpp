@@ -102,8 +102,8 @@ std::vector<int64_t> weld_positions(const MeshDesc& m) {
     return weld;
 }
 
-// Which faces are degenerate: they are not there (the scene skips them), so their neighbours'
-// edges with them are boundaries.
+}  // namespace
+
 std::vector<uint8_t> degenerate_faces(const MeshDesc& m) {
     std::vector<uint8_t> out(size_t(m.num_triangles));
     for (int64_t f = 0; f < m.num_triangles; ++f) {
@@ -114,6 +114,8 @@ std::vector<uint8_t> degenerate_faces(const MeshDesc& m) {
     }
     return out;
 }
+
+namespace {
 
 // build_mesh_edges from the welding and the degenerate faces; with `flattenable`, also appends
 // for each edge whether it is flat where its faces are nearly coplanar.
@@ -212,17 +214,18 @@ void build_mesh_edges(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& 
     pair_faces(m, mesh_index, weld_positions(m), degenerate_faces(m), out, keep_flat, nullptr);
 }
 
-void MeshEdgeList::build(const MeshDesc& m, int32_t mesh_index, std::vector<Edge>& out) {
+void MeshEdgeList::build(const MeshDesc& m, const std::vector<uint8_t>& degenerate, int32_t mesh_index,
+                         std::vector<Edge>& out) {
     weld_ = weld_positions(m);
-    degenerate_ = degenerate_faces(m);
+    degenerate_ = degenerate;
     flattenable_.clear();
     begin_ = out.size();
     pair_faces(m, mesh_index, weld_, degenerate_, out, true, &flattenable_);
     count_ = out.size() - begin_;
 }
 
-bool MeshEdgeList::refresh(const MeshDesc& m, std::vector<Edge>& all) const {
-    if (begin_ + count_ > all.size() || weld_positions(m) != weld_ || degenerate_faces(m) != degenerate_) return false;
+bool MeshEdgeList::refresh(const MeshDesc& m, const std::vector<uint8_t>& degenerate, std::vector<Edge>& all) const {
+    if (begin_ + count_ > all.size() || degenerate != degenerate_ || weld_positions(m) != weld_) return false;
     // The same pairs of faces: only where they lie changed.
     for (size_t k = 0; k < count_; ++k) {
         Edge& e = all[begin_ + k];

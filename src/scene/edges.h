@@ -54,6 +54,10 @@ struct Edge {
 // that become or stop being degenerate, and positions that start or stop coinciding).
 void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out, bool keep_flat = false);
 
+// Per face of the mesh, whether it is degenerate (is_degenerate_triangle): not there for the
+// edges (the scene skips it), so its neighbours' edges with it are boundaries.
+std::vector<uint8_t> degenerate_faces(const MeshDesc& mesh);
+
 // What one mesh's part of an edge list (build_mesh_edges with keep_flat) was made from, kept
 // across the moves of a scene whose vertices move. The part depends on the positions only
 // through the welding (which vertices share a position), the degenerate faces and the flat
@@ -63,12 +67,14 @@ void build_mesh_edges(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge
 class MeshEdgeList {
 public:
     // Appends build_mesh_edges(mesh, mesh_index, out, true)'s edges to `out` and keeps what they
-    // were made from.
-    void build(const MeshDesc& mesh, int32_t mesh_index, std::vector<Edge>& out);
+    // were made from. `degenerate`: degenerate_faces(mesh), which the caller may hold already
+    // (the scene keeps it per triangle).
+    void build(const MeshDesc& mesh, const std::vector<uint8_t>& degenerate, int32_t mesh_index,
+               std::vector<Edge>& out);
     // Where the welding and the degenerate faces of `mesh` are those the part was built with,
     // brings the part (in `all`, where build() put it) to what build() would make now, bit for
     // bit: only the flat marks can differ. False, with nothing changed, where they are not.
-    bool refresh(const MeshDesc& mesh, std::vector<Edge>& all) const;
+    bool refresh(const MeshDesc& mesh, const std::vector<uint8_t>& degenerate, std::vector<Edge>& all) const;
 
 private:
     size_t begin_ = 0, count_ = 0;  // the part's place in the list

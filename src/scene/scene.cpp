@@ -213,13 +213,15 @@ const std::vector<Edge>& Scene::edges() const {
         // place where every mesh's pairs of faces are those it was built with (a move nearly
         // always leaves them so); it is built anew otherwise.
         bool refreshed = moving_ && edge_lists_.size() == meshes.size();
-        for (size_t i = 0; i < meshes.size() && refreshed; ++i) refreshed = edge_lists_[i].refresh(desc_of(i), edges_);
+        // (The degenerate triangles: those update() found, kept per mesh.)
+        for (size_t i = 0; i < meshes.size() && refreshed; ++i)
+            refreshed = edge_lists_[i].refresh(desc_of(i), kept_[i].degenerate, edges_);
         if (!refreshed) {
             edges_.clear();
             edge_lists_.assign(moving_ ? meshes.size() : 0, MeshEdgeList());
             for (size_t i = 0; i < meshes.size(); ++i) {
                 if (moving_)
-                    edge_lists_[i].build(desc_of(i), int32_t(i), edges_);
+                    edge_lists_[i].build(desc_of(i), kept_[i].degenerate, int32_t(i), edges_);
                 else
                     build_mesh_edges(desc_of(i), int32_t(i), edges_);
             }
