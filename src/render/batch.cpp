@@ -20,6 +20,11 @@ namespace {
 static_assert(kLanes == lanes_of<RTCRay16>(), "the batches trace RTCRay16 packets");
 static_assert(kBatchSize == kShadeBatch, "shade_lanes takes a batch's paths");
 
+// With at most this many emitting meshes, a last vertex's continuation is first tested
+// against their boxes (Scene::may_meet_emitter); with more, it is traced whatever its
+// direction.
+constexpr size_t kMaxEmitterBoxes = 8;
+
 // Embree's packets, each with its lane mask.
 struct alignas(64) RayHitPacket {
     RTCRayHit16 rh;
@@ -517,12 +522,27 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         if (mirror_) read_back(mirror_.get(), std::false_type{}, std::true_type{});
 
         // The continuations, each hit's triangle fetched while the packets after it are traced;
-        // then the shadow rays.
+        // then the shadow rays. A last vertex's continuation counts only where it meets an
+        // emitter: without an environment, one that misses every emitter's box is not traced
+        // (it reads as one that left the scene, which adds nothing then).
+        const bool last = bounce + 1 >= opt.max_bounces;
+        const bool boxed = last && !scene.has_envmap && scene.emitter_boxes.size() <= kMaxEmitterBoxes;
         for (int p = 0; p * kLanes < nnext; ++p) {
             RayHitPacket& pk = next[p];
             const int m = std::min(kLanes, nnext - p * kLanes);
             close_packet(pk.rh.ray, pk.valid, m);
             clear_hits(pk.rh);
+            if (boxed) {
+                const RTCRay16& r = pk.rh.ray;
+                int traced = 0;
+                for (int i = 0; i < m; ++i) {
+                    const bool may = scene.may_meet_emitter(Vec3f(r.org_x[i], r.org_y[i], r.org_z[i]),
+                                                            Vec3f(r.dir_x[i], r.dir_y[i], r.dir_z[i]));
+                    pk.valid[i] = may ? -1 : 0;
+                    traced += may;
+                }
+                if (traced == 0) continue;
+            }
             rtcIntersect16(pk.valid, rtc, &ctx, &pk.rh);
             Hit h;
             for (int i = 0; i < m; ++i)
@@ -537,7 +557,6 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // Each path adds what it sees, in trace_path's order: its light samples that nothing
         // hides (an occluded ray's tfar is -inf), then the light its continuation meets.
         int kept = 0;
-        const bool last = bounce + 1 >= opt.max_bounces;
         for (int j = 0; j < nlive; ++j) {
             const int i = live[j];
             PathState& ps = paths[i];

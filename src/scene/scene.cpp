@@ -555,6 +555,7 @@ void Scene::drop_bvhs() {
 
 void Scene::build_lights() {
     lights.clear();
+    emitter_boxes.clear();
     std::vector<double> light_weights;
     for (size_t i = 0; i < meshes.size(); ++i) {
         Mesh& m = meshes[i];
@@ -578,6 +579,12 @@ void Scene::build_lights() {
             lights.push_back({int(i), t, area});
             light_weights.push_back(area * power);
         }
+        if (m.num_triangles > 0) {
+            // Wider by a thousandth of its size and of its distance from the origin: far more
+            // than the rounding of a hit's distance or of may_meet_emitter's.
+            const float pad = 1e-3f * (max_component(hi - lo) + std::max(max_abs_component(lo), max_abs_component(hi)));
+            emitter_boxes.push_back({lo - Vec3f(pad), hi + Vec3f(pad)});
+        }
         if (m.solid_angle) {
             // One entry for the mesh, weighted by its power as its triangles would be.
             m.sphere_center = (lo + hi) * 0.5f;
@@ -596,6 +603,24 @@ void Scene::build_lights() {
     }
     light_distribution = Distribution1D();
     light_distribution.build(light_weights);
+}
+
+bool Scene::may_meet_emitter(const Vec3f& origin, const Vec3f& dir) const {
+    for (const Box& b : emitter_boxes) {
+        float t0 = 0.f, t1 = std::numeric_limits<float>::infinity();
+        for (int a = 0; a < 3 && t0 <= t1; ++a) {
+            if (dir[a] == 0.f) {
+                if (origin[a] < b.lo[a] || origin[a] > b.hi[a]) t0 = t1 + 1.f;
+                continue;
+            }
+            float near = (b.lo[a] - origin[a]) / dir[a], far = (b.hi[a] - origin[a]) / dir[a];
+            if (near > far) std::swap(near, far);
+            t0 = std::max(t0, near);
+            t1 = std::min(t1, far);
+        }
+        if (t0 <= t1) return true;
+    }
+    return false;
 }
 
 namespace {

@@ -230,6 +230,15 @@ public:
         float area;
     };
     std::vector<EmissiveTriangle> lights;
+    // A box around each emitting mesh's triangles, a little larger (set by build_lights): a ray
+    // that meets none of them meets no emitter.
+    struct Box {
+        Vec3f lo, hi;
+    };
+    std::vector<Box> emitter_boxes;
+    // Whether the ray from `origin` along `dir` (t >= 0) may meet an emitter: false only where
+    // it misses every box of emitter_boxes.
+    bool may_meet_emitter(const Vec3f& origin, const Vec3f& dir) const;
     // Delta lights (desc.h): next-event estimation only, every one at every vertex.
     std::vector<PointLightDesc> point_lights;
     Distribution1D light_distribution;

@@ -735,6 +735,78 @@ TEST(Render, PacketsMatchSingleRays) {
     }
 }
 
+// A last vertex's continuation is traced only where it may meet an emitter
+// (Scene::may_meet_emitter, render/batch.cpp): every ray towards a point of an emitting triangle
+// (inside, on an edge, at a corner; from near and far, along the axes too) may; rays that leave
+// every emitter's box behind may not; the boxes follow the emitters when vertices move, and a
+// scene without emitters has none. (The batched-paths tests below check the images bit for bit.)
+TEST(Render, ContinuationsThatMissEveryEmitterBoxAreKnown) {
+    MeshData floor = make_quad(Vec3f(-3, -1, -3), Vec3f(0, 0, 6), Vec3f(6, 0, 0));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 1.5f, -0.5f), Vec3f(1.f, 0, 0), Vec3f(0, 0, 1.f));
+    MeshData bulb = make_sphere(Vec3f(2.f, 0.5f, 0.f), 0.2f, 6, 12);
+    ConstTex kd({0.6f, 0.6f, 0.5f}), black({0, 0, 0}), r({0.3f}), le({4.f, 4.f, 4.f});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0, 1.5f, 5), Vec3f(0, 0, 0), 8, 8, 40);
+    d.materials.push_back(material(kd, black, r));
+    d.meshes.push_back(floor.desc(0));
+    auto scene = build_scene(d);
+    EXPECT_TRUE(scene->emitter_boxes.empty());
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(0, 0, 0), Vec3f(0, 1, 0)));
+    d.meshes.push_back(lamp.desc(0));
+    d.meshes.back().emission = le.desc();
+    d.meshes.push_back(bulb.desc(0));
+    d.meshes.back().emission = le.desc();
+    update_scene(*scene, d);
+    ASSERT_EQ(scene->emitter_boxes.size(), 2u);
+
+    Rng rng(7, 1);
+    // Every emitting triangle's corners, edge points and inner points, from origins all around.
+    auto check_all = [&](const MeshData& m, const Vec3f& shift) {
+        int checked = 0;
+        for (int64_t t = 0; t < m.num_triangles(); ++t) {
+            Vec3f v[3];
+            for (int c = 0; c < 3; ++c) v[c] = Vec3f::load(m.vertices.data() + 3 * m.indices[size_t(3 * t + c)]) + shift;
+            for (int k = 0; k < 12; ++k) {
+                float b1 = rng.next_float(), b2 = rng.next_float();
+                if (k < 3) b1 = float(k == 1), b2 = float(k == 2);  // the corners
+                else if (k < 6) b2 = 0.f;                          // on an edge
+                else if (b1 + b2 > 1.f) b1 = 1.f - b1, b2 = 1.f - b2;
+                const Vec3f target = v[0] * (1.f - b1 - b2) + v[1] * b1 + v[2] * b2;
+                const float dist = k % 2 ? 1e-3f : 30.f;
+                Vec3f dir(rng.next_float() - 0.5f, rng.next_float() - 0.5f, rng.next_float() - 0.5f);
+                if (k == 7) dir = Vec3f(0, 1, 0);  // axis-aligned: two slabs met with a zero direction
+                dir = normalize(dir);
+                const Vec3f origin = target - dir * dist;
+                EXPECT_TRUE(scene->may_meet_emitter(origin, dir)) << "triangle " << t << ", point " << k;
+                ++checked;
+            }
+        }
+        return checked;
+    };
+    EXPECT_GT(check_all(lamp, Vec3f(0.f)) + check_all(bulb, Vec3f(0.f)), 12 * 100);
+    // Away from both: from the floor downwards, sideways beneath the lamp, and from beside the
+    // lamp (inside its box's slab of height) straight along x, missing the bulb.
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(0, -1, 0), Vec3f(0, -1, 0)));
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(-3, 1.f, 0), normalize(Vec3f(1, 0, 1))));
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(-2, 1.5f, 3), Vec3f(1, 0, 0)));
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(0, 1.f, 0), Vec3f(0, -1, 0)));  // the lamp behind
+    int missed = 0;
+    for (int k = 0; k < 200; ++k) {  // from the floor into the upper hemisphere: mostly past both
+        const Vec3f origin(6.f * rng.next_float() - 3.f, -1.f, 6.f * rng.next_float() - 3.f);
+        const float z = rng.next_float(), phi = 6.2831853f * rng.next_float(), s = std::sqrt(1.f - z * z);
+        missed += !scene->may_meet_emitter(origin, Vec3f(s * std::cos(phi), z, s * std::sin(phi)));
+    }
+    EXPECT_GT(missed, 150);
+
+    // The lamp moved: its box moves with it.
+    MeshData moved = lamp;
+    moved.transform(Vec3f(1.f), Vec3f(0.f, -3.f, 4.f));
+    d.meshes[1].vertices = moved.vertices.data();
+    update_scene(*scene, d);
+    EXPECT_GT(check_all(moved, Vec3f(0.f)), 0);
+    EXPECT_FALSE(scene->may_meet_emitter(Vec3f(0, 1.f, 0), Vec3f(0, 1, 0)));  // towards where it was
+}
+
 // trace_path's image of `scene`: each pixel the mean of trace_path over its camera samples,
 // traced one at a time with their own streams (black outside a fisheye's image circle; counted
 // in `outside`). `counters` gets its rays.
