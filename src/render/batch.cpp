@@ -534,14 +534,9 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             clear_hits(pk.rh);
             if (boxed) {
                 const RTCRay16& r = pk.rh.ray;
-                int traced = 0;
-                for (int i = 0; i < m; ++i) {
-                    const bool may = scene.may_meet_emitter(Vec3f(r.org_x[i], r.org_y[i], r.org_z[i]),
-                                                            Vec3f(r.dir_x[i], r.dir_y[i], r.dir_z[i]));
-                    pk.valid[i] = may ? -1 : 0;
-                    traced += may;
-                }
-                if (traced == 0) continue;
+                const float* const origin[3] = {r.org_x, r.org_y, r.org_z};
+                const float* const dir[3] = {r.dir_x, r.dir_y, r.dir_z};
+                if (scene.may_meet_emitter(origin, dir, m, pk.valid) == 0) continue;
             }
             rtcIntersect16(pk.valid, rtc, &ctx, &pk.rh);
             Hit h;

@@ -605,22 +605,35 @@ void Scene::build_lights() {
     light_distribution.build(light_weights);
 }
 
-bool Scene::may_meet_emitter(const Vec3f& origin, const Vec3f& dir) const {
-    for (const Box& b : emitter_boxes) {
-        float t0 = 0.f, t1 = std::numeric_limits<float>::infinity();
-        for (int a = 0; a < 3 && t0 <= t1; ++a) {
-            if (dir[a] == 0.f) {
-                if (origin[a] < b.lo[a] || origin[a] > b.hi[a]) t0 = t1 + 1.f;
-                continue;
+int Scene::may_meet_emitter(const float* const origin[3], const float* const dir[3], int n, int* may) const {
+    // Slabs by reciprocal directions: a zero direction's slab gives t = +-inf (the box missed
+    // or the whole line inside it) or NaN (the origin on the slab's plane), which the max and
+    // min below ignore: the box is then taken as met, never wrongly missed.
+    constexpr int kChunk = 16;
+    int count = 0;
+    for (int begin = 0; begin < n; begin += kChunk) {
+        const int m = std::min(kChunk, n - begin);
+        float inv[3][kChunk];
+        int met[kChunk] = {};
+        for (int a = 0; a < 3; ++a)
+            for (int i = 0; i < m; ++i) inv[a][i] = 1.f / dir[a][begin + i];
+        for (const Box& b : emitter_boxes)
+            for (int i = 0; i < m; ++i) {
+                float t0 = 0.f, t1 = std::numeric_limits<float>::infinity();
+                for (int a = 0; a < 3; ++a) {
+                    const float o = origin[a][begin + i];
+                    const float near = (b.lo[a] - o) * inv[a][i], far = (b.hi[a] - o) * inv[a][i];
+                    t0 = std::max(t0, std::min(near, far));
+                    t1 = std::min(t1, std::max(near, far));
+                }
+                met[i] |= t0 <= t1;
             }
-            float near = (b.lo[a] - origin[a]) / dir[a], far = (b.hi[a] - origin[a]) / dir[a];
-            if (near > far) std::swap(near, far);
-            t0 = std::max(t0, near);
-            t1 = std::min(t1, far);
+        for (int i = 0; i < m; ++i) {
+            may[begin + i] = met[i] ? -1 : 0;
+            count += met[i];
         }
-        if (t0 <= t1) return true;
     }
-    return false;
+    return count;
 }
 
 namespace {

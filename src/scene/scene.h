@@ -236,9 +236,17 @@ public:
         Vec3f lo, hi;
     };
     std::vector<Box> emitter_boxes;
-    // Whether the ray from `origin` along `dir` (t >= 0) may meet an emitter: false only where
-    // it misses every box of emitter_boxes.
-    bool may_meet_emitter(const Vec3f& origin, const Vec3f& dir) const;
+    // For rays i < n from (origin[0][i], origin[1][i], origin[2][i]) along dir[.][i] (t >= 0):
+    // may[i] = -1 where the ray may meet an emitter, 0 only where it misses every box of
+    // emitter_boxes (Embree's lane masks); returns how many may.
+    int may_meet_emitter(const float* const origin[3], const float* const dir[3], int n, int* may) const;
+    bool may_meet_emitter(const Vec3f& origin, const Vec3f& dir) const {
+        const float o[3] = {origin.x, origin.y, origin.z}, d[3] = {dir.x, dir.y, dir.z};
+        const float* const op[3] = {o, o + 1, o + 2};
+        const float* const dp[3] = {d, d + 1, d + 2};
+        int may = 0;
+        return may_meet_emitter(op, dp, 1, &may) > 0;
+    }
     // Delta lights (desc.h): next-event estimation only, every one at every vertex.
     std::vector<PointLightDesc> point_lights;
     Distribution1D light_distribution;
