@@ -1,6 +1,7 @@
 #include "edges/hierarchy.h"
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -154,22 +155,28 @@ struct EdgeHierarchy::Input {
     std::vector<uint8_t> dark_behind;  // two faces that are black from behind
     std::vector<uint8_t> emissive;     // an edge of an emitter
     const std::vector<int32_t>* ids;
+    // Element k is of edge (*ids)[(*order)[k]]: the leaves' order of a built tree (refit() reads
+    // it straight through); null: of edge (*ids)[k].
+    const std::vector<int32_t>* order;
+    int32_t id(size_t k) const { return (*ids)[order ? size_t((*order)[k]) : k]; }
 
-    // What the hierarchy needs of the edges `ids` (indices into scene.edges()).
-    Input(const Scene& scene, const std::vector<int32_t>& edges) : ids(&edges) {
+    // What the hierarchy needs of the edges `ids` (indices into scene.edges()), in the order
+    // `in_order` gives (null: theirs).
+    Input(const Scene& scene, const std::vector<int32_t>& edges, const std::vector<int32_t>* in_order = nullptr)
+        : ids(&edges), order(in_order) {
         const std::vector<Edge>& all = scene.edges();
         const size_t n = edges.size();
         p0.resize(n);
         p1.resize(n);
-        n0.assign(n, Vec3f(0.f));
-        n1.assign(n, Vec3f(0.f));
+        n0.resize(n);
+        n1.resize(n);
         always.resize(n);
-        dark_behind.assign(n, 0);
-        emissive.assign(n, 0);
-        crease.assign(n, 0);
-        seam.assign(n, 0);
+        dark_behind.resize(n);
+        emissive.resize(n);
+        crease.resize(n);
+        seam.resize(n);
         auto one = [&](size_t i) {
-            const Edge& e = all[size_t(edges[i])];
+            const Edge& e = all[size_t(id(i))];
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             p0[i] = m.vertex(e.v0);
             p1[i] = m.vertex(e.v1);
@@ -183,12 +190,15 @@ struct EdgeHierarchy::Input {
             seam[i] = crease[i] && e.seam;
             dark_behind[i] = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
             emissive[i] = m.is_emitter();
+            n0[i] = n1[i] = Vec3f(0.f);
             if (!always[i] || crease[i]) {
-                const Vec3f a = m.face_normal(e.f0), b = m.face_normal(e.f1);
+                // The faces' unit normals, as the scene keeps them (normalize(face_normal(f)),
+                // the face normal itself where its length is 0: one read for each face).
+                const Vec3f a = m.triangle_data[e.f0].ng, b = m.triangle_data[e.f1].ng;
                 // A face of zero area has no side: its edge is treated as a discontinuity.
                 if (length(a) > 0.f && length(b) > 0.f) {
-                    n0[i] = normalize(a);
-                    n1[i] = normalize(b);
+                    n0[i] = a;
+                    n1[i] = b;
                 } else {
                     always[i] = 1;
                     dark_behind[i] = 0;
@@ -210,7 +220,7 @@ void EdgeHierarchy::set_leaf(const Input& in, size_t i, Node& node) {
     node.lo = min(in.p0[i], in.p1[i]);
     node.hi = max(in.p0[i], in.p1[i]);
     node.length = length(in.p1[i] - in.p0[i]);
-    node.edge = (*in.ids)[i];
+    node.edge = in.id(i);
     node.count = 1;
     node.always = in.always[i] != 0;
     node.center = (node.lo + node.hi) * 0.5f;
@@ -274,7 +284,7 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
     }
     finish_inner(index);
     // The children are done: items [begin, end) are in the leaves' order.
-    if (!node.always || node.crease)
+    if (has_cone(node))
         fit_cone(node, end - begin, in.n0.data(), in.n1.data(), in.p0.data(),
                  [&](int k) { return size_t(items[size_t(begin + k)]); });
 }
@@ -357,6 +367,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges,
 }
 
 void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
+    assert(!in.order);
     nodes_.clear();
     const std::vector<Edge>& all = scene.edges();
     leaf_of_.assign(all.size(), -1);
@@ -437,29 +448,33 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
         bool same = true, moved = false, flags = false;
         Found operator+(const Found& o) const { return {same && o.same, moved || o.moved, flags || o.flags}; }
     };
-    auto over_edges = [&](auto&& check) {
+    auto over = [&](size_t count, auto&& check) {
         auto chunk = [&](const tbb::blocked_range<size_t>& r, Found f) {
             for (size_t i = r.begin(); i < r.end() && f.same; ++i) check(i, f);
             return f;
         };
-        if (n <= size_t(kParallelRange)) return chunk(tbb::blocked_range<size_t>(0, n), Found());
-        return tbb::parallel_reduce(tbb::blocked_range<size_t>(0, n, 16384), Found(), chunk, std::plus<Found>());
+        if (n <= size_t(kParallelRange)) return chunk(tbb::blocked_range<size_t>(0, count), Found());
+        return tbb::parallel_reduce(tbb::blocked_range<size_t>(0, count, 16384), Found(), chunk, std::plus<Found>());
     };
     bool same = built_ && group == group_ && edges == ids_ && leaf_of_.size() == all.size();
     if (same)
-        same = over_edges([&](size_t i, Found& f) {
+        same = over(n, [&](size_t i, Found& f) {
                    const Edge &e = all[size_t(edges[i])], &k = kept_edges_[i];
                    f.same = e.mesh == k.mesh && e.v0 == k.v0 && e.v1 == k.v1 && e.f0 == k.f0 && e.f1 == k.f1 &&
                             e.kind == k.kind;
                }).same;
-    const Input in(scene, edges);
+    // The same edges: read in the leaves' order, as the leaves lie in nodes_ (nearly: a leaf
+    // beside an inner node comes before that node's subtree), and as refit() reads them.
+    const Input in(scene, edges, same ? &order_ : nullptr);
     // Which leaves changed: their edge's ends or faces (a refit), only the flags the materials
     // and emission decide (those flags alone), or which tree (discontinuity or smooth) it
     // belongs in (a face became or stopped being degenerate: a rebuild).
     bool moved = false, flags = false;
     if (same) {
-        const Found f = over_edges([&](size_t i, Found& f) {
-            const Node& leaf = nodes_[size_t(leaf_of_[size_t(edges[i])])];
+        const Found f = over(nodes_.size(), [&](size_t k, Found& f) {
+            const Node& leaf = nodes_[k];
+            if (leaf.left >= 0) return;
+            const size_t i = size_t(leaf.first);
             f.same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0) &&
                      leaf.seam == (in.seam[i] != 0);
             f.moved = f.moved || !(bitwise_equal(leaf.leaf.a, in.p0[i]) && bitwise_equal(leaf.leaf.b, in.p1[i]) &&
@@ -471,7 +486,11 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
         flags = f.flags;
     }
     if (!same) {
-        build(scene, in, group);
+        // The build reads its input in the edges' own order (and rewrites order_).
+        if (in.order)
+            build(scene, Input(scene, edges), group);
+        else
+            build(scene, in, group);
         return done(Update::Built);
     }
     if (moved) {
@@ -483,54 +502,40 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
 }
 
 void EdgeHierarchy::refit(const Input& in) {
-    const size_t n = in.ids->size();
+    // `in` is in the leaves' order (update()): leaf node k's edge is element nodes_[k].first.
+    const size_t n = in.ids->size(), count = nodes_.size();
     auto leaves = [&](size_t b, size_t e) {
-        for (size_t i = b; i < e; ++i) set_leaf(in, i, nodes_[size_t(leaf_of_[size_t((*in.ids)[i])])]);
+        for (size_t k = b; k < e; ++k)
+            if (nodes_[k].left < 0) set_leaf(in, size_t(nodes_[k].first), nodes_[k]);
     };
     if (n > size_t(kParallelRange))
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024),
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 2048),
                           [&](const tbb::blocked_range<size_t>& r) { leaves(r.begin(), r.end()); });
     else
-        leaves(0, n);
+        leaves(0, count);
     // Children come after their parent: bottom-up in reverse.
-    for (size_t k = nodes_.size(); k-- > 0;)
+    for (size_t k = count; k-- > 0;)
         if (nodes_[k].left >= 0) finish_inner(int32_t(k));
     // The cones of the nodes build_range made, over their leaves' items, as the build fits them:
-    // from copies of the items' normals and first ends in the leaves' order, which each node
-    // then reads in one sweep (read through order_, every node's items were scattered over the
-    // edge list: most of a refit's time at a million edges).
-    std::vector<Vec3f> n0(n), n1(n), p0(n);
-    auto gather = [&](size_t b, size_t e) {
-        for (size_t k = b; k < e; ++k) {
-            const size_t i = size_t(order_[k]);
-            n0[k] = in.n0[i];
-            n1[k] = in.n1[i];
-            p0[k] = in.p0[i];
-        }
-    };
+    // each node's items lie side by side in the leaves' order, read in one sweep.
     auto cones = [&](size_t b, size_t e) {
         for (size_t k = b; k < e; ++k) {
             Node& node = nodes_[k];
-            if (node.left >= 0 && !node.mixed && (!node.always || node.crease))
-                fit_cone(node, node.count, n0.data() + node.first, n1.data() + node.first, p0.data() + node.first,
-                         [](int j) { return size_t(j); });
+            if (has_cone(node))
+                fit_cone(node, node.count, in.n0.data() + node.first, in.n1.data() + node.first,
+                         in.p0.data() + node.first, [](int j) { return size_t(j); });
         }
     };
     if (n > size_t(kParallelRange))
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
-                          [&](const tbb::blocked_range<size_t>& r) { gather(r.begin(), r.end()); });
-    else
-        gather(0, n);
-    if (n > size_t(kParallelRange))
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 64),
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 64),
                           [&](const tbb::blocked_range<size_t>& r) { cones(r.begin(), r.end()); });
     else
-        cones(0, nodes_.size());
+        cones(0, count);
 }
 
 void EdgeHierarchy::refresh_flags(const Input& in) {
     for (size_t i = 0; i < in.ids->size(); ++i) {
-        Node& leaf = nodes_[size_t(leaf_of_[size_t((*in.ids)[i])])];
+        Node& leaf = nodes_[size_t(leaf_of_[size_t(in.id(i))])];
         leaf.dark_behind = in.dark_behind[i] != 0;
         leaf.emissive = in.emissive[i] != 0;
     }

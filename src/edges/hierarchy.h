@@ -403,6 +403,12 @@ private:
     void finish_inner(int32_t index);
     template <class Item>
     static void fit_cone(Node& n, int count, const Vec3f* n0, const Vec3f* n1, const Vec3f* p0, Item&& item);
+    // Whether inner node n gets a normal cone: not where it joins the kinds' or groups' trees, nor
+    // where it holds discontinuities other than creases, nor in a small subtree (at most
+    // kExactLeaves edges), which the descents score by its leaves and never by its own bounds.
+    static bool has_cone(const Node& n) {
+        return n.left >= 0 && !n.mixed && (!n.always || n.crease) && n.count > kExactLeaves;
+    }
     // Whether a descent with strategy k that has split `used` times splits at n, whose children
     // have importances il, ir; `whole`: the root's importances.
     bool splits(const Query& q, const Node& n, const float il[2], const float ir[2], const float whole[2], int k,
