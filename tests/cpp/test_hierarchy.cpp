@@ -1124,6 +1124,41 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     expect_fresh(flags, d);
 }
 
+// The same at the size where the checks, the leaves and the cones of an update go in parallel
+// chunks (a sphere of some 12k edges beside the box and the floor): the refit, after every
+// vertex is scaled by two, equals a fresh build node for node; after an uneven move its bounds
+// hold every edge.
+TEST(EdgeHierarchy, RefitOfALargeTreeEqualsAFreshBuild) {
+    HierarchyScene hs;
+    hs.sphere = make_sphere(Vec3f(0, 1, 0), 0.5f, 64, 96);
+    SceneDesc d = hs.desc();
+    const std::shared_ptr<Scene> scene = build_moved(d);
+    size_t group = 0;
+    const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
+    ASSERT_GT(ids.size(), 8192u);
+    scene->edge_hierarchy(ids, group);
+    for (MeshData* m : {&hs.sphere, &hs.box, &hs.quad})
+        for (float& x : m->vertices) x *= 2.f;
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    update_scene(*scene, d);
+    const EdgeHierarchy& refit = *scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().refits, 1u);
+    const std::shared_ptr<Scene> fresh_scene = build_moved(d);
+    EdgeHierarchy fresh;
+    fresh.build(*fresh_scene, ids, group);
+    EXPECT_EQ(refit.first_difference(fresh), -1);
+    EXPECT_EQ(refit.check_bounds(*scene, 1e-5f), -1);
+    // An uneven move: each vertex pushed along its own direction from the centre.
+    for (size_t v = 0; v + 2 < hs.sphere.vertices.size(); v += 3)
+        hs.sphere.vertices[v + 1] += 0.1f * std::sin(7.f * hs.sphere.vertices[v]) * hs.sphere.vertices[v + 2];
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    update_scene(*scene, d);
+    const EdgeHierarchy& moved = *scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().refits, 2u);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    EXPECT_EQ(moved.check_bounds(*scene, 1e-5f), -1);
+}
+
 // A moving scene's flat edges (Edge::flat) are empty leaves: never sampled, zero probability
 // under both strategies; the others' probabilities finite, those sample() reports pdf()'s.
 TEST(EdgeHierarchy, FlatEdgesOfAMovingSceneAreNeverSampled) {
