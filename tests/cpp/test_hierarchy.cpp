@@ -1148,7 +1148,7 @@ TEST(EdgeHierarchy, RefitOfALargeTreeEqualsAFreshBuild) {
     fresh.build(*fresh_scene, ids, group);
     EXPECT_EQ(refit.first_difference(fresh), -1);
     EXPECT_EQ(refit.check_bounds(*scene, 1e-5f), -1);
-    // An uneven move: each vertex pushed along its own direction from the centre.
+    // An uneven move: each vertex raised or lowered by a wave over its x and z.
     for (size_t v = 0; v + 2 < hs.sphere.vertices.size(); v += 3)
         hs.sphere.vertices[v + 1] += 0.1f * std::sin(7.f * hs.sphere.vertices[v]) * hs.sphere.vertices[v + 2];
     d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
