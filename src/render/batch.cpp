@@ -2,6 +2,7 @@
 
 #include <limits>
 #include <memory>
+#include <stdexcept>
 #include <type_traits>
 
 #include "render/embree_lanes.h"
@@ -47,9 +48,36 @@ struct PathState {
     Vec3f next_beta;
     float pdf = 0.f;
     bool delta = false, goes_on = false;
+    bool refract = false;  // (recorded paths) the BSDF sample's transmission
     int next = 0;
     int shadow_begin = 0, shadow_end = 0;  // its shadow rays of this bounce
+    // (Recorded paths) the area light's sample gathered for the vectors: the point on the light
+    // (LightSample::hit; for a triangle sampled in the vectors, its t is their distance).
+    Hit light_hit;
 };
+
+// (Recorded paths) what a shadow ray's light sample leaves in the path's record where nothing
+// hides it (trace_path's NeeRecord): its kind, MIS weight over density, direction and point.
+struct ShadowRecord {
+    ShadowKind kind = ShadowKind::Point;
+    float scale = 0.f;
+    Vec3f dir;
+    Hit hit;
+};
+
+namespace {
+// trace_path's push_vertex: the vertex `hit` found by the ray (origin, dir) with throughput beta.
+void push_vertex(PathRecord& rec, const Hit& hit, const Vec3f& origin, const Vec3f& dir, const Vec3f& beta,
+                 float emission_weight) {
+    rec.vertices.emplace_back();
+    PathVertexRecord& v = rec.vertices.back();
+    v.hit = hit;
+    v.origin = origin;
+    v.dir = dir;
+    v.beta = beta;
+    v.emission_weight = emission_weight;
+}
+}  // namespace
 
 struct PathBatch::Impl {
     const Scene& scene;
@@ -60,6 +88,8 @@ struct PathBatch::Impl {
     // A bounce's shadow rays: what each adds if nothing is in its way, and their packets.
     std::vector<Vec3f> shadow_value;
     std::vector<RayPacket> shadow;
+    std::vector<ShadowRecord> shadow_record;  // (recorded paths) each shadow ray's light sample
+    bool recording = false;                   // the paths of this trace() are recorded
     RayHitPacket next[kBatchSize / kLanes];  // a bounce's continuations
     // The plain vertices of a bounce (render/shade_lanes.h), their paths' places in `live`.
     // Per mesh, for its plain vertices, what is the same at every point: the specular (a
@@ -93,6 +123,8 @@ struct PathBatch::Impl {
     // scene has few (a batch's tables are made for each tile), looked up path by path otherwise.
     struct LightEntry {
         bool in_vectors = false;
+        int mesh = -1;
+        int64_t prim = -1;
         TriangleData td;
         float pmf = 0.f, area = 0.f;
         Vec3f emission;
@@ -158,13 +190,14 @@ struct PathBatch::Impl {
         // each path.
         const size_t max_shadow = size_t(kBatchSize) * (2 + scene.point_lights.size());
         shadow_value.resize(max_shadow);
+        shadow_record.resize(max_shadow);
         shadow.resize((max_shadow + kLanes - 1) / kLanes);
         // What Embree only reads, once: the rays then take their extents only.
         for (RayPacket& pk : shadow) set_packet_constants(pk.r);
         for (RayHitPacket& pk : next) set_packet_constants(pk.rh.ray);
     }
 
-    void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
+    void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters, PathRecord* records);
     // The mask of a plain vertex's reflecting (a reflectance with luminance above 0).
     static float plain_reflects(const Vec3f& diffuse, const Vec3f& specular) {
         return lane_mask(!(luminance(diffuse) + luminance(specular) <= 0.f));
@@ -189,6 +222,8 @@ struct PathBatch::Impl {
         const Mesh& m = scene.meshes[size_t(lt.mesh)];
         e.in_vectors = lt.prim >= 0 && !m.spherical_triangle && !m.spot && m.emission.is_constant();
         if (!e.in_vectors) return;
+        e.mesh = lt.mesh;
+        e.prim = lt.prim;
         e.td = m.triangle_data[lt.prim];
         e.pmf = float(double(scene.light_distribution.pmf(li)));
         e.area = scene.light_triangle_area(m, lt.prim);
@@ -323,6 +358,13 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
             put3(l.emission, e.emission);
             l.two_sided_emission[k] = e.two_sided;
             l.light_on[k] = lane_mask(true);
+            if (recording) {
+                Hit& h = paths[live[j]].light_hit;
+                h.mesh = e.mesh;
+                h.prim = e.prim;
+                h.b1 = b.x;
+                h.b2 = b.y;
+            }
         } else {
             LightSample ls;
             if (scene.sample_area_light(ps.sp.p, ul0, ul1, ul2, ls)) {
@@ -338,6 +380,7 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
                 put3(l.given_p_error, ls.p_error);
                 put3(l.given_ng, ls.ng);
                 l.light_on[k] = l.light_given[k] = lane_mask(true);
+                if (recording) paths[live[j]].light_hit = ls.hit;
             }
         }
     }
@@ -358,13 +401,16 @@ bool PathBatch::Impl::gather_plain(int j, const Material& mat, Rng& rng) {
 PathBatch::PathBatch(const Scene& scene, const RenderOptions& opt) : impl_(new Impl(scene, opt)) {}
 PathBatch::~PathBatch() = default;
 
-void PathBatch::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters) {
-    impl_->trace(samples, n, L, counters);
+void PathBatch::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters, PathRecord* records) {
+    impl_->trace(samples, n, L, counters, records);
 }
 
 // trace_path (render/path.cpp) for n paths at once: the same operations, path by path, in the
 // same order; only the rays are traced between the steps, in packets.
-void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters) {
+void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters, PathRecord* records) {
+    if (records && !opt.replayable)
+        throw std::logic_error("PathBatch: recorded paths need replayable options (trace_path's recorded settings)");
+    recording = records != nullptr;
     const RTCScene rtc = scene.bvh(settings.tracing);
     RTCIntersectContext ctx;
     rtcInitIntersectContext(&ctx);
@@ -375,12 +421,24 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
     for (int i = 0; i < n; ++i) {
         const CameraSample& cs = samples[i];
         L[i] = Vec3f(0.f);
-        if (cs.outside) continue;
+        PathRecord* const rec = records ? records + i : nullptr;
+        if (rec) {
+            rec->vertices.clear();
+            rec->camera_missed = rec->escaped = false;
+            rec->emitters_hidden = opt.hide_emitters;
+        }
+        if (cs.outside) {
+            // Outside the image: black, nothing to differentiate.
+            if (rec) rec->camera_missed = rec->emitters_hidden = true;
+            continue;
+        }
         ++counters.camera;
         if (!cs.first.found) {
             if (scene.has_envmap && !opt.hide_emitters) L[i] += scene.envmap.eval(cs.ray.dir);
+            if (rec) rec->camera_missed = true;
             continue;
         }
+        if (rec) push_vertex(*rec, cs.first.hit, cs.ray.origin, cs.ray.dir, Vec3f(1.f), opt.hide_emitters ? 0.f : 1.f);
         const bool emitter = scene.meshes[size_t(cs.first.hit.mesh)].is_emitter();
         if (opt.max_bounces == 0 && !emitter) continue;  // no surface point needed
         PathState& ps = paths[i];
@@ -405,6 +463,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // (`count`: nnext or nshadow, or a copy of it kept in a register.)
         auto add_next = [&](int& count, PathState& ps, const Ray& r, const Vec3f& next_beta, float pdf, bool delta) {
             ps.goes_on = true;
+            ps.refract = false;
             ps.next_beta = next_beta;
             ps.pdf = pdf;
             ps.delta = delta;
@@ -431,15 +490,26 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             }
             ps.goes_on = false;
             ps.shadow_begin = nshadow;
-            shade_vertex(
+            const bool delta = shade_vertex(
                 scene, settings, ps.sp, ps.dir, ps.beta, samples[live[j]].rng, counters,
                 [&](const Ray& r, const BsdfSample& bs, const Vec3f& next_beta) {
                     add_next(nnext, ps, r, next_beta, bs.pdf, bs.delta);
+                    ps.refract = bs.refract;
                 },
-                [&](ShadowKind, const Ray& r, const Vec3f& value, const LightSample*, float) {
+                [&](ShadowKind kind, const Ray& r, const Vec3f& value, const LightSample* ls, float scale) {
+                    if (recording) {
+                        ShadowRecord& sr = shadow_record[size_t(nshadow)];
+                        sr.kind = kind;
+                        sr.scale = scale;
+                        if (ls) {
+                            sr.dir = ls->dir;
+                            sr.hit = ls->hit;
+                        }
+                    }
                     add_shadow(nshadow, r, value);
                 });
             ps.shadow_end = nshadow;
+            if (recording) records[live[j]].vertices.back().point_lights = !delta;
         }
         // The plain vertices, a vector of them at a time (the standard material's, then the
         // plastic's); then their rays into the packets.
@@ -471,7 +541,16 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     r.dir = get3(l.next_dir, k);
                     add_next(nexts, ps, r, get3(l.next_beta, k), l.next_pdf[k], (plastic || mirror) && lane_set(l.next_delta, k));
                 }
+                if (recording) records[live[group->plain[k]]].vertices.back().point_lights = !mirror;
                 if (lane_set(l.light_on, k)) {
+                    if (recording) {
+                        ShadowRecord& sr = shadow_record[size_t(shadows)];
+                        sr.kind = ShadowKind::Area;
+                        sr.scale = l.light_scale[k];
+                        sr.dir = get3(l.light_to, k);
+                        sr.hit = ps.light_hit;
+                        if (!lane_set(l.light_given, k)) sr.hit.t = l.light_dist[k];
+                    }
                     r.origin = get3(l.light_origin, k);
                     r.dir = get3(l.light_dir, k);
                     r.tmax = l.light_tmax[k];
@@ -481,6 +560,13 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     r.origin = get3(l.env_origin, k);
                     r.dir = get3(l.env_dir, k);
                     r.tmax = std::numeric_limits<float>::infinity();
+                    if (recording) {
+                        ShadowRecord& sr = shadow_record[size_t(shadows)];
+                        sr.kind = ShadowKind::Env;
+                        sr.scale = l.env_scale[k];
+                        sr.dir = r.dir;
+                        sr.hit = Hit();
+                    }
                     add_shadow(shadows, r, get3(l.env_value, k));
                 }
                 counters.shadow += uint64_t(shadows - ps.shadow_begin);
@@ -510,7 +596,10 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
                     }
                     point_light_samples(scene, ps.sp, bp, frame, frame.to_local(-ps.dir), ps.beta, counters,
                                         [&](ShadowKind, const Ray& shadow_ray, const Vec3f& value, const LightSample*,
-                                            float) { add_shadow(shadows, shadow_ray, value); });
+                                            float) {
+                                            if (recording) shadow_record[size_t(shadows)].kind = ShadowKind::Point;
+                                            add_shadow(shadows, shadow_ray, value);
+                                        });
                 }
                 ps.shadow_end = shadows;
             }
@@ -526,7 +615,8 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
         // emitter: without an environment, one that misses every emitter's box is not traced
         // (it reads as one that left the scene, which adds nothing then).
         const bool last = bounce + 1 >= opt.max_bounces;
-        const bool boxed = last && !scene.has_envmap && scene.emitter_boxes.size() <= kMaxEmitterBoxes;
+        // (Recorded paths keep every last vertex, as trace_path records them.)
+        const bool boxed = !recording && last && !scene.has_envmap && scene.emitter_boxes.size() <= kMaxEmitterBoxes;
         for (int p = 0; p * kLanes < nnext; ++p) {
             RayHitPacket& pk = next[p];
             const int m = std::min(kLanes, nnext - p * kLanes);
@@ -556,27 +646,60 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             const int i = live[j];
             PathState& ps = paths[i];
             Vec3f& Li = L[i];
-            for (int k = ps.shadow_begin; k < ps.shadow_end; ++k)
-                if (!(shadow[size_t(k / kLanes)].r.tfar[k % kLanes] < 0.f)) Li += shadow_value[size_t(k)];
+            PathRecord* const rec = records ? records + i : nullptr;
+            for (int k = ps.shadow_begin; k < ps.shadow_end; ++k) {
+                if (shadow[size_t(k / kLanes)].r.tfar[k % kLanes] < 0.f) continue;
+                Li += shadow_value[size_t(k)];
+                const ShadowRecord& sr = shadow_record[size_t(k)];
+                if (!rec || sr.kind == ShadowKind::Point) continue;
+                PathVertexRecord& v = rec->vertices.back();
+                NeeRecord& nr = sr.kind == ShadowKind::Area ? v.nee_area : v.nee_env;
+                nr.used = true;
+                nr.dir = sr.dir;
+                nr.scale = sr.scale;
+                nr.hit = sr.hit;
+            }
             if (!ps.goes_on) continue;
             const RayHitPacket& pk = next[ps.next / kLanes];
             const int lane = ps.next % kLanes;
             const Vec3f beta = ps.beta = ps.next_beta;
             const Vec3f dir(pk.rh.ray.dir_x[lane], pk.rh.ray.dir_y[lane], pk.rh.ray.dir_z[lane]);
+            if (rec) {
+                PathVertexRecord& v = rec->vertices.back();
+                v.next = true;
+                v.next_delta = ps.delta;
+                v.next_refract = ps.refract;
+                v.next_dir = dir;
+                v.next_inv_pdf = 1.f / ps.pdf;
+            }
             Vec3f Le;
             float w;
             Hit hit;
             if (!lane_hit(pk.rh, lane, hit)) {
-                if (escaped_light(scene, settings, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
+                if (escaped_light(scene, settings, dir, ps.pdf, ps.delta, Le, w)) {
+                    Li += beta * Le * w;
+                    if (rec) {
+                        rec->escaped = true;
+                        rec->escape_weight = w;
+                    }
+                }
                 continue;
             }
+            const Vec3f origin(pk.rh.ray.org_x[lane], pk.rh.ray.org_y[lane], pk.rh.ray.org_z[lane]);
             // A path's last vertex matters only for light it sees there.
-            if (last && !(continuation_counts(settings, ps.delta) && scene.meshes[size_t(hit.mesh)].is_emitter()))
+            if (last && !(continuation_counts(settings, ps.delta) && scene.meshes[size_t(hit.mesh)].is_emitter())) {
+                if (rec) push_vertex(*rec, hit, origin, dir, beta, 0.f);
                 continue;
+            }
             const Vec3f prev_p = ps.sp.p;
             surface_point(hit, ps.sp);
             ps.dir = dir;
-            if (met_emission(scene, settings, hit.mesh, prev_p, ps.sp, dir, ps.pdf, ps.delta, Le, w)) Li += beta * Le * w;
+            float emission_weight = 0.f;
+            if (met_emission(scene, settings, hit.mesh, prev_p, ps.sp, dir, ps.pdf, ps.delta, Le, w)) {
+                emission_weight = w;
+                Li += beta * Le * w;
+            }
+            if (rec) push_vertex(*rec, hit, origin, dir, beta, emission_weight);
             if (!last) live[kept++] = i;
         }
         nlive = kept;

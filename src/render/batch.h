@@ -7,9 +7,9 @@
 //
 // Each path keeps its own random stream and adds to its radiance in the order trace_path does:
 // the radiance of every path is trace_path's, bit for bit (Render.BatchedPathsMatchTracePath),
-// so an image does not depend on how the paths are grouped. The gradient pass, which records
-// its paths, stays with trace_path; the primary edge pass traces its side paths (not recorded)
-// here (edges/primary.cpp).
+// so an image does not depend on how the paths are grouped. The gradient pass records its
+// camera paths here too (trace()'s records: what trace_path records, bit for bit), and the
+// primary edge pass traces its side paths (not recorded) here (edges/primary.cpp).
 #pragma once
 #include <memory>
 #include <vector>
@@ -39,8 +39,12 @@ public:
 
     // L[i] = the radiance of camera sample samples[i], i < n <= kBatchSize: trace_path's for
     // its ray, stream and first hit (black outside the image), bit for bit. Advances the
-    // samples' streams as trace_path does and adds its rays to `counters`.
-    void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters);
+    // samples' streams as trace_path does and adds its rays to `counters`. With `records` (n of
+    // them; the options replayable, as a gradient pass's are), also records each path into
+    // records[i] as trace_path records it (every vertex, light sample and weight the same, bit
+    // for bit; for a sample outside the image, camera_missed and emitters_hidden set, no vertex);
+    // their film, lens and stream are left to the caller.
+    void trace(CameraSample* samples, int n, Vec3f* L, RayCounters& counters, PathRecord* records = nullptr);
 
 private:
     struct Impl;

@@ -423,7 +423,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
 
         // One light sample's value and MIS weight (next_event in shade_vertex): `on` cleared
         // where the BSDF is black towards it.
-        auto next_event = [&](const V& ldir, F lpdf, const V& radiance, M& on) {
+        auto next_event = [&](const V& ldir, F lpdf, const V& radiance, M& on, float* scale_out) {
             const V wi = to_local(ldir);
             V f;
             F bpdf;
@@ -440,7 +440,9 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             }
             on = on & !is_black(f);
             const F w = mis ? mis_power_lanes(lpdf, bpdf) : one;
-            return beta * f * radiance * (w / lpdf);
+            const F scale = w / lpdf;
+            scale.store(scale_out + k);
+            return beta * f * radiance * scale;
         };
 
         // The area light's sample (Scene::sample_light_triangle, by area, or the one given)
@@ -475,7 +477,9 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             to = select(given, load3<V>(L.given_dir, k), to);
             lpdf = select(given, F::load(L.given_pdf + k), lpdf);
             radiance = select(given, load3<V>(L.given_radiance, k), radiance);
-            const V value = next_event(to, lpdf, radiance, on);
+            const V value = next_event(to, lpdf, radiance, on, L.light_scale);
+            store3(L.light_to, k, to);
+            dist.store(L.light_dist + k);
             on.store(L.light_on + k);
             store3(L.light_value, k, value);
             const V origin = offset_ray_origin(p, p_error, ng, q - p);
@@ -491,7 +495,7 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
         if (M::load(L.env_on + k).bits() != 0) {
             M on = M::load(L.env_on + k);
             const V ldir = load3<V>(L.env_dir, k);
-            const V value = next_event(ldir, F::load(L.env_pdf + k), load3<V>(L.env_radiance, k), on);
+            const V value = next_event(ldir, F::load(L.env_pdf + k), load3<V>(L.env_radiance, k), on, L.env_scale);
             on.store(L.env_on + k);
             store3(L.env_value, k, value);
             store3(L.env_origin, k, offset_ray_origin(p, p_error, ng, ldir));

@@ -95,6 +95,11 @@ struct ShadeLanes {
     alignas(64) float goes_on[N], next_origin[3][N], next_dir[3][N], next_beta[3][N], next_pdf[N];
     alignas(64) float light_origin[3][N], light_dir[3][N], light_tmax[N], light_value[3][N];
     alignas(64) float env_origin[3][N], env_value[3][N];
+    // Out, for the paths the gradient pass records (PathVertexRecord's NeeRecord): each light
+    // sample's MIS weight over its density (shade_vertex's `scale`); the area light's sample's
+    // unit direction and distance (LightSample's dir and dist; written where light_on was set
+    // on the way in, read where the sample was taken in the vectors).
+    alignas(64) float light_scale[N], env_scale[N], light_to[3][N], light_dist[N];
 
     ShadeLanes() {
         // The lanes past the last path of a vector compute on whatever is there: zeros, then

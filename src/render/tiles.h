@@ -7,10 +7,12 @@
 #include <mutex>
 #include <stdexcept>
 #include <string>
+#include <vector>
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include "render/batch.h"
 #include "render/packet.h"
 #include "render/path.h"
 #include "scene/desc.h"
@@ -111,42 +113,60 @@ void for_each_chunk(const RenderOptions& opt, int64_t n, int64_t chunk, ChunkFn&
 }
 
 // Runs fn(x, y, record) for every camera sample of every output pixel (x, y), in parallel, with
-// the random numbers of render() for the same options; tile_end(tile) after each tile, on the
-// thread that ran it (tile: for_each_tile's index). With `full_paths` the whole path is traced
-// and recorded (the radiance's gradient); without, only the camera ray's first hit
-// (record.vertices holds it, or record.camera_missed).
+// the random numbers of render() for the same options (replayable ones, as a gradient pass's
+// are: render/path.h, tracing_of); tile_end(tile) after each tile, on the thread that ran it
+// (tile: for_each_tile's index), fn called for a tile's samples in their order. With
+// `full_paths` the whole path is traced and recorded (the radiance's gradient), a batch of
+// paths at a time (PathBatch: trace_path's records, bit for bit); without, only the camera
+// ray's first hit (record.vertices holds it, or record.camera_missed).
 template <class SampleFn, class TileEnd>
 void for_each_sample(const Scene& scene, const RenderOptions& opt, bool full_paths, SampleFn&& fn,
                      TileEnd&& tile_end) {
     for_each_tile(scene, opt, [&](int64_t tile, int x0, int y0, int x1, int y1) {
         RayCounters c;
-        PathRecord rec;
-        // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
-        rec.vertices.reserve(size_t(std::min(opt.max_bounces, 63)) + 1);
-        const bool done = for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
+        // A record's stream, film and lens: the sample's.
+        auto identify = [&](const CameraSample& cs, PathRecord& rec) {
             rec.stream = mix64(mix64(opt.seed ^ 0x736563ull) ^ (cs.pixel * uint64_t(opt.spp) + uint64_t(cs.s)));
             rec.film = cs.film;
             rec.lens = cs.lens;
-            if (cs.outside) {
-                // Outside the image: black, nothing to differentiate.
-                rec.vertices.clear();
-                rec.escaped = false;
-                rec.camera_missed = rec.emitters_hidden = true;
-            } else if (full_paths) {
-                trace_path(scene, opt, cs.ray, cs.rng, c, &rec, &cs.first);
-            } else {
-                rec.vertices.clear();
-                rec.escaped = false;
-                rec.camera_missed = !cs.first.found;
-                if (!rec.camera_missed) {
-                    rec.vertices.emplace_back();
-                    rec.vertices.back().hit = cs.first.hit;
-                    rec.vertices.back().origin = cs.ray.origin;
-                    rec.vertices.back().dir = cs.ray.dir;
+        };
+        bool done;
+        if (full_paths) {
+            PathBatch paths(scene, opt);
+            CameraSample samples[kBatchSize];
+            Vec3f L[kBatchSize];
+            std::vector<PathRecord> records(kBatchSize);
+            // Room for the usual path; a longer one (max_bounces may be up to 2^31 - 1) grows it once.
+            for (PathRecord& rec : records) rec.vertices.reserve(size_t(std::min(opt.max_bounces, 63)) + 1);
+            done = for_each_camera_batch(scene, opt, x0, y0, x1, y1, samples, kBatchSize, [&](CameraSample* cs, int n) {
+                paths.trace(cs, n, L, c, records.data());
+                for (int i = 0; i < n; ++i) {
+                    identify(cs[i], records[size_t(i)]);
+                    fn(cs[i].x, cs[i].y, records[size_t(i)]);
                 }
-            }
-            fn(cs.x, cs.y, rec);
-        });
+            });
+        } else {
+            PathRecord rec;
+            rec.vertices.reserve(1);
+            done = for_each_camera_sample(scene, opt, x0, y0, x1, y1, [&](CameraSample& cs) {
+                identify(cs, rec);
+                rec.vertices.clear();
+                rec.escaped = false;
+                if (cs.outside) {
+                    // Outside the image: black, nothing to differentiate.
+                    rec.camera_missed = rec.emitters_hidden = true;
+                } else {
+                    rec.camera_missed = !cs.first.found;
+                    if (!rec.camera_missed) {
+                        rec.vertices.emplace_back();
+                        rec.vertices.back().hit = cs.first.hit;
+                        rec.vertices.back().origin = cs.ray.origin;
+                        rec.vertices.back().dir = cs.ray.dir;
+                    }
+                }
+                fn(cs.x, cs.y, rec);
+            });
+        }
         if (!done) return;
         tile_end(tile);
     });

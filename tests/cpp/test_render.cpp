@@ -13,6 +13,7 @@
 #include "render/packet.h"
 #include "render/path.h"
 #include "render/shade_lanes.h"
+#include "render/tiles.h"
 #include "scene/gradients.h"
 #include "scene/plastic.h"
 #include "scene/scene.h"
@@ -923,6 +924,74 @@ struct LightVariants {
     }
 };
 
+// Whether two floats are the same bit for bit.
+bool same_bits(float a, float b) { return std::memcmp(&a, &b, sizeof a) == 0; }
+bool same_bits(const Vec3f& a, const Vec3f& b) { return same_bits(a.x, b.x) && same_bits(a.y, b.y) && same_bits(a.z, b.z); }
+bool same_hit(const Hit& a, const Hit& b) {
+    return a.mesh == b.mesh && a.prim == b.prim && same_bits(a.b1, b.b1) && same_bits(a.b2, b.b2) && same_bits(a.t, b.t);
+}
+bool same_nee(const NeeRecord& a, const NeeRecord& b) {
+    return a.used == b.used && (!a.used || (same_bits(a.dir, b.dir) && same_bits(a.scale, b.scale) && same_hit(a.hit, b.hit)));
+}
+// Two records of one path, every field the gradient pass reads (escape_weight where it escaped,
+// the continuation's where it has one).
+bool same_record(const PathRecord& a, const PathRecord& b) {
+    if (a.camera_missed != b.camera_missed || a.emitters_hidden != b.emitters_hidden || a.escaped != b.escaped ||
+        (a.escaped && !same_bits(a.escape_weight, b.escape_weight)) || a.vertices.size() != b.vertices.size())
+        return false;
+    for (size_t k = 0; k < a.vertices.size(); ++k) {
+        const PathVertexRecord &u = a.vertices[k], &v = b.vertices[k];
+        if (!same_hit(u.hit, v.hit) || !same_bits(u.origin, v.origin) || !same_bits(u.dir, v.dir) ||
+            !same_bits(u.beta, v.beta) || !same_bits(u.emission_weight, v.emission_weight) ||
+            !same_nee(u.nee_area, v.nee_area) || !same_nee(u.nee_env, v.nee_env) || u.point_lights != v.point_lights ||
+            u.next != v.next)
+            return false;
+        if (u.next && (u.next_delta != v.next_delta || u.next_refract != v.next_refract ||
+                       !same_bits(u.next_dir, v.next_dir) || !same_bits(u.next_inv_pdf, v.next_inv_pdf)))
+            return false;
+    }
+    return true;
+}
+
+// The gradient pass's camera paths (for_each_sample with whole paths: recorded a batch at a time,
+// render/batch.h) against trace_path's records of the same samples traced one by one: the same
+// records bit for bit, with the sample's film point, lens point and stream. Options made
+// replayable, as a gradient pass's are. Returns the number of records with a light sample used
+// (kind: 0 area, 1 environment) in `nee` (two counts), and adds the records compared to `compared`.
+void expect_records_match(const Scene& scene, RenderOptions opt, const std::string& what, int& compared,
+                          int nee[2]) {
+    opt.replayable = true;
+    opt.num_threads = 1;  // the samples in order: a pixel's s counted here
+    const int W = image_width(scene), H = image_height(scene);
+    std::vector<int> next_s(size_t(W) * H, 0);
+    int differing = 0, identity = 0;
+    RayCounters counters;
+    for_each_sample(
+        scene, opt, true,
+        [&](int x, int y, const PathRecord& rec) {
+            const int s = next_s[size_t(y) * W + x]++;
+            CameraSample cs = camera_sample(scene, opt.seed, x, y, s);
+            PathRecord ref;
+            if (cs.outside) {
+                ref.camera_missed = ref.emitters_hidden = true;
+            } else {
+                trace_path(scene, opt, cs.ray, cs.rng, counters, &ref);
+            }
+            differing += !same_record(rec, ref);
+            identity += !same_bits(rec.film.x, cs.film.x) || !same_bits(rec.film.y, cs.film.y) ||
+                        !same_bits(rec.lens.x, cs.lens.x) || !same_bits(rec.lens.y, cs.lens.y) ||
+                        rec.stream != mix64(mix64(opt.seed ^ 0x736563ull) ^ (cs.pixel * uint64_t(opt.spp) + uint64_t(s)));
+            for (const PathVertexRecord& v : ref.vertices) {
+                nee[0] += v.nee_area.used;
+                nee[1] += v.nee_env.used;
+            }
+            ++compared;
+        },
+        [](int64_t) {});
+    EXPECT_EQ(differing, 0) << what << ": records";
+    EXPECT_EQ(identity, 0) << what << ": film, lens or stream";
+}
+
 // render() on 1 and 2 threads: `reference` bit for bit, with the same rays (`counters`).
 // Returns the number of renders compared.
 int expect_render_matches(const Scene& scene, RenderOptions opt, const std::vector<float>& reference,
@@ -1008,7 +1077,7 @@ TEST(Render, BatchedPathsMatchTracePath) {
     RenderOptions opt;
     opt.spp = 3;  // batches straddle pixels; a tile's last batch is partial
     opt.seed = 5;
-    int compared = 0, outside = 0;
+    int compared = 0, outside = 0, records = 0, nee[2] = {0, 0};
     // A fisheye's film points outside its image circle are black (CameraSample::outside).
     for (CameraType type : {CameraType::Perspective, CameraType::Fisheye}) {
         d.camera.type = type;
@@ -1044,10 +1113,14 @@ TEST(Render, BatchedPathsMatchTracePath) {
                         for (size_t i = 0; i < reference.size(); ++i)
                             differing += values[i / 3 * 4 + 1 + i % 3] != reference[i];
                         EXPECT_EQ(differing, 0) << what << ", render_channels";
+                        if (replayable) expect_records_match(*scene, opt, what, records, nee);
                     }
     }
     EXPECT_EQ(compared, 2 * (2 * 8 + 3 + 3 + 2));
     EXPECT_GT(outside, 0);
+    EXPECT_GT(records, 0);
+    EXPECT_GT(nee[0], 0);
+    EXPECT_GT(nee[1], 0);
 }
 
 // The batches against trace_path for each sampling strategy at 0, 1 and 3 bounces, and with MIS
@@ -1072,6 +1145,14 @@ int expect_strategies_match(const Scene& scene, RenderOptions opt, int variant, 
                 for (float v : reference) total += v;
                 EXPECT_GT(total, 0.0) << what;
                 compared += expect_render_matches(scene, opt, reference, counters, what);
+                if (replayable) {
+                    int records = 0, nee[2] = {0, 0};
+                    expect_records_match(scene, opt, what, records, nee);
+                    EXPECT_GT(records, 0) << what;
+                    if (sampling != LightSampling::BSDFOnly && bounces > 0) {
+                        EXPECT_GT(nee[0], 0) << what;
+                    }
+                }
             }
     return compared;
 }
