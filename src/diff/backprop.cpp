@@ -129,7 +129,7 @@ VertexGeometry::VertexGeometry(const Scene& scene, const Hit& hit, const Vec3f& 
 
 template <class A>
 void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
-                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir) {
+                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir, bool positions) {
     const Mesh& m = *g.mesh;
     float b[3] = {1.f - g.th.b1 - g.th.b2, g.th.b1, g.th.b2};
     A db1 = a.db.x, db2 = a.db.y;
@@ -177,6 +177,7 @@ void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGra
         db1 += dot(dN, n[1] - n[0]);
         db2 += dot(dN, n[2] - n[0]);
     }
+    if (!positions) return;
     // Geometric normal ng = normalize(cross(e1, e2)) (also the shading normal without normals).
     const TVec3<A> dng = m.normals ? a.dng : a.dng + a.dn;
     if (!is_black(dng)) {
@@ -205,11 +206,11 @@ void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGra
 }
 
 template void finish_hit<float>(const VertexGeometry&, const HitAdjoint&, const SceneGradients::MeshSlots*,
-                                GradSink&, const Vec3f&, const Vec3f&, Vec3f&, Vec3f&);
+                                GradSink&, const Vec3f&, const Vec3f&, Vec3f&, Vec3f&, bool);
 #define EDGEPATH_FINISH_HIT_N(N)                                                                                     \
     template void finish_hit<AdjN<N>>(const VertexGeometry&, const THitAdjoint<AdjN<N>>&,                             \
                                       const SceneGradients::MeshSlots*, GradSink&, const Vec3f&, const Vec3f&,        \
-                                      TVec3<AdjN<N>>&, TVec3<AdjN<N>>&);                                              \
+                                      TVec3<AdjN<N>>&, TVec3<AdjN<N>>&, bool);                                        \
     template void d_texture<AdjN<N>>(const Texture&, const GradSlot&, Vec2f, const AdjN<N>*, GradSink&,              \
                                      TVec2<AdjN<N>>*);
 EDGEPATH_FINISH_HIT_N(4)
@@ -429,6 +430,21 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
             m = m || (V[k].next_delta && size_t(mat) < slots.materials.size() && slots.materials[mat].ior.wanted());
         }
     }
+    // Whether the adjoint of vertex k's position and of the direction that found it reaches
+    // anything wanted: the camera (the camera ray), the vertices of a mesh the path met up to k,
+    // or past a smooth bounce before k (its direction moves with its normal and index, and the
+    // vertex after it with that direction). Once true it stays so along the path. Where it is
+    // false, finish_hit leaves the positions out (nothing they would add is wanted).
+    uint64_t positions = 0;
+    {
+        bool m = slots.camera.wanted();
+        for (int k = 0; k < K && k < 64; ++k) {
+            const SceneGradients::MeshSlots* ms = mesh_slots(slots, V[k].hit.mesh);
+            m = m || (ms && ms->vertices.wanted());
+            if (m) positions |= uint64_t(1) << k;
+            m = m || V[k].next_delta;
+        }
+    }
     for (int k = K - 1; k >= 0; --k) {
         const PathVertexRecord& r = V[k];
         VertexGeometry g(scene, r.hit, r.origin, r.dir);
@@ -604,7 +620,7 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
 
         TVec3<A> d_origin(A(0)), d_dir(A(0));
         d_normal_map(scene, g, slots, sink, ha);
-        finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir);
+        finish_hit(g, ha, ms, sink, r.origin, r.dir, d_origin, d_dir, k >= 64 || ((positions >> k) & 1) != 0);
         // wo = -d: the adjoint of the direction of the ray that found this vertex.
         d_dir -= dwo;
         dp_next = d_origin;

@@ -69,10 +69,13 @@ struct THitAdjoint {
 using HitAdjoint = THitAdjoint<float>;
 
 // Sends the adjoints `a` of a hit to the mesh's buffers (`ms`, may be null) and adds the
-// adjoint of the ray through the intersection to (d_origin, d_dir).
+// adjoint of the ray through the intersection to (d_origin, d_dir). Without `positions` (the
+// caller knows that neither the mesh's vertices nor the ray's adjoint reach anything wanted),
+// only the uvs', colours' and normals' buffers: the rest (the geometric normal, the point, the
+// intersection) is left out and (d_origin, d_dir) untouched.
 template <class A>
 void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGradients::MeshSlots* ms, GradSink& sink,
-                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir);
+                const Vec3f& origin, const Vec3f& dir, TVec3<A>& d_origin, TVec3<A>& d_dir, bool positions = true);
 
 // Adjoint of a texture lookup: texels into `slot`, and (if `duv`) the derivative along uv.
 template <class A>
