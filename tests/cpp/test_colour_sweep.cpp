@@ -122,14 +122,13 @@ TEST(ColourSweep, EachColourEqualsReverseModeWithItsUnitAdjoint) {
     }
 }
 
-
 // The sweep leaves out the adjoint of the vertices' positions (finish_hit's geometric normal,
 // point and intersection) where nothing wanted needs it: no camera, no vertices of a mesh the
 // path met before, no smooth bounce before (past a mirror or glass the next vertex moves with the
 // bounce's normal and index). For every parameter group alone (the glass made smooth), its
-// projection equals, bit for bit,
-// the one with the camera wanted too in a zero direction (which keeps every position's adjoint:
-// what it adds to the projection is zero), path by path, with the interior term of 3 bounces.
+// projection equals, bit for bit, the one with the camera wanted too in a zero direction (which
+// keeps every position's adjoint: what it adds to the projection is zero), path by path, with
+// the interior term of 3 bounces.
 TEST(ColourSweep, PositionsLeftOutOnlyWhereNothingWantedNeedsThem) {
     AllAdjointsScene s;
     s.glass_rough[0] = 0.f;  // smooth glass: its index moves the vertices past it
