@@ -418,31 +418,26 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
             if (last.next_delta) dd_next = d_dir;
         }
     }
-    // Whether anything wanted moves vertex k: the camera, a mesh the path met up to k, or the
-    // index of refraction of glass it passed.
-    uint64_t moves = 0;
-    if (secondary) {
-        bool m = secondary->camera_wanted();
-        for (int k = 0; k < K && k < 64; ++k) {
-            m = m || secondary->mesh_wanted(V[k].hit.mesh);
-            if (m) moves |= uint64_t(1) << k;
-            const int mat = scene.meshes[V[k].hit.mesh].material;
-            m = m || (V[k].next_delta && size_t(mat) < slots.materials.size() && slots.materials[mat].ior.wanted());
-        }
-    }
-    // Whether the adjoint of vertex k's position and of the direction that found it reaches
-    // anything wanted: the camera (the camera ray), the vertices of a mesh the path met up to k,
-    // or past a smooth bounce before k (its direction moves with its normal and index, and the
-    // vertex after it with that direction). Once true it stays so along the path. Where it is
-    // false, finish_hit leaves the positions out (nothing they would add is wanted).
-    uint64_t positions = 0;
+    // Along the path from the camera, two masks that stay set once set at a vertex k:
+    // - moves (the edge term's): whether anything wanted moves vertex k: the camera, the vertices
+    //   of a mesh the path met up to k, or the index of refraction of glass it passed;
+    // - positions: whether the adjoint of vertex k's position and of the direction that found it
+    //   reaches anything wanted: the same, or past any smooth bounce before k (its direction
+    //   moves with its normal and index, and the vertex after it with that direction). Where it
+    //   is clear, finish_hit leaves the positions out (nothing they would add is wanted).
+    uint64_t moves = 0, positions = 0;
     {
-        bool m = slots.camera.wanted();
+        bool geometry = slots.camera.wanted(), past_index = false, past_smooth = false;
         for (int k = 0; k < K && k < 64; ++k) {
             const SceneGradients::MeshSlots* ms = mesh_slots(slots, V[k].hit.mesh);
-            m = m || (ms && ms->vertices.wanted());
-            if (m) positions |= uint64_t(1) << k;
-            m = m || V[k].next_delta;
+            geometry = geometry || (ms && ms->vertices.wanted());
+            if (geometry || past_index) moves |= uint64_t(1) << k;
+            if (geometry || past_smooth) positions |= uint64_t(1) << k;
+            if (V[k].next_delta) {
+                const int mat = scene.meshes[V[k].hit.mesh].material;
+                past_index = past_index || (size_t(mat) < slots.materials.size() && slots.materials[mat].ior.wanted());
+                past_smooth = true;
+            }
         }
     }
     for (int k = K - 1; k >= 0; --k) {

@@ -12,8 +12,9 @@ namespace edgepath {
 class SecondaryEdges;
 struct EdgeTermLog;
 
-// Adds d(adjoint . L)/d(parameters) for the path in `rec` to `sink`; with `secondary`, also the
-// boundary term of the edges seen from each scattering vertex (edges/secondary.h). With `log`,
+// Adds d(adjoint . L)/d(parameters) for the path in `rec` to `sink`; with `secondary` (made for
+// the same `slots`), also the boundary term of the edges seen from each scattering vertex
+// (edges/secondary.h). With `log`,
 // those edge terms are recorded (log->replaying false) or replayed from an earlier sweep over
 // the same path (true) instead of sampled again.
 void backprop_path(const Scene& scene, const SceneGradients& slots, const PathRecord& rec, const Vec3f& adjoint,
