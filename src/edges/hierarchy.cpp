@@ -1,7 +1,6 @@
 #include "edges/hierarchy.h"
 
 #include <algorithm>
-#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstring>
@@ -13,6 +12,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
+#include "math/simd4.h"
 #include "scene/scene.h"
 
 namespace edgepath {
@@ -147,66 +147,51 @@ bool BoundsCone::towards(const Vec3f& p, const Vec3f& c, float r) {
 
 // ---- building ---------------------------------------------------------------------------------
 
-struct EdgeHierarchy::Input {
-    std::vector<Vec3f> p0, p1, n0, n1;
-    std::vector<uint8_t> always;
-    std::vector<uint8_t> crease;       // a crease (with two faces of nonzero area)
-    std::vector<uint8_t> seam;         // a crease along which more than the face normal jumps
-    std::vector<uint8_t> dark_behind;  // two faces that are black from behind
-    std::vector<uint8_t> emissive;     // an edge of an emitter
-    const std::vector<int32_t>* ids;
-    // Element k is of edge (*ids)[(*order)[k]]: the leaves' order of a built tree (refit() reads
-    // it straight through); null: of edge (*ids)[k].
-    const std::vector<int32_t>* order;
-    int32_t id(size_t k) const { return (*ids)[order ? size_t((*order)[k]) : k]; }
+EdgeHierarchy::LeafInput EdgeHierarchy::leaf_input(const Scene& scene, const Edge& e) {
+    LeafInput in;
+    const Mesh& m = scene.meshes[size_t(e.mesh)];
+    in.p0 = m.vertex(e.v0);
+    in.p1 = m.vertex(e.v1);
+    if (e.flat) in.p0 = in.p1 = (in.p0 + in.p1) * 0.5f;  // an empty leaf (Edge::flat): never sampled
+    in.always = e.kind != EdgeKind::Smooth;
+    // An edge between faces that are black seen from behind (a one-sided material, no
+    // emission from the back): from a point behind both, either side of it looks black
+    // (or both sides see what hides it), so it adds nothing there.
+    const Material& mat = scene.materials[size_t(m.material)];
+    in.crease = e.kind == EdgeKind::Crease;
+    in.seam = in.crease && e.seam;
+    in.dark_behind = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+    in.emissive = m.is_emitter();
+    in.n0 = in.n1 = Vec3f(0.f);
+    if (!in.always || in.crease) {
+        // The faces' unit normals, as the scene keeps them (normalize(face_normal(f)),
+        // the face normal itself where its length is 0: one read for each face).
+        const Vec3f a = m.triangle_data[e.f0].ng, b = m.triangle_data[e.f1].ng;
+        // A face of zero area has no side: its edge is treated as a discontinuity.
+        if (length(a) > 0.f && length(b) > 0.f) {
+            in.n0 = a;
+            in.n1 = b;
+        } else {
+            in.always = true;
+            in.dark_behind = false;
+            in.crease = false;
+            in.seam = false;
+        }
+    }
+    return in;
+}
 
-    // What the hierarchy needs of the edges `ids` (indices into scene.edges()), in the order
-    // `in_order` gives (null: theirs).
-    Input(const Scene& scene, const std::vector<int32_t>& edges, const std::vector<int32_t>* in_order = nullptr)
-        : ids(&edges), order(in_order) {
+// What the build needs of the edges `ids` (indices into scene.edges()), in their order.
+struct EdgeHierarchy::Input {
+    std::vector<LeafInput> leaf;
+    const std::vector<int32_t>* ids;
+    int32_t id(size_t k) const { return (*ids)[k]; }
+
+    Input(const Scene& scene, const std::vector<int32_t>& edges) : ids(&edges) {
         const std::vector<Edge>& all = scene.edges();
         const size_t n = edges.size();
-        p0.resize(n);
-        p1.resize(n);
-        n0.resize(n);
-        n1.resize(n);
-        always.resize(n);
-        dark_behind.resize(n);
-        emissive.resize(n);
-        crease.resize(n);
-        seam.resize(n);
-        auto one = [&](size_t i) {
-            const Edge& e = all[size_t(id(i))];
-            const Mesh& m = scene.meshes[size_t(e.mesh)];
-            p0[i] = m.vertex(e.v0);
-            p1[i] = m.vertex(e.v1);
-            if (e.flat) p0[i] = p1[i] = (p0[i] + p1[i]) * 0.5f;  // an empty leaf (Edge::flat): never sampled
-            always[i] = e.kind != EdgeKind::Smooth;
-            // An edge between faces that are black seen from behind (a one-sided material, no
-            // emission from the back): from a point behind both, either side of it looks black
-            // (or both sides see what hides it), so it adds nothing there.
-            const Material& mat = scene.materials[size_t(m.material)];
-            crease[i] = e.kind == EdgeKind::Crease;
-            seam[i] = crease[i] && e.seam;
-            dark_behind[i] = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
-            emissive[i] = m.is_emitter();
-            n0[i] = n1[i] = Vec3f(0.f);
-            if (!always[i] || crease[i]) {
-                // The faces' unit normals, as the scene keeps them (normalize(face_normal(f)),
-                // the face normal itself where its length is 0: one read for each face).
-                const Vec3f a = m.triangle_data[e.f0].ng, b = m.triangle_data[e.f1].ng;
-                // A face of zero area has no side: its edge is treated as a discontinuity.
-                if (length(a) > 0.f && length(b) > 0.f) {
-                    n0[i] = a;
-                    n1[i] = b;
-                } else {
-                    always[i] = 1;
-                    dark_behind[i] = 0;
-                    crease[i] = 0;
-                    seam[i] = 0;
-                }
-            }
-        };
+        leaf.resize(n);
+        auto one = [&](size_t i) { leaf[i] = leaf_input(scene, all[size_t(edges[i])]); };
         if (n > size_t(kParallelRange))
             tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
                 for (size_t i = r.begin(); i != r.end(); ++i) one(i);
@@ -216,29 +201,39 @@ struct EdgeHierarchy::Input {
     }
 };
 
-void EdgeHierarchy::set_leaf(const Input& in, size_t i, Node& node) {
-    node.lo = min(in.p0[i], in.p1[i]);
-    node.hi = max(in.p0[i], in.p1[i]);
-    node.length = length(in.p1[i] - in.p0[i]);
-    node.edge = in.id(i);
+void EdgeHierarchy::ConeInput::resize(size_t n) {
+    for (std::vector<float>& c : v) c.resize(n);
+}
+
+void EdgeHierarchy::ConeInput::set(size_t k, const LeafInput& in) {
+    const Vec3f* from[3] = {&in.n0, &in.n1, &in.p0};
+    for (int a = 0; a < 3; ++a)
+        for (int c = 0; c < 3; ++c) v[3 * a + c][k] = (*from[a])[c];
+}
+
+void EdgeHierarchy::set_leaf(const LeafInput& in, int32_t edge, Node& node) {
+    node.lo = min(in.p0, in.p1);
+    node.hi = max(in.p0, in.p1);
+    node.length = length(in.p1 - in.p0);
+    node.edge = edge;
     node.count = 1;
-    node.always = in.always[i] != 0;
+    node.always = in.always;
     node.center = (node.lo + node.hi) * 0.5f;
     node.radius = length(node.hi - node.lo) * 0.5f;
-    node.leaf.a = in.p0[i];
-    node.leaf.b = in.p1[i];
-    node.leaf.n0 = in.n0[i];
-    node.leaf.n1 = in.n1[i];
-    node.dark_behind = in.dark_behind[i] != 0;
-    node.emissive = in.emissive[i] != 0;
-    node.crease = in.crease[i] != 0;
-    node.seam = in.seam[i] != 0;
+    node.leaf.a = in.p0;
+    node.leaf.b = in.p1;
+    node.leaf.n0 = in.n0;
+    node.leaf.n1 = in.n1;
+    node.dark_behind = in.dark_behind;
+    node.emissive = in.emissive;
+    node.crease = in.crease;
+    node.seam = in.seam;
     node.cone_cos = -1.f;
     node.dihedral = 0.f;
-    const Vec3f s = in.n0[i] + in.n1[i];
+    const Vec3f s = in.n0 + in.n1;
     if ((!node.always || node.crease) && length(s) > 1e-6f) {
         // The cone's axis (the normals' mean) is not kept: a leaf tests its two faces exactly.
-        node.cone_cos = std::clamp(dot(normalize(s), in.n0[i]), -1.f, 1.f);
+        node.cone_cos = std::clamp(dot(normalize(s), in.n0), -1.f, 1.f);
         node.dihedral = 2.f * std::acos(node.cone_cos);
     }
 }
@@ -254,15 +249,17 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
     node.parent = parent;
     node.first = begin;
     if (end - begin == 1) {
-        set_leaf(in, size_t(items[size_t(begin)]), node);
+        const size_t i = size_t(items[size_t(begin)]);
+        set_leaf(in.leaf[i], in.id(i), node);
+        cone_in_.set(size_t(begin), in.leaf[i]);  // its place in the leaves' order
         leaf_of_[size_t(node.edge)] = index;
         return;
     }
     // Median split of the centroids along the longest axis of their box.
     Vec3f lo(1e30f), hi(-1e30f);
     for (int k = begin; k < end; ++k) {
-        const size_t i = size_t(items[size_t(k)]);
-        const Vec3f c = (in.p0[i] + in.p1[i]) * 0.5f;
+        const LeafInput& e = in.leaf[size_t(items[size_t(k)])];
+        const Vec3f c = (e.p0 + e.p1) * 0.5f;
         lo = min(lo, c);
         hi = max(hi, c);
     }
@@ -270,7 +267,8 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
     const int axis = ext.x >= ext.y && ext.x >= ext.z ? 0 : (ext.y >= ext.z ? 1 : 2);
     const int mid = (begin + end) / 2;
     std::nth_element(items.begin() + begin, items.begin() + mid, items.begin() + end, [&](int32_t a, int32_t b) {
-        return (in.p0[size_t(a)][axis] + in.p1[size_t(a)][axis]) < (in.p0[size_t(b)][axis] + in.p1[size_t(b)][axis]);
+        const LeafInput &ea = in.leaf[size_t(a)], &eb = in.leaf[size_t(b)];
+        return (ea.p0[axis] + ea.p1[axis]) < (eb.p0[axis] + eb.p1[axis]);
     });
     const int32_t l = next, r = next + 1;
     node.left = l;
@@ -283,35 +281,61 @@ void EdgeHierarchy::build_range(const Input& in, std::vector<int32_t>& items, in
         build_range(in, items, mid, end, r, index, next_r);
     }
     finish_inner(index);
-    // The children are done: items [begin, end) are in the leaves' order.
-    if (has_cone(node))
-        fit_cone(node, end - begin, in.n0.data(), in.n1.data(), in.p0.data(),
-                 [&](int k) { return size_t(items[size_t(begin + k)]); });
+    // The children are done: items [begin, end) are in the leaves' order, and so are their
+    // cones' inputs.
+    if (has_cone(node)) fit_cone(node);
 }
 
 // A tight normal cone and the range of the plane equations at the centre, over the faces of the
-// node's (smooth) edges: O(n) per node, O(n log n) in all. `item(k)`, k in [0, count), gives the
-// k-th of the node's edges in the leaves' order, as an index into the arrays n0, n1, p0 (the
-// build's Input's, through its items; the refit's copies in the leaves' order, read straight
-// through): the same operations in the same order either way.
-template <class Item>
-void EdgeHierarchy::fit_cone(Node& n, int count, const Vec3f* n0, const Vec3f* n1, const Vec3f* p0, Item&& item) {
+// node's (smooth) edges, from their inputs in the leaves' order (cone_in_, from node.first on):
+// O(n) per node, O(n log n) in all. The sum of the normals in the leaves' order, one edge after
+// another; the least cosine to the axis and the planes' range four edges at a time (each lane's
+// products and sums as the scalar dot products make them; a least or greatest value is the same
+// whatever the order it is found in).
+void EdgeHierarchy::fit_cone(Node& n) const {
+    const size_t first = size_t(n.first), end = first + size_t(n.count);
+    const float *n0x = cone_in_.v[0].data(), *n0y = cone_in_.v[1].data(), *n0z = cone_in_.v[2].data();
+    const float *n1x = cone_in_.v[3].data(), *n1y = cone_in_.v[4].data(), *n1z = cone_in_.v[5].data();
+    const float *px = cone_in_.v[6].data(), *py = cone_in_.v[7].data(), *pz = cone_in_.v[8].data();
     Vec3f sum(0.f);
-    for (int k = 0; k < count; ++k) {
-        const size_t i = item(k);
-        sum += n0[i] + n1[i];
+    for (size_t i = first; i < end; ++i) {
+        sum.x += n0x[i] + n1x[i];
+        sum.y += n0y[i] + n1y[i];
+        sum.z += n0z[i] + n1z[i];
     }
     n.cone_cos = -1.f;
     n.cone = Cone();
     const bool axis = length(sum) > 1e-6f;
     n.cone.axis = axis ? normalize(sum) : Vec3f(0.f, 0.f, 1.f);
+    const Vec3f ax = n.cone.axis, c = n.center;
     // The normals' least cosine to the axis and the planes' range, in one sweep.
-    float lo = 1.f, plo = 1e30f, phi = -1e30f;
-    for (int k = 0; k < count; ++k) {
-        const size_t i = item(k);
-        if (axis) lo = std::min(lo, std::min(dot(n.cone.axis, n0[i]), dot(n.cone.axis, n1[i])));
-        const Vec3f to_c = n.center - p0[i];
-        const float a = dot(n0[i], to_c), b = dot(n1[i], to_c);
+    auto dot3 = [](auto x0, auto y0, auto z0, auto x1, auto y1, auto z1) { return x0 * x1 + y0 * y1 + z0 * z1; };
+    F4 lo4(1.f), plo4(1e30f), phi4(-1e30f);
+    size_t i = first;
+    for (; i + 4 <= end; i += 4) {
+        const F4 ax0 = F4::loadu(n0x + i), ay0 = F4::loadu(n0y + i), az0 = F4::loadu(n0z + i);
+        const F4 ax1 = F4::loadu(n1x + i), ay1 = F4::loadu(n1y + i), az1 = F4::loadu(n1z + i);
+        if (axis)
+            lo4 = min_std(lo4, min_std(dot3(F4(ax.x), F4(ax.y), F4(ax.z), ax0, ay0, az0),
+                                       dot3(F4(ax.x), F4(ax.y), F4(ax.z), ax1, ay1, az1)));
+        const F4 tx = F4(c.x) - F4::loadu(px + i), ty = F4(c.y) - F4::loadu(py + i), tz = F4(c.z) - F4::loadu(pz + i);
+        const F4 a = dot3(ax0, ay0, az0, tx, ty, tz), b = dot3(ax1, ay1, az1, tx, ty, tz);
+        plo4 = min_std(plo4, min_std(a, b));
+        phi4 = max_std(phi4, max_std(a, b));
+    }
+    alignas(16) float l[4], pl[4], ph[4];
+    lo4.store(l);
+    plo4.store(pl);
+    phi4.store(ph);
+    float lo = std::min(std::min(l[0], l[1]), std::min(l[2], l[3]));
+    float plo = std::min(std::min(pl[0], pl[1]), std::min(pl[2], pl[3]));
+    float phi = std::max(std::max(ph[0], ph[1]), std::max(ph[2], ph[3]));
+    for (; i < end; ++i) {
+        if (axis)
+            lo = std::min(lo, std::min(dot3(ax.x, ax.y, ax.z, n0x[i], n0y[i], n0z[i]),
+                                       dot3(ax.x, ax.y, ax.z, n1x[i], n1y[i], n1z[i])));
+        const float tx = c.x - px[i], ty = c.y - py[i], tz = c.z - pz[i];
+        const float a = dot3(n0x[i], n0y[i], n0z[i], tx, ty, tz), b = dot3(n1x[i], n1y[i], n1z[i], tx, ty, tz);
         plo = std::min(plo, std::min(a, b));
         phi = std::max(phi, std::max(a, b));
     }
@@ -367,7 +391,6 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges,
 }
 
 void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
-    assert(!in.order);
     nodes_.clear();
     const std::vector<Edge>& all = scene.edges();
     leaf_of_.assign(all.size(), -1);
@@ -388,12 +411,13 @@ void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
     for (int g = 0; g < 2; ++g) {
         const size_t lo = g == 0 ? 0 : group, hi = g == 0 ? group : n;
         for (size_t i = lo; i < hi; ++i)
-            if (in.always[i]) items.push_back(int32_t(i));
+            if (in.leaf[i].always) items.push_back(int32_t(i));
         splits[g] = int(items.size());
         for (size_t i = lo; i < hi; ++i)
-            if (!in.always[i]) items.push_back(int32_t(i));
+            if (!in.leaf[i].always) items.push_back(int32_t(i));
     }
     group_root_ = group > 0 ? 1 : (everything ? 0 : -1);
+    cone_in_.resize(n);
     if (n > 0) {
         nodes_.resize(2 * n - 1);
         if (group == 0) {
@@ -463,82 +487,84 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
                    f.same = e.mesh == k.mesh && e.v0 == k.v0 && e.v1 == k.v1 && e.f0 == k.f0 && e.f1 == k.f1 &&
                             e.kind == k.kind;
                }).same;
-    // The same edges: read in the leaves' order, as the leaves lie in nodes_ (nearly: a leaf
-    // beside an inner node comes before that node's subtree), and as refit() reads them.
-    const Input in(scene, edges, same ? &order_ : nullptr);
-    // Which leaves changed: their edge's ends or faces (a refit), only the flags the materials
-    // and emission decide (those flags alone), or which tree (discontinuity or smooth) it
-    // belongs in (a face became or stopped being degenerate: a rebuild).
+    // The same edges: each leaf set from its edge as the scene has it now, in the leaves' order,
+    // with its cone's input, in one sweep that finds which changed: their ends or faces (a
+    // refit), only the flags the materials and emission decide (those flags alone), or which
+    // tree (discontinuity or smooth) they belong in (a face became or stopped being degenerate:
+    // a rebuild, which sets every node anew).
     bool moved = false, flags = false;
     if (same) {
-        const Found f = over(nodes_.size(), [&](size_t k, Found& f) {
-            const Node& leaf = nodes_[k];
-            if (leaf.left >= 0) return;
-            const size_t i = size_t(leaf.first);
-            f.same = leaf.always == (in.always[i] != 0) && leaf.crease == (in.crease[i] != 0) &&
-                     leaf.seam == (in.seam[i] != 0);
-            f.moved = f.moved || !(bitwise_equal(leaf.leaf.a, in.p0[i]) && bitwise_equal(leaf.leaf.b, in.p1[i]) &&
-                                   bitwise_equal(leaf.leaf.n0, in.n0[i]) && bitwise_equal(leaf.leaf.n1, in.n1[i]));
-            f.flags = f.flags || leaf.dark_behind != (in.dark_behind[i] != 0) || leaf.emissive != (in.emissive[i] != 0);
+        // (The leaves' order is not the edge list's: each edge, then its vertices and faces,
+        // fetched some leaves ahead.)
+        auto fetch = [&](size_t k, bool ends) {
+            if (k >= n) return;
+            const Edge& e = all[size_t(edges[size_t(order_[k])])];
+            if (!ends) {
+                __builtin_prefetch(&e);
+                return;
+            }
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            __builtin_prefetch(m.vertices + 3 * int64_t(e.v0));
+            __builtin_prefetch(m.vertices + 3 * int64_t(e.v1));
+            __builtin_prefetch(m.triangle_data + e.f0);
+            if (e.f1 >= 0) __builtin_prefetch(m.triangle_data + e.f1);
+        };
+        const Found f = over(n, [&](size_t k, Found& f) {
+            fetch(k + 16, false);
+            fetch(k + 8, true);
+            const int32_t id = edges[size_t(order_[k])];
+            Node& leaf = nodes_[size_t(leaf_of_[size_t(id)])];
+            const LeafInput in = leaf_input(scene, all[size_t(id)]);
+            f.same = leaf.always == in.always && leaf.crease == in.crease && leaf.seam == in.seam;
+            if (!f.same) return;
+            f.moved = f.moved || !(bitwise_equal(leaf.leaf.a, in.p0) && bitwise_equal(leaf.leaf.b, in.p1) &&
+                                   bitwise_equal(leaf.leaf.n0, in.n0) && bitwise_equal(leaf.leaf.n1, in.n1));
+            f.flags = f.flags || leaf.dark_behind != in.dark_behind || leaf.emissive != in.emissive;
+            set_leaf(in, id, leaf);
+            cone_in_.set(k, in);
         });
         same = f.same;
         moved = f.moved;
         flags = f.flags;
     }
     if (!same) {
-        // The build reads its input in the edges' own order (and rewrites order_).
-        if (in.order)
-            build(scene, Input(scene, edges), group);
-        else
-            build(scene, in, group);
+        build(scene, Input(scene, edges), group);
         return done(Update::Built);
     }
     if (moved) {
-        refit(in);
+        refit(0);
         return done(Update::Refit);
     }
-    if (flags) refresh_flags(in);
+    if (flags) refresh_inner_flags();
     return done(Update::Reused);
 }
 
-void EdgeHierarchy::refit(const Input& in) {
-    // `in` is in the leaves' order (update()): leaf node k's edge is element nodes_[k].first.
-    const size_t n = in.ids->size(), count = nodes_.size();
-    auto leaves = [&](size_t b, size_t e) {
-        for (size_t k = b; k < e; ++k)
-            if (nodes_[k].left < 0) set_leaf(in, size_t(nodes_[k].first), nodes_[k]);
-    };
-    if (n > size_t(kParallelRange))
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 2048),
-                          [&](const tbb::blocked_range<size_t>& r) { leaves(r.begin(), r.end()); });
-    else
-        leaves(0, count);
-    // Children come after their parent: bottom-up in reverse.
-    for (size_t k = count; k-- > 0;)
-        if (nodes_[k].left >= 0) finish_inner(int32_t(k));
-    // The cones of the nodes build_range made, over their leaves' items, as the build fits them:
-    // each node's items lie side by side in the leaves' order, read in one sweep.
-    auto cones = [&](size_t b, size_t e) {
-        for (size_t k = b; k < e; ++k) {
-            Node& node = nodes_[k];
-            if (has_cone(node))
-                fit_cone(node, node.count, in.n0.data() + node.first, in.n1.data() + node.first,
-                         in.p0.data() + node.first, [](int j) { return size_t(j); });
-        }
-    };
-    if (n > size_t(kParallelRange))
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, count, 64),
-                          [&](const tbb::blocked_range<size_t>& r) { cones(r.begin(), r.end()); });
-    else
-        cones(0, count);
+// The inner nodes of the subtree at `index` from their children's (set), bottom-up, and the
+// normal cones of those that have one, as the build makes them; large subtrees' halves in
+// parallel.
+void EdgeHierarchy::refit(int32_t index) {
+    Node& node = nodes_[size_t(index)];
+    if (node.left < 0) return;
+    if (node.count > kParallelRange)
+        tbb::parallel_invoke([&] { refit(node.left); }, [&] { refit(node.right()); });
+    else {
+        refit(node.left);
+        refit(node.right());
+    }
+    finish_inner(index);
+    if (has_cone(node)) fit_cone(node);
 }
 
 void EdgeHierarchy::refresh_flags(const Input& in) {
     for (size_t i = 0; i < in.ids->size(); ++i) {
         Node& leaf = nodes_[size_t(leaf_of_[size_t(in.id(i))])];
-        leaf.dark_behind = in.dark_behind[i] != 0;
-        leaf.emissive = in.emissive[i] != 0;
+        leaf.dark_behind = in.leaf[i].dark_behind;
+        leaf.emissive = in.leaf[i].emissive;
     }
+    refresh_inner_flags();
+}
+
+void EdgeHierarchy::refresh_inner_flags() {
     for (size_t k = nodes_.size(); k-- > 0;) {
         Node& node = nodes_[k];
         if (node.left < 0) continue;

@@ -388,11 +388,20 @@ private:
     // A subtree of at most this many edges is scored by the sum of its leaves (fewer descents end
     // where no leaf can contribute).
     static constexpr int kExactLeaves = 8;
+    // What a leaf is made of: its edge's ends (an empty leaf's both at its midpoint), its faces'
+    // unit normals (zero where it has none) and its flags, as the scene has them now.
+    struct LeafInput {
+        Vec3f p0, p1, n0, n1;
+        bool always, crease, seam, dark_behind, emissive;
+    };
+    static LeafInput leaf_input(const Scene& scene, const Edge& e);
     struct Input;
     void build(const Scene& scene, const Input& in, size_t group);
-    static void set_leaf(const Input& in, size_t i, Node& node);
-    void refit(const Input& in);
+    static void set_leaf(const LeafInput& in, int32_t edge, Node& node);
+    // The inner nodes and cones of the subtree at `index`, its leaves set (a refit).
+    void refit(int32_t index);
     void refresh_flags(const Input& in);
+    void refresh_inner_flags();
     // The subtree over items [begin, end) rooted at `index`, its other nodes from `next` on.
     void build_range(const Input& in, std::vector<int32_t>& items, int begin, int end, int32_t index, int32_t parent,
                      int32_t next);
@@ -401,8 +410,16 @@ private:
     void build_kinds(const Input& in, std::vector<int32_t>& items, int begin, int split, int end, int32_t index,
                      int32_t parent, int32_t next);
     void finish_inner(int32_t index);
-    template <class Item>
-    static void fit_cone(Node& n, int count, const Vec3f* n0, const Vec3f* n1, const Vec3f* p0, Item&& item);
+    // The cones' input in the leaves' order (a node's edges lie side by side from node.first):
+    // each edge's faces' normals n0, n1 and its end p0, one array per coordinate (x, y, z of n0,
+    // then of n1, then of p0), kept across updates.
+    struct ConeInput {
+        std::vector<float> v[9];
+        void resize(size_t n);
+        void set(size_t k, const LeafInput& in);
+    };
+    ConeInput cone_in_;
+    void fit_cone(Node& n) const;
     // Whether inner node n gets a normal cone: not where it joins the kinds' or groups' trees, nor
     // where it holds discontinuities other than creases, nor in a small subtree (at most
     // kExactLeaves edges), which the descents score by its leaves and never by its own bounds.

@@ -32,7 +32,8 @@ struct FilmEdge {
 // as that angle. (Any positive density is unbiased; this one puts the samples where the steps
 // are likely.)
 double smooth_edge_weight(const Mesh& m, const Edge& e) {
-    const float c = dot(normalize(m.face_normal(e.f0)), normalize(m.face_normal(e.f1)));
+    // The faces' unit normals as the scene keeps them: normalize(m.face_normal(f)), bit for bit.
+    const float c = dot(m.triangle_data[e.f0].ng, m.triangle_data[e.f1].ng);
     return std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
 }
 

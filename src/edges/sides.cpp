@@ -18,14 +18,14 @@ bool same_position(const Vec3f& a, const Vec3f& b) { return a.x == b.x && a.y ==
 
 // The vertex of face f that is at neither end of the edge (p0, p1); false if none (degenerate).
 bool third_vertex(const Mesh& m, int64_t f, const Vec3f& p0, const Vec3f& p1, Vec3f& c) {
-    const int32_t* t = m.indices + 3 * f;
-    for (int k = 0; k < 3; ++k) {
-        const Vec3f v = m.vertex(t[k]);
-        if (!same_position(v, p0) && !same_position(v, p1)) {
-            c = v;
+    // The triangle's vertices in its order, from the scene's copy (one record, not the index
+    // array and three vertices).
+    const TriangleData& td = m.triangle_data[f];
+    for (const Vec3f* v : {&td.v0, &td.v1, &td.v2})
+        if (!same_position(*v, p0) && !same_position(*v, p1)) {
+            c = *v;
             return true;
         }
-    }
     return false;
 }
 

@@ -30,6 +30,7 @@ struct F4 {
     F4(__m128 x) : v(x) {}
     F4(float s) : v(_mm_set1_ps(s)) {}
     static F4 load(const float* p) { return _mm_load_ps(p); }  // 16-byte aligned
+    static F4 loadu(const float* p) { return _mm_loadu_ps(p); }  // any alignment
     void store(float* p) const { _mm_store_ps(p, v); }
 };
 
@@ -101,6 +102,7 @@ struct F4 {
         std::memcpy(r.v, p, sizeof r.v);
         return r;
     }
+    static F4 loadu(const float* p) { return load(p); }
     void store(float* p) const { std::memcpy(p, v, sizeof v); }
 };
 

@@ -1122,6 +1122,17 @@ TEST(EdgeHierarchy, RefitEqualsAFreshBuildThatSplitsAlike) {
     EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
     EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
     expect_fresh(flags, d);
+    // Both at once: the vertices moved and the creases one-sided again (the leaves' flags set
+    // with their bounds, the inner nodes' from theirs).
+    for (MeshData* m : {&hs.sphere, &hs.box, &hs.quad})
+        for (float& x : m->vertices) x *= 0.5f;  // a power of two: a fresh build splits alike
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    d.materials[0].two_sided = false;
+    update_scene(*scene, d);
+    const EdgeHierarchy& both = *scene->edge_hierarchy(ids, group);
+    EXPECT_EQ(scene->hierarchy_stats().refits, 2u);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    expect_fresh(both, d);
 }
 
 // The same at the size where the checks, the leaves and the cones of an update go in parallel
