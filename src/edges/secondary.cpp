@@ -4,6 +4,7 @@
 #include <cmath>
 #include "edges/sides.h"
 #include "render/path.h"
+#include "render/tiles.h"
 
 namespace edgepath {
 
@@ -14,14 +15,18 @@ namespace {
 constexpr float kTouchStep = 1e-4f;
 }  // namespace
 
-void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&)) {
+void SecondaryEdges::build_set(EdgeSet& set, const std::vector<float>& lengths,
+                               bool (*keep)(const SecondaryEdges&, const Edge&)) {
     const std::vector<Edge>& all = scene_.edges();
     set.cumulative.assign(1, 0.0);
     for (size_t i = 0; i < all.size(); ++i) {
         if (all[i].flat || !keep(*this, all[i])) continue;
-        const Mesh& m = scene_.meshes[size_t(all[i].mesh)];
-        const double len = length(m.vertex(all[i].v1) - m.vertex(all[i].v0));
+        const double len = lengths[i];
         if (!(len > 0.0)) continue;
+        if (!by_length_) {  // only whether the set has an edge
+            set.total = 1.0;
+            return;
+        }
         set.edges.push_back(int32_t(i));
         set.cumulative.push_back(set.cumulative.back() + len);
     }
@@ -42,29 +47,40 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     if (!any && !ior) return;
     if (!any) every = true;  // only shading points move: every edge alike
     uniform_ = opt.edge_sampling == EdgeSampling::Uniform;
+    // Edges are sampled by length with the uniform sampler, and at a rough dielectric's
+    // vertices (add()); otherwise the sets only tell whether there is an edge to sample.
+    by_length_ = uniform_;
+    for (const Material& m : scene.materials) by_length_ = by_length_ || m.kind == MaterialKind::Dielectric;
+    // Each edge's length, in parallel over chunks of the list.
+    const std::vector<Edge>& edges = scene.edges();
+    std::vector<float> lengths(edges.size());
+    for_each_chunk(opt, int64_t(edges.size()), 16384, [&](int64_t begin, int64_t end) {
+        for (int64_t i = begin; i < end; ++i) {
+            const Edge& e = edges[size_t(i)];
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            lengths[size_t(i)] = length(m.vertex(e.v1) - m.vertex(e.v0));
+        }
+    });
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
-    build_set(all_, [](const SecondaryEdges&, const Edge&) { return true; });
+    build_set(all_, lengths, [](const SecondaryEdges&, const Edge&) { return true; });
     total_ = all_.total;
     // Where nothing wanted moves the shading point, only the wanted meshes' edges matter.
     if (!every) {
-        build_set(wanted_, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
+        build_set(wanted_, lengths, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
         has_wanted_set_ = true;
     }
-    if (!uniform_ && !all_.edges.empty()) {
+    if (!uniform_ && all_.total > 0.0) {
         // The wanted meshes' edges first, under a subtree of their own; with the flat edges of
         // a scene whose vertices move (Edge::flat), empty leaves there, so that the same tree
         // is refit while moves turn edges flat and back.
-        const std::vector<Edge>& edges = scene.edges();
         std::vector<int32_t> order;
-        order.reserve(all_.edges.size());
+        order.reserve(edges.size());
         size_t group = 0;
         for (int pass = 0; pass < (has_wanted_set_ ? 2 : 1); ++pass) {
             for (size_t i = 0; i < edges.size(); ++i) {
-                const Edge& e = edges[i];
-                if (has_wanted_set_ && mesh_wanted(e.mesh) != (pass == 0)) continue;
-                const Mesh& m = scene.meshes[size_t(e.mesh)];
-                if (!(length(m.vertex(e.v1) - m.vertex(e.v0)) > 0.f)) continue;
+                if (has_wanted_set_ && mesh_wanted(edges[i].mesh) != (pass == 0)) continue;
+                if (!(lengths[i] > 0.f)) continue;
                 order.push_back(int32_t(i));
             }
             if (pass == 0) group = order.size();
@@ -110,7 +126,7 @@ Vec3f SecondaryEdges::add(const SurfacePoint& sp, const Vec3f& wo, const TBsdfPa
     Vec3f d_p(0.f);
     if (!active()) return d_p;
     const EdgeSet& set = (position_matters || !has_wanted_set_) ? all_ : wanted_;
-    if (set.edges.empty()) return d_p;
+    if (!(set.total > 0.0)) return d_p;
     // The hierarchy's lobe bound covers the side of wo only: a rough dielectric, which also
     // transmits, picks its edges uniformly (unbiased, noisier).
     if (uniform_ || bsdf.kind == MaterialKind::Dielectric) {

@@ -116,18 +116,21 @@ private:
     template <class S>
     TVec3<S> send(const EdgeTerm& term, const S& s, GradSink& sink) const;
 
-    // A set of edges with its sampler by length (uniform).
+    // A set of edges with its sampler by length (uniform): the edges kept by `keep` that are
+    // not flat and have a nonzero length (`lengths`: each edge's). Without by_length_, neither
+    // the edges nor a sampler: total 1 where the set has an edge, else 0.
     struct EdgeSet {
         std::vector<int32_t> edges;  // indices into scene.edges()
         std::vector<double> cumulative;
         double total = 0.0;
     };
-    void build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, const Edge&));
+    void build_set(EdgeSet& set, const std::vector<float>& lengths, bool (*keep)(const SecondaryEdges&, const Edge&));
 
     const Scene& scene_;
     const RenderOptions& opt_;
     const SceneGradients& slots_;
     bool uniform_ = false;
+    bool by_length_ = false;  // the sets' samplers are needed (uniform_, or a dielectric)
     EdgeSet all_, wanted_;  // every edge; the edges of meshes whose vertices are wanted
     // The hierarchy over every edge, the wanted meshes' edges under a node of their own
     // (wanted_root_) when not every mesh is wanted: one build serves both sets. Kept by the
