@@ -310,8 +310,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
     std::vector<std::vector<double>> chunk_lengths(chunk_edges.size());
     for_each_chunk(opt, num_edges, kSetupChunk, [&](int64_t begin, int64_t end) {
-        std::vector<FilmEdge>& film_edges = chunk_edges[size_t(begin / kSetupChunk)];
-        std::vector<double>& lengths = chunk_lengths[size_t(begin / kSetupChunk)];
+        // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
+        // two threads adding to neighbours would share their cache line at every addition.
+        std::vector<FilmEdge> film_edges;
+        std::vector<double> lengths;
+        film_edges.reserve(size_t(end - begin));
+        lengths.reserve(size_t(end - begin));
         for (int64_t index = begin; index < end; ++index) {
             const Edge& e = all_edges[size_t(index)];
             if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
@@ -352,6 +356,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             film_edges.push_back(fe);
             lengths.push_back(len);
         }
+        chunk_edges[size_t(begin / kSetupChunk)] = std::move(film_edges);
+        chunk_lengths[size_t(begin / kSetupChunk)] = std::move(lengths);
     });
     std::vector<FilmEdge> film_edges;
     std::vector<double> lengths;
