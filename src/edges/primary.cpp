@@ -343,12 +343,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // the mesh shadows itself along it (the light between its faces' planes reaches one
                 // face and not the other, while the smooth normals give both a weight): sampled in
                 // proportion to the angle between its faces, the weight dividing the sample's.
+                // (Its part on the film first: an edge off the film needs neither its faces nor
+                // its weight.)
+                if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
                 const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
                 if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
                     fe.weight = smooth_edge_weight(m, e);
                     if (!(fe.weight > 0.0)) continue;
                 }
-                if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
                 len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
             }
             fe.edge = size_t(index);
