@@ -690,23 +690,8 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
     // would be infinite for boxes that hold p).
     const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
-    if (!(dc2 > r2)) {
-        // p inside the bounding sphere: every direction; the lobe's peak. (importance() scores
-        // such a node by its children instead, a few levels down: their bounds are tighter.)
-        // Strategy Lights: nothing where the point sampler has no part of the edge to take, or
-        // where the box lies outside every light triangle's wedge.
-        out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
-        if (q.cone) {
-            ArcPart arc;
-            const bool none = leaf ? !(leaf_part(arc) && arc.t1 > arc.t0) : q.lights && q.lights->outside(n.lo, n.hi);
-            out.value[1] = none ? 0.f : out.value[0];
-        }
-        out.inside = !leaf;
-        return;
-    }
     const float d = std::sqrt(dc2);
-    const Vec3f dir = v / d;
-    const float sin_b = n.radius / d, cos_b = sine(sin_b);
+    const Vec3f dir = d > 0.f ? v / d : Vec3f(0.f, 0.f, 1.f);  // (any direction at the centre: d 0)
     // Silhouettes possible? The signed distance of p to a face's plane is
     //   n_f . (p - x_f) = n_f . (p - c) + n_f . (c - x_f),
     // the first term within d [cos(phi + theta), cos(phi - theta)] (phi: the angle between the
@@ -715,7 +700,10 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     // none if the range is all positive or all negative. Otherwise the share of silhouettes:
     // the two faces of an edge differ by about d x dihedral, so about that over the range's
     // width (no less than a tenth: an estimate, not a bound, kept from starving a node whose
-    // silhouettes happen to carry the contribution).
+    // silhouettes happen to carry the contribution). The range holds wherever p is, inside the
+    // node's sphere too, and so do its two exact tests (nothing where p is behind every face of
+    // edges dark from behind; nothing but silhouettes at a last bounce): their leaves would all
+    // score zero, so a node they reject scores zero even where p is inside it.
     float fraction = 1.f;
     bool silhouettes_only = false;
     if (!leaf && (!n.always || n.crease) && n.cone_cos > -1.f) {
@@ -737,6 +725,22 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
             fraction = silhouettes + (1.f - silhouettes) * (n.always ? crease_weight(n.dihedral, n.seam) : n.dihedral / kPi);
         }
     }
+    if (!(dc2 > r2)) {
+        // p inside the bounding sphere: every direction; the lobe's peak (not the silhouettes'
+        // share, an estimate for nodes seen from outside). (importance() scores such a node by
+        // its children instead, a few levels down: their bounds are tighter.)
+        // Strategy Lights: nothing where the point sampler has no part of the edge to take, or
+        // where the box lies outside every light triangle's wedge.
+        out.value[0] = n.length * (q.lobe.diffuse + q.lobe.specular) / d2;
+        if (q.cone) {
+            ArcPart arc;
+            const bool none = leaf ? !(leaf_part(arc) && arc.t1 > arc.t0) : q.lights && q.lights->outside(n.lo, n.hi);
+            out.value[1] = none ? 0.f : out.value[0];
+        }
+        out.inside = !leaf;
+        return;
+    }
+    const float sin_b = n.radius / d, cos_b = sine(sin_b);
     // The lobe over the node's directions: for a leaf, along its edge's own arc (closed form);
     // for a node, over the cone around its sphere.
     double leaf_h = 0.0;
