@@ -9,10 +9,10 @@
 #include <xmmintrin.h>
 #endif
 #include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
 #include <tbb/parallel_reduce.h>
 #include "math/simd4.h"
+#include "scene/chunks.h"
 #include "scene/scene.h"
 
 namespace edgepath {
@@ -191,13 +191,9 @@ struct EdgeHierarchy::Input {
         const std::vector<Edge>& all = scene.edges();
         const size_t n = edges.size();
         leaf.resize(n);
-        auto one = [&](size_t i) { leaf[i] = leaf_input(scene, all[size_t(edges[i])]); };
-        if (n > size_t(kParallelRange))
-            tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
-                for (size_t i = r.begin(); i != r.end(); ++i) one(i);
-            });
-        else
-            for (size_t i = 0; i < n; ++i) one(i);
+        over_chunks(int64_t(n), kParallelRange, [&](int64_t b, int64_t e) {
+            for (size_t i = size_t(b); i < size_t(e); ++i) leaf[i] = leaf_input(scene, all[size_t(edges[i])]);
+        });
     }
 };
 

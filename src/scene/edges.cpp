@@ -3,9 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
+#include "scene/chunks.h"
 #include "scene/desc.h"
 #include "scene/geometry.h"
 
@@ -232,18 +230,12 @@ bool MeshEdgeList::refresh(const MeshDesc& m, const std::vector<uint8_t>& degene
     if (begin_ + count_ > all.size() || degenerate != degenerate_ || weld_positions(m) != weld_) return false;
     // The same pairs of faces: only where they lie changed (each edge on its own, in parallel
     // over chunks where there are many).
-    auto flatten = [&](size_t b, size_t e) {
-        for (size_t k = b; k < e; ++k) {
+    over_chunks(int64_t(count_), 16384, [&](int64_t b, int64_t e) {
+        for (size_t k = size_t(b); k < size_t(e); ++k) {
             Edge& edge = all[begin_ + k];
             edge.flat = flattenable_[k] && nearly_coplanar(m, edge.f0, edge.f1);
         }
-    };
-    constexpr size_t kChunk = 16384;
-    if (count_ <= kChunk)
-        flatten(0, count_);
-    else
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, count_, kChunk),
-                          [&](const tbb::blocked_range<size_t>& r) { flatten(r.begin(), r.end()); });
+    });
     return true;
 }
 

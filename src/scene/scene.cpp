@@ -8,15 +8,16 @@
 #include <stdexcept>
 #include <string>
 
-#include <tbb/blocked_range.h>
-#include <tbb/parallel_for.h>
-
+#include "scene/chunks.h"
 #include "scene/geometry.h"
 #include "scene/normal_map.h"
 
 namespace edgepath {
 
 namespace {
+
+// Triangles per chunk of the update's parallel sweeps (over_chunks).
+constexpr int64_t kTriangleChunk = 16384;
 
 RTCDevice shared_device() {
     static RTCDevice device = [] {
@@ -334,24 +335,6 @@ std::shared_ptr<Scene> Scene::build(const SceneDesc& desc) {
     return s;
 }
 
-namespace {
-
-// fn(t) for each of `count` triangles, in parallel over chunks where there are many (each
-// triangle's result its own: the same whatever the order).
-template <class Fn>
-void each_triangle(int64_t count, Fn&& fn) {
-    constexpr int64_t kChunk = 16384;
-    if (count <= kChunk) {
-        for (int64_t t = 0; t < count; ++t) fn(t);
-        return;
-    }
-    tbb::parallel_for(tbb::blocked_range<int64_t>(0, count, kChunk), [&](const tbb::blocked_range<int64_t>& r) {
-        for (int64_t t = r.begin(); t < r.end(); ++t) fn(t);
-    });
-}
-
-}  // namespace
-
 Scene::Update Scene::update(const SceneDesc& desc) {
     validate(desc);
     const size_t n = desc.meshes.size();
@@ -383,7 +366,9 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             Mesh& m = meshes[i];
             degenerate[i].resize(size_t(m.num_triangles));
             uint8_t* flags = degenerate[i].data();
-            each_triangle(m.num_triangles, [&](int64_t t) { flags[t] = m.is_degenerate(t); });
+            over_chunks(m.num_triangles, kTriangleChunk, [&](int64_t b, int64_t e) {
+                for (int64_t t = b; t < e; ++t) flags[t] = m.is_degenerate(t);
+            });
             m.num_degenerate = 0;
             for (int64_t t = 0; t < m.num_triangles; ++t) m.num_degenerate += flags[t];
             if (what == Update::Refit && degenerate[i] != kept_[i].degenerate) what = Update::Built;
@@ -413,7 +398,8 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.colors = copy_of(md.colors, 3 * md.num_vertices);
             if (what != Update::Reused) k.degenerate = std::move(degenerate[i]);
             k.triangle_data.resize(size_t(md.num_triangles));
-            each_triangle(md.num_triangles, [&](int64_t t) {
+            over_chunks(md.num_triangles, kTriangleChunk, [&](int64_t b, int64_t e) {
+                for (int64_t t = b; t < e; ++t) {
                 TriangleData& td = k.triangle_data[size_t(t)];
                 const int32_t* tri = md.indices + 3 * t;
                 td.v0 = Vec3f::load(md.vertices + 3 * int64_t(tri[0]));
@@ -421,6 +407,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
                 td.v2 = Vec3f::load(md.vertices + 3 * int64_t(tri[2]));
                 td.ng = normalize(cross(td.v1 - td.v0, td.v2 - td.v0));
                 td.largest_edge = triangle_largest_edge(td.v0, td.v1, td.v2);
+                }
             });
         }
     }
