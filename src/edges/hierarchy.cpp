@@ -490,24 +490,7 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
     // a rebuild, which sets every node anew).
     bool moved = false, flags = false;
     if (same) {
-        // (The leaves' order is not the edge list's: each edge, then its vertices and faces,
-        // fetched some leaves ahead.)
-        auto fetch = [&](size_t k, bool ends) {
-            if (k >= n) return;
-            const Edge& e = all[size_t(edges[size_t(order_[k])])];
-            if (!ends) {
-                __builtin_prefetch(&e);
-                return;
-            }
-            const Mesh& m = scene.meshes[size_t(e.mesh)];
-            __builtin_prefetch(m.vertices + 3 * int64_t(e.v0));
-            __builtin_prefetch(m.vertices + 3 * int64_t(e.v1));
-            __builtin_prefetch(m.triangle_data + e.f0);
-            if (e.f1 >= 0) __builtin_prefetch(m.triangle_data + e.f1);
-        };
         const Found f = over(n, [&](size_t k, Found& f) {
-            fetch(k + 16, false);
-            fetch(k + 8, true);
             const int32_t id = edges[size_t(order_[k])];
             Node& leaf = nodes_[size_t(leaf_of_[size_t(id)])];
             const LeafInput in = leaf_input(scene, all[size_t(id)]);
