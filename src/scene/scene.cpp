@@ -400,13 +400,13 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             k.triangle_data.resize(size_t(md.num_triangles));
             over_chunks(md.num_triangles, kTriangleChunk, [&](int64_t b, int64_t e) {
                 for (int64_t t = b; t < e; ++t) {
-                TriangleData& td = k.triangle_data[size_t(t)];
-                const int32_t* tri = md.indices + 3 * t;
-                td.v0 = Vec3f::load(md.vertices + 3 * int64_t(tri[0]));
-                td.v1 = Vec3f::load(md.vertices + 3 * int64_t(tri[1]));
-                td.v2 = Vec3f::load(md.vertices + 3 * int64_t(tri[2]));
-                td.ng = normalize(cross(td.v1 - td.v0, td.v2 - td.v0));
-                td.largest_edge = triangle_largest_edge(td.v0, td.v1, td.v2);
+                    TriangleData& td = k.triangle_data[size_t(t)];
+                    const int32_t* tri = md.indices + 3 * t;
+                    td.v0 = Vec3f::load(md.vertices + 3 * int64_t(tri[0]));
+                    td.v1 = Vec3f::load(md.vertices + 3 * int64_t(tri[1]));
+                    td.v2 = Vec3f::load(md.vertices + 3 * int64_t(tri[2]));
+                    td.ng = normalize(cross(td.v1 - td.v0, td.v2 - td.v0));
+                    td.largest_edge = triangle_largest_edge(td.v0, td.v1, td.v2);
                 }
             });
         }
