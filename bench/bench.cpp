@@ -1186,8 +1186,8 @@ void edges_section(const SceneDesc& base,
 
     // A whole optimisation step on it, under the base scene's lamps: the vertices moved as
     // above, the scene updated, an image rendered and the gradient pass w.r.t. the vertices, at
-    // 16x16 and 1 spp, so that what a step costs whatever its image shows (medians of five steps
-    // after two). A scene of its own: its hierarchy is over the wanted mesh's edges apart.
+    // 16x16 and 1 spp, to show what a step costs whatever its image (medians of five steps after
+    // two). A scene of its own: its hierarchy holds the wanted mesh's edges in a subtree apart.
     SceneDesc ld = d;
     for (const MeshDesc& m : base.meshes)
         if (m.emission.num_values() > 0) ld.meshes.push_back(m);
