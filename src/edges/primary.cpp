@@ -24,18 +24,8 @@ struct FilmEdge {
     double ax, ay, bx, by;
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
+    double len = 0.0;     // its sampling length (film length times weight; see the set-up)
 };
-
-// The share of the samples per unit film length given to a smooth edge that does not fold: the
-// angle between its faces over pi. Such an edge is a step only where the mesh shadows itself
-// along it, for the light arriving between the two faces' planes: a range of directions as wide
-// as that angle. (Any positive density is unbiased; this one puts the samples where the steps
-// are likely.)
-double smooth_edge_weight(const Mesh& m, const Edge& e) {
-    // The faces' unit normals as the scene keeps them: normalize(m.face_normal(f)), bit for bit.
-    const float c = dot(m.triangle_data[e.f0].ng, m.triangle_data[e.f1].ng);
-    return std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
-}
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
 // aperture. Seen from a lens point, the camera is a pinhole at that point whose film is shifted
@@ -305,17 +295,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // Each edge's part on the film and its sampling length, in parallel over chunks of the edge
     // list, then joined in the list's order (the same sums, whatever the thread count).
     const std::vector<Edge>& all_edges = scene.edges();
+    // The share of the samples per unit film length given to a smooth edge that does not fold:
+    // the angle between its faces over pi. Such an edge is a step only where the mesh shadows
+    // itself along it, for the light arriving between the two faces' planes: a range of
+    // directions as wide as that angle. (Any positive density is unbiased; this one puts the
+    // samples where the steps are likely.)
+    const std::vector<double>& smooth_weights = scene.smooth_edge_weights();
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
-    std::vector<std::vector<double>> chunk_lengths(chunk_edges.size());
     for_each_chunk(opt, num_edges, kSetupChunk, [&](int64_t begin, int64_t end) {
         // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
         // two threads adding to neighbours would share their cache line at every addition.
         std::vector<FilmEdge> film_edges;
-        std::vector<double> lengths;
         film_edges.reserve(size_t(end - begin));
-        lengths.reserve(size_t(end - begin));
         for (int64_t index = begin; index < end; ++index) {
             const Edge& e = all_edges[size_t(index)];
             if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
@@ -329,7 +322,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // Folds (and the smooth edges by their weight, as below), by the angle they subtend
                 // at the camera's position; the points of an edge by world length.
                 if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
-                    fe.weight = smooth_edge_weight(m, e);
+                    fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;
                 }
                 const Vec3d a(m.vertex(e.v0) - cam.position), b(m.vertex(e.v1) - cam.position);
@@ -348,30 +341,34 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
                 const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
                 if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
-                    fe.weight = smooth_edge_weight(m, e);
+                    fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;
                 }
                 len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
             }
             fe.edge = size_t(index);
+            fe.len = len;
             if (!(len > 0.0)) continue;
             film_edges.push_back(fe);
-            lengths.push_back(len);
         }
         chunk_edges[size_t(begin / kSetupChunk)] = std::move(film_edges);
-        chunk_lengths[size_t(begin / kSetupChunk)] = std::move(lengths);
     });
-    std::vector<FilmEdge> film_edges;
-    std::vector<double> lengths;
-    for (size_t c = 0; c < chunk_edges.size(); ++c) {
-        film_edges.insert(film_edges.end(), chunk_edges[c].begin(), chunk_edges[c].end());
-        lengths.insert(lengths.end(), chunk_lengths[c].begin(), chunk_lengths[c].end());
-    }
-    if (film_edges.empty()) return;
+    // The edges on the film, k = 0, 1, ... in the list's order, stay in their chunks (not copied
+    // into one array): chunk c holds k from starts[c] on.
+    std::vector<size_t> starts(chunk_edges.size() + 1, 0);
+    for (size_t c = 0; c < chunk_edges.size(); ++c) starts[c + 1] = starts[c] + chunk_edges[c].size();
+    const size_t num_film = starts.back();
+    if (num_film == 0) return;
+    auto film_edge = [&](size_t k) -> const FilmEdge& {
+        const size_t c = size_t(std::upper_bound(starts.begin(), starts.end(), k) - starts.begin()) - 1;
+        return chunk_edges[c][k - starts[c]];
+    };
     // Cumulative film length: sample i takes the point at length (i + u) / n * total, so the
     // samples are stratified along all the edges together. (Uniform: world length, u alone.)
-    std::vector<double> cumulative(lengths.size() + 1, 0.0);
-    for (size_t k = 0; k < lengths.size(); ++k) cumulative[k + 1] = cumulative[k] + lengths[k];
+    std::vector<double> cumulative(num_film + 1, 0.0);
+    size_t k_all = 0;
+    for (const std::vector<FilmEdge>& chunk : chunk_edges)
+        for (const FilmEdge& fe : chunk) cumulative[k_all + 1] = cumulative[k_all] + fe.len, ++k_all;
     const double total = cumulative.back();
     const int64_t n = opt.edge_samples > 0 ? opt.edge_samples
                                            : int64_t(scene.out_width) * scene.out_height * int64_t(opt.spp);
@@ -576,9 +573,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
             const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
                                              cumulative.begin()) - 1,
-                                      film_edges.size() - 1);
-            const FilmEdge& fe = film_edges[k];
-            const double t = std::clamp((at - cumulative[k]) / lengths[k], 0.0, 1.0);
+                                      num_film - 1);
+            const FilmEdge& fe = film_edge(k);
+            const double t = std::clamp((at - cumulative[k]) / fe.len, 0.0, 1.0);
             const Edge& edge = scene.edges()[fe.edge];
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
@@ -587,12 +584,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
             if (spherical) {
-                // Drawn with density lengths[k] / total / world per unit world length; the film
+                // Drawn with density fe.len / total / world per unit world length; the film
                 // points that see it get its film length per unit world length (in splat).
                 const Vec3f p = p0 + (p1 - p0) * float(t);
                 double fx, fy;
                 if (!spherical_film_point(cam, normalize(p - cam.position), fx, fy)) continue;
-                const double w = sample_weight * fe.world / lengths[k];
+                const double w = sample_weight * fe.world / fe.len;
                 if (cam.type == CameraType::Panorama) {
                     // The film's images of the point: longitude wraps every W pixels, and rows past
                     // a pole see the other half of the sphere (mirrored, half a turn around): a

@@ -346,6 +346,11 @@ public:
     // passes skip: the list is then the same whatever the positions, so that a move refits the
     // edge hierarchy.
     const std::vector<Edge>& edges() const;
+    // Per edge of edges(), in its order: of a smooth edge, the angle between its faces' normals
+    // over pi (the camera's pass samples a smooth edge that does not fold by it); 0 for the
+    // other kinds. Built on first use after the edge list (thread-safe), in parallel: the views
+    // of a call and the calls that leave the geometry alone share it.
+    const std::vector<double>& smooth_edge_weights() const;
 
     // The edge hierarchy (edges/hierarchy.h) over `edges` (indices into edges()), the first
     // `group` of them under a subtree of their own, kept across calls and views: the kept one
@@ -409,6 +414,9 @@ private:
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
+    mutable std::mutex weights_mutex_;
+    mutable std::atomic<bool> weights_ready_{false};
+    mutable std::vector<double> weights_;  // smooth_edge_weights()
     // Per mesh, what its part of edges_ was made from, for the moves of a scene whose vertices
     // move (moving_): dropped when the triangles, uvs, normals or colours change.
     mutable std::vector<MeshEdgeList> edge_lists_;
