@@ -388,6 +388,7 @@ void EdgeHierarchy::build(const Scene& scene, const std::vector<int32_t>& edges,
 
 void EdgeHierarchy::build(const Scene& scene, const Input& in, size_t group) {
     nodes_.clear();
+    key_.clear();  // (the caller's name for the edges, if any, is given again after)
     const std::vector<Edge>& all = scene.edges();
     leaf_of_.assign(all.size(), -1);
     const std::vector<int32_t>& edges = *in.ids;
@@ -1425,27 +1426,59 @@ void EdgePointSampler::pdfs(float t, bool lights, float& all, float& lights_out)
 
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or
 // else the one used least recently, brought up to date.
-std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
+bool EdgeHierarchy::current_for(const Scene& scene, const std::vector<uint8_t>& key) const {
+    return built_ && !key.empty() && key == key_ && scene_ == &scene && version_ == scene.geometry_version();
+}
+
+std::shared_ptr<const EdgeHierarchy> Scene::kept_hierarchy(const std::function<bool(const EdgeHierarchy&)>& fits,
+                                                           const std::vector<int32_t>* edges, size_t group) const {
     KeptHierarchies& h = *hierarchies_;
-    std::lock_guard<std::mutex> lock(h.mutex);
-    // The one built for these arguments, or else the one used least recently.
     size_t pick = 0;
     for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
         if (h.used[k] < h.used[pick]) pick = k;
     for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
-        if (h.kept[k] && h.kept[k]->built_for(edges, group)) pick = k;
+        if (h.kept[k] && fits(*h.kept[k])) pick = k;
     h.used[pick] = ++h.calls;
     std::shared_ptr<EdgeHierarchy>& kept = h.kept[pick];
     if (!kept)
         kept = std::make_shared<EdgeHierarchy>();
     else if (kept.use_count() > 1)
         kept = std::make_shared<EdgeHierarchy>(*kept);  // a pass in another thread still reads it
-    switch (kept->update(*this, edges, group)) {
+    switch (edges ? kept->update(*this, *edges, group) : kept->update(*this, kept->edges(), kept->group())) {
         case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
         case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;
         case EdgeHierarchy::Update::Reused: ++hierarchy_stats_.reuses; break;
     }
     return kept;
+}
+
+std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const {
+    std::lock_guard<std::mutex> lock(hierarchies_->mutex);
+    // The one built for these arguments, or else the one used least recently.
+    return kept_hierarchy([&](const EdgeHierarchy& t) { return t.built_for(edges, group); }, &edges, group);
+}
+
+std::shared_ptr<const EdgeHierarchy> Scene::edge_hierarchy(
+    const std::vector<uint8_t>& key, const std::function<void(std::vector<int32_t>&, size_t&)>& list) const {
+    KeptHierarchies& h = *hierarchies_;
+    std::lock_guard<std::mutex> lock(h.mutex);
+    auto current = [&](const EdgeHierarchy& t) { return t.current_for(*this, key); };
+    bool any = false;
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k) any = any || (h.kept[k] && current(*h.kept[k]));
+    std::shared_ptr<const EdgeHierarchy> tree;
+    if (any) {
+        // Its own edges and group: update() finds them its own and reuses it.
+        tree = kept_hierarchy(current, nullptr, 0);
+    } else {
+        std::vector<int32_t> edges;
+        size_t group = 0;
+        list(edges, group);
+        tree = kept_hierarchy([&](const EdgeHierarchy& t) { return t.built_for(edges, group); }, &edges, group);
+    }
+    // (The one kept is the one returned: the same tree, or its copy.)
+    for (size_t k = 0; k < KeptHierarchies::kKept; ++k)
+        if (h.kept[k] == tree) h.kept[k]->set_key(key);
+    return tree;
 }
 
 }  // namespace edgepath

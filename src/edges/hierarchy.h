@@ -229,6 +229,14 @@ public:
     bool built_for(const std::vector<int32_t>& edges, size_t group) const {
         return built_ && group == group_ && edges == ids_;
     }
+    // The caller's name for the edges and group it was last updated with (Scene::edge_hierarchy
+    // with a key), and whether its leaves are `scene`'s geometry as it is now: then a call with
+    // the same key, whose edges are the same, needs not list them again.
+    const std::vector<uint8_t>& key() const { return key_; }
+    void set_key(const std::vector<uint8_t>& key) { key_ = key; }
+    bool current_for(const Scene& scene, const std::vector<uint8_t>& key) const;
+    const std::vector<int32_t>& edges() const { return ids_; }
+    size_t group() const { return group_; }
     // The node over the group's edges: 0 (the root) when they are all the edges, -1 when none.
     int32_t group_root() const { return group_root_; }
     bool empty() const { return nodes_.empty(); }
@@ -446,6 +454,7 @@ private:
     const Scene* scene_ = nullptr;
     uint64_t version_ = 0;
     std::vector<uint8_t> mesh_flags_;
+    std::vector<uint8_t> key_;  // set_key(); empty: none
     static std::vector<uint8_t> mesh_flags(const Scene& scene);
     Stats stats_;
 };

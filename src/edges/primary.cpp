@@ -95,11 +95,16 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
                   FilmEdge& fe) {
     Vec3d q0 = camera_axes(cam, p0 - cam.position), q1 = camera_axes(cam, p1 - cam.position);
     if (has_eye(cam.type)) {
-        // Keep the part in front of the camera.
-        const double near = 1e-5 * std::max(length(q0), length(q1));
-        if (q0.z < near && q1.z < near) return false;
-        if (q0.z < near) q0 = q1 + (q0 - q1) * ((q1.z - near) / (q1.z - q0.z));
-        if (q1.z < near) q1 = q0 + (q1 - q0) * ((q0.z - near) / (q0.z - q1.z));
+        // Keep the part in front of the camera. (Both ends well in front, as nearly always: no
+        // need of `near`, whose lengths' square roots cost more than the rest. The 1-norm bounds
+        // the length.)
+        auto norm1 = [](const Vec3d& q) { return std::abs(q.x) + std::abs(q.y) + std::abs(q.z); };
+        if (!(std::min(q0.z, q1.z) > 2e-5 * std::max(norm1(q0), norm1(q1)))) {
+            const double near = 1e-5 * std::max(length(q0), length(q1));
+            if (q0.z < near && q1.z < near) return false;
+            if (q0.z < near) q0 = q1 + (q0 - q1) * ((q1.z - near) / (q1.z - q0.z));
+            if (q1.z < near) q1 = q0 + (q1 - q0) * ((q0.z - near) / (q0.z - q1.z));
+        }
         q0.x /= q0.z;
         q0.y /= q0.z;
         q1.x /= q1.z;
@@ -116,7 +121,10 @@ bool project_edge(const Camera& cam, const Vec3f& p0, const Vec3f& p1, double x0
     }
     const double ax = film_x(cam, q0.x), ay = film_y(cam, q0.y), bx = film_x(cam, q1.x), by = film_y(cam, q1.y);
     double t0 = 0.0, t1 = 1.0;
-    if (!clip_axis(ax, bx, x0, x1, t0, t1) || !clip_axis(ay, by, y0, y1, t0, t1)) return false;
+    // Both ends inside the window (most edges of a mesh in view): nothing to clip, and clip_axis
+    // would leave t0 at 0 and t1 at 1.
+    const bool inside = ax >= x0 && ax <= x1 && bx >= x0 && bx <= x1 && ay >= y0 && ay <= y1 && by >= y0 && by <= y1;
+    if (!inside && (!clip_axis(ax, bx, x0, x1, t0, t1) || !clip_axis(ay, by, y0, y1, t0, t1))) return false;
     fe.ax = ax + (bx - ax) * t0;
     fe.ay = ay + (by - ay) * t0;
     fe.bx = ax + (bx - ax) * t1;
@@ -300,7 +308,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // itself along it, for the light arriving between the two faces' planes: a range of
     // directions as wide as that angle. (Any positive density is unbiased; this one puts the
     // samples where the steps are likely.)
-    const std::vector<double>& smooth_weights = scene.smooth_edge_weights();
+    const std::vector<double>& smooth_weights = scene.edge_measures().smooth_weight;
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
@@ -315,10 +323,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             FilmEdge fe;
             double len;
-            fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
             if (uniform) {
+                fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
                 len = fe.world;  // world length; the film part is found per sample
             } else if (spherical) {
+                fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
                 // Folds (and the smooth edges by their weight, as below), by the angle they subtend
                 // at the camera's position; the points of an edge by world length.
                 if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
@@ -344,7 +353,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;
                 }
-                len = std::hypot(fe.bx - fe.ax, fe.by - fe.ay) * fe.weight;
+                // (Film lengths are far from overflow: no need of hypot's care, which costs as
+                // much as the rest of an edge's set-up.)
+                const double dx = fe.bx - fe.ax, dy = fe.by - fe.ay;
+                len = std::sqrt(dx * dx + dy * dy) * fe.weight;
             }
             fe.edge = size_t(index);
             fe.len = len;

@@ -51,16 +51,9 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     // vertices (add()); otherwise the sets only tell whether there is an edge to sample.
     by_length_ = uniform_;
     for (const Material& m : scene.materials) by_length_ = by_length_ || m.kind == MaterialKind::Dielectric;
-    // Each edge's length, in parallel over chunks of the list.
+    // Each edge's length (kept by the scene).
     const std::vector<Edge>& edges = scene.edges();
-    std::vector<float> lengths(edges.size());
-    for_each_chunk(opt, int64_t(edges.size()), 16384, [&](int64_t begin, int64_t end) {
-        for (int64_t i = begin; i < end; ++i) {
-            const Edge& e = edges[size_t(i)];
-            const Mesh& m = scene.meshes[size_t(e.mesh)];
-            lengths[size_t(i)] = length(m.vertex(e.v1) - m.vertex(e.v0));
-        }
-    });
+    const std::vector<float>& lengths = scene.edge_measures().length;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
     build_set(all_, lengths, [](const SecondaryEdges&, const Edge&) { return true; });
@@ -74,18 +67,21 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
         // The wanted meshes' edges first, under a subtree of their own; with the flat edges of
         // a scene whose vertices move (Edge::flat), empty leaves there, so that the same tree
         // is refit while moves turn edges flat and back.
-        std::vector<int32_t> order;
-        order.reserve(edges.size());
-        size_t group = 0;
-        for (int pass = 0; pass < (has_wanted_set_ ? 2 : 1); ++pass) {
-            for (size_t i = 0; i < edges.size(); ++i) {
-                if (has_wanted_set_ && mesh_wanted(edges[i].mesh) != (pass == 0)) continue;
-                if (!(lengths[i] > 0.f)) continue;
-                order.push_back(int32_t(i));
+        // The list is a function of the geometry and of which meshes are wanted, its key.
+        std::vector<uint8_t> key(1, uint8_t(has_wanted_set_));
+        if (has_wanted_set_)
+            for (size_t i = 0; i < scene.meshes.size(); ++i) key.push_back(uint8_t(mesh_wanted(int(i))));
+        hierarchy_ = scene.edge_hierarchy(key, [&](std::vector<int32_t>& order, size_t& group) {
+            order.reserve(edges.size());
+            for (int pass = 0; pass < (has_wanted_set_ ? 2 : 1); ++pass) {
+                for (size_t i = 0; i < edges.size(); ++i) {
+                    if (has_wanted_set_ && mesh_wanted(edges[i].mesh) != (pass == 0)) continue;
+                    if (!(lengths[i] > 0.f)) continue;
+                    order.push_back(int32_t(i));
+                }
+                if (pass == 0) group = has_wanted_set_ ? order.size() : 0;
             }
-            if (pass == 0) group = order.size();
-        }
-        hierarchy_ = scene.edge_hierarchy(order, has_wanted_set_ ? group : 0);
+        });
         wanted_root_ = has_wanted_set_ ? hierarchy_->group_root() : 0;
     }
     // A bounding sphere of the area lights: the box's centre, the farthest vertex.

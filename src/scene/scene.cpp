@@ -235,25 +235,27 @@ const std::vector<Edge>& Scene::edges() const {
     return edges_;
 }
 
-const std::vector<double>& Scene::smooth_edge_weights() const {
-    if (weights_ready_.load(std::memory_order_acquire)) return weights_;
+const Scene::EdgeMeasures& Scene::edge_measures() const {
+    if (measures_ready_.load(std::memory_order_acquire)) return measures_;
     const std::vector<Edge>& all = edges();
-    std::lock_guard<std::mutex> lock(weights_mutex_);
-    if (!weights_ready_.load(std::memory_order_relaxed)) {
-        weights_.assign(all.size(), 0.0);
+    std::lock_guard<std::mutex> lock(measures_mutex_);
+    if (!measures_ready_.load(std::memory_order_relaxed)) {
+        measures_.length.assign(all.size(), 0.f);
+        measures_.smooth_weight.assign(all.size(), 0.0);
         over_chunks(int64_t(all.size()), 16384, [&](int64_t begin, int64_t end) {
             for (int64_t i = begin; i < end; ++i) {
                 const Edge& e = all[size_t(i)];
+                const Mesh& m = meshes[size_t(e.mesh)];
+                measures_.length[size_t(i)] = length(m.vertex(e.v1) - m.vertex(e.v0));
                 if (e.kind != EdgeKind::Smooth) continue;
                 // The faces' unit normals as the scene keeps them: normalize(m.face_normal(f)).
-                const Mesh& m = meshes[size_t(e.mesh)];
                 const float c = dot(m.triangle_data[e.f0].ng, m.triangle_data[e.f1].ng);
-                weights_[size_t(i)] = std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
+                measures_.smooth_weight[size_t(i)] = std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
             }
         });
-        weights_ready_.store(true, std::memory_order_release);
+        measures_ready_.store(true, std::memory_order_release);
     }
-    return weights_;
+    return measures_;
 }
 
 Scene::HierarchyStats Scene::hierarchy_stats() const {
@@ -401,7 +403,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
         // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use,
         // from the meshes' kept lists where only the positions changed.
         edges_ready_.store(false, std::memory_order_relaxed);
-        weights_ready_.store(false, std::memory_order_relaxed);
+        measures_ready_.store(false, std::memory_order_relaxed);
         if (what == Update::Built || !same_shading) edge_lists_.clear();
         ++geometry_version_;
         kept_.resize(n);

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <atomic>
+#include <functional>
 #include <memory>
 #include <mutex>
 #include <vector>
@@ -346,11 +347,16 @@ public:
     // passes skip: the list is then the same whatever the positions, so that a move refits the
     // edge hierarchy.
     const std::vector<Edge>& edges() const;
-    // Per edge of edges(), in its order: of a smooth edge, the angle between its faces' normals
-    // over pi (the camera's pass samples a smooth edge that does not fold by it); 0 for the
-    // other kinds. Built on first use after the edge list (thread-safe), in parallel: the views
-    // of a call and the calls that leave the geometry alone share it.
-    const std::vector<double>& smooth_edge_weights() const;
+    // Per edge of edges(), in its order, what the gradient passes' set-ups read of it: built on
+    // first use after the edge list (thread-safe), in parallel, and shared by the views of a call
+    // and by the calls that leave the geometry alone.
+    struct EdgeMeasures {
+        std::vector<float> length;          // |v1 - v0|
+        // Of a smooth edge, the angle between its faces' normals over pi (the camera's pass
+        // samples a smooth edge that does not fold by it); 0 for the other kinds.
+        std::vector<double> smooth_weight;
+    };
+    const EdgeMeasures& edge_measures() const;
 
     // The edge hierarchy (edges/hierarchy.h) over `edges` (indices into edges()), the first
     // `group` of them under a subtree of their own, kept across calls and views: the kept one
@@ -358,6 +364,12 @@ public:
     // Two are kept (the views of one call may want different things: each keeps its own).
     // Thread-safe: a tree still held by a pass is copied before it is changed for another.
     std::shared_ptr<const EdgeHierarchy> edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const;
+    // The same for the edges and group that list(edges, group) writes, `key` naming them: a
+    // function of the key and of the geometry alone. A tree kept for that key and the geometry
+    // as it is now is reused without calling list (a view or a call that changed no geometry
+    // saves a sweep over the edges and the lists' comparisons).
+    std::shared_ptr<const EdgeHierarchy> edge_hierarchy(
+        const std::vector<uint8_t>& key, const std::function<void(std::vector<int32_t>&, size_t&)>& list) const;
     struct HierarchyStats {
         uint64_t builds = 0, refits = 0, reuses = 0;  // edge_hierarchy() calls
     };
@@ -369,6 +381,10 @@ public:
 private:
     Scene() = default;
     void set_views(const SceneDesc& desc);
+    // edge_hierarchy's choice among the kept trees (under their mutex): the one that `fits`, or
+    // else the one used least recently; updated for `edges` and `group` (nullptr: its own).
+    std::shared_ptr<const EdgeHierarchy> kept_hierarchy(const std::function<bool(const EdgeHierarchy&)>& fits,
+                                                        const std::vector<int32_t>* edges, size_t group) const;
     RTCScene prepare_bvh(Tracing tracing) const;
     void drop_bvhs();
     void build_lights();
@@ -414,9 +430,9 @@ private:
     mutable std::mutex edges_mutex_;
     mutable std::atomic<bool> edges_ready_{false};
     mutable std::vector<Edge> edges_;
-    mutable std::mutex weights_mutex_;
-    mutable std::atomic<bool> weights_ready_{false};
-    mutable std::vector<double> weights_;  // smooth_edge_weights()
+    mutable std::mutex measures_mutex_;
+    mutable std::atomic<bool> measures_ready_{false};
+    mutable EdgeMeasures measures_;
     // Per mesh, what its part of edges_ was made from, for the moves of a scene whose vertices
     // move (moving_): dropped when the triangles, uvs, normals or colours change.
     mutable std::vector<MeshEdgeList> edge_lists_;

@@ -1065,6 +1065,71 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
     EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
 }
 
+// A tree asked for by key (Scene::edge_hierarchy(key, list)): the list is asked for only when no
+// kept tree was updated for that key on the geometry as it is now; otherwise the same tree comes
+// back, reused. A move of the vertices, another key, or the same slot taken by other edges
+// asks for the list again, and the tree is then the one those edges give.
+TEST(EdgeHierarchy, KeyedTreeIsListedOnlyWhenTheGeometryOrTheKeyChanged) {
+    HierarchyScene hs;
+    SceneDesc d = hs.matte.desc();
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    const std::shared_ptr<Scene> scene = build_moved(d);
+    size_t group = 0;
+    const std::vector<int32_t> ids = edges_mesh_first(*scene, 0, &group);
+    std::vector<int32_t> every(scene->edges().size());
+    for (size_t i = 0; i < every.size(); ++i) every[i] = int32_t(i);
+    int lists = 0;
+    auto sphere_first = [&](std::vector<int32_t>& out, size_t& g) {
+        ++lists;
+        out = ids;
+        g = group;
+    };
+    auto all_edges = [&](std::vector<int32_t>& out, size_t& g) {
+        ++lists;
+        out = every;
+        g = 0;
+    };
+    const std::vector<uint8_t> key_a = {1, 1, 0, 0}, key_b = {0};
+    // (No tree held here: a tree a pass still holds is copied before the scene changes it.)
+    const EdgeHierarchy* a = scene->edge_hierarchy(key_a, sphere_first).get();
+    EXPECT_EQ(lists, 1);
+    EXPECT_EQ(a->edges(), ids);
+    EXPECT_EQ(a->group(), group);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 1u);
+    // The same key, nothing changed: the same tree, not listed again.
+    EXPECT_EQ(scene->edge_hierarchy(key_a, sphere_first).get(), a);
+    EXPECT_EQ(lists, 1);
+    EXPECT_EQ(scene->hierarchy_stats().reuses, 1u);
+    // Another key: listed, the other slot built.
+    EXPECT_EQ(scene->edge_hierarchy(key_b, all_edges)->edges(), every);
+    EXPECT_EQ(lists, 2);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 2u);
+    EXPECT_EQ(scene->edge_hierarchy(key_a, sphere_first)->edges(), ids);
+    EXPECT_EQ(lists, 2);
+    // The vertices moved: listed again (the list may depend on the geometry), the tree refit.
+    for (float& x : hs.sphere.vertices) x *= 1.25f;
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    update_scene(*scene, d);
+    const EdgeHierarchy* moved = scene->edge_hierarchy(key_a, sphere_first).get();
+    EXPECT_EQ(lists, 3);
+    EXPECT_EQ(scene->hierarchy_stats().refits, 1u);
+    EXPECT_EQ(moved->check_bounds(*scene, 1e-5f), -1);
+    EXPECT_EQ(scene->edge_hierarchy(key_a, sphere_first).get(), moved);
+    EXPECT_EQ(lists, 3);
+    // Both slots taken by trees asked for by their edges alone: key_a's tree is gone, so the key
+    // lists again and gets a tree of its own edges.
+    std::vector<int32_t> box_only;
+    for (size_t i = 0; i < scene->edges().size(); ++i)
+        if (scene->edges()[i].mesh == 1) box_only.push_back(int32_t(i));
+    scene->edge_hierarchy(box_only, 0);
+    scene->edge_hierarchy(every, 0);
+    const std::shared_ptr<const EdgeHierarchy> back = scene->edge_hierarchy(key_a, sphere_first);
+    EXPECT_EQ(lists, 4);
+    EXPECT_EQ(scene->hierarchy_stats().builds, 5u);
+    EXPECT_EQ(back->edges(), ids);
+    EXPECT_EQ(back->group(), group);
+}
+
 // A refit gives the hierarchy a build gives where the build would split alike: every vertex
 // scaled by two (every comparison of the median splits comes out the same, every bound scales
 // exactly), the refit kept hierarchy and a fresh build give the same probabilities, bit for bit.
