@@ -103,7 +103,17 @@ bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
     const Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
     Vec3f c0, c1;
     if (!third_vertex(m, e.f0, p0, p1, c0) || !third_vertex(m, e.f1, p0, p1, c1)) return true;
-    const double s0 = side_of(eye, p0, p1, c0), s1 = side_of(eye, p0, p1, c1);
+    // side_of(eye, p0, p1, c) for both c, the cross product (the same) once.
+    double s0, s1;
+    if (eye.parallel) {
+        const Vec3d d(eye.dir);
+        s0 = dot(cross(Vec3d(p0 - c0), Vec3d(p1 - c0)), d);
+        s1 = dot(cross(Vec3d(p0 - c1), Vec3d(p1 - c1)), d);
+    } else {
+        const Vec3d n = cross(Vec3d(p0 - eye.origin), Vec3d(p1 - eye.origin));
+        s0 = dot(n, Vec3d(c0 - eye.origin));
+        s1 = dot(n, Vec3d(c1 - eye.origin));
+    }
     return (s0 > 0.0) == (s1 > 0.0);
 }
 
