@@ -200,6 +200,7 @@ edgepath::MeshDesc mesh_desc(Views& views, const nb::dict& d, const std::string&
     if (has(d, "sample_solid_angle")) m.sample_solid_angle = scalar<bool>(d, "sample_solid_angle", f);
     if (has(d, "sample_spherical_triangle"))
         m.sample_spherical_triangle = scalar<bool>(d, "sample_spherical_triangle", f);
+    if (has(d, "moves")) m.moves = scalar<bool>(d, "moves", f);
     return m;
 }
 

@@ -812,6 +812,8 @@ def _flatten_mesh(mesh, i: int, flat: FlatScene) -> None:
         "sample_solid_angle": light_sampling == 1,
         "sample_spherical_triangle": light_sampling == 2,
         "material": i,
+        # Vertices being optimised move between calls: the kept scene is built for refitting.
+        "moves": bool(isinstance(mesh.vertices, torch.Tensor) and mesh.vertices.requires_grad),
     }
     if mesh.uvs is not None:
         out["uvs"] = _param(flat, ("meshes", i, "uvs"), v.float_tensor(mesh.uvs, f + ".uvs", ("K", 2)))

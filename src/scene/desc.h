@@ -82,6 +82,12 @@ struct MeshDesc {
     // area samples' density dist^2 / cos varies widely over the light. Ignored when
     // sample_solid_angle is set.
     bool sample_spherical_triangle = false;
+    // A hint: the vertices will move between the calls of a kept scene (they are being
+    // optimised). A scene built with such a mesh takes at once the form a scene takes once its
+    // vertices have moved (a refittable BVH, an edge list that keeps its nearly flat edges), so
+    // that the first move refits instead of rebuilding everything. Its renders and gradients are
+    // those of that form (unbiased alike, not bit for bit a static build's).
+    bool moves = false;
 };
 
 // A light at a point (a delta light, as Mitsuba's `point` and `spot`): it radiates `intensity`

@@ -397,7 +397,10 @@ Scene::Update Scene::update(const SceneDesc& desc) {
             if (what == Update::Refit && degenerate[i] != kept_[i].degenerate) what = Update::Built;
         }
         if (what == Update::Refit && !moving_) what = Update::Built;
-        moving_ = moving_ || same_topology;
+        // (A mesh whose vertices are known to move: that form from the first build.)
+        bool hinted = false;
+        for (const MeshDesc& md : desc.meshes) hinted = hinted || md.moves;
+        moving_ = moving_ || same_topology || hinted;
     }
     if (what != Update::Reused || !same_shading) {
         // The edge list depends on positions (welding, creases), uvs and normals: rebuilt on use,

@@ -406,6 +406,47 @@ TEST(Render, SamplingStrategiesAgree) {
 // The two BVHs (scene.h, Tracing): each built on its first use, the fast one by images no
 // gradient follows, the exact one by the rest; the gradient passes trace the exact one whatever
 // the options say; and the two give the same image but for the last bits of the intersections.
+// A mesh whose vertices are known to move (MeshDesc::moves): the scene is built in the form of
+// a scene whose vertices have moved, so the first move refits the BVH and the edge hierarchy
+// (without the hint it rebuilds both), and the edge list keeps its nearly flat edges from the
+// start (the sphere's planar quads' diagonals), as a scene built and then moved does.
+TEST(SceneUpdate, MeshesKnownToMoveAreBuiltForRefittingFromTheStart) {
+    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
+    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
+    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 24, 20, 45);
+    d.materials = {material(kd, ks, rough), material(black, black, rough)};
+    d.meshes = {ball.desc(0), lamp.desc(1)};
+    d.meshes[1].emission = light.desc();
+    RenderOptions opt;
+    opt.spp = 1;
+    opt.num_threads = 1;
+    std::vector<float> adjoint(24 * 20 * 3, 1.f), grad(ball.vertices.size());
+    SceneGradients slots;
+    slots.meshes.resize(2);
+    slots.meshes[0].vertices.grad = grad.data();
+    for (bool moves : {false, true}) {
+        d.meshes[0].moves = moves;
+        d.meshes[0].vertices = ball.vertices.data();
+        const std::shared_ptr<Scene> scene = build_scene(d);
+        render_gradients(*scene, opt, adjoint.data(), slots);
+        size_t flat = 0;
+        for (const Edge& e : scene->edges()) flat += e.flat;
+        EXPECT_EQ(flat > 0, moves);
+        std::vector<float> moved(ball.vertices);
+        for (float& x : moved) x *= 1.5f;
+        d.meshes[0].vertices = moved.data();
+        update_scene(*scene, d);
+        render_gradients(*scene, opt, adjoint.data(), slots);
+        const SceneBuildCounts bvh = scene_build_counts(*scene), tree = scene_hierarchy_counts(*scene);
+        EXPECT_EQ(bvh.builds, moves ? 1u : 2u) << moves;
+        EXPECT_EQ(bvh.refits, moves ? 1u : 0u) << moves;
+        EXPECT_EQ(tree.builds, moves ? 1u : 2u) << moves;
+        EXPECT_EQ(tree.refits, moves ? 1u : 0u) << moves;
+    }
+}
+
 TEST(SceneUpdate, EachKindOfTracingBuildsItsBvhOnFirstUse) {
     MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
     MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
