@@ -1424,12 +1424,12 @@ void EdgePointSampler::pdfs(float t, bool lights, float& all, float& lights_out)
     if (in_part) lights_out = lights_pdf(t, phi);
 }
 
-// The scene's kept hierarchies (Scene::KeptHierarchies): the one built for these arguments, or
-// else the one used least recently, brought up to date.
 bool EdgeHierarchy::current_for(const Scene& scene, const std::vector<uint8_t>& key) const {
     return built_ && !key.empty() && key == key_ && scene_ == &scene && version_ == scene.geometry_version();
 }
 
+// The scene's kept hierarchies (Scene::KeptHierarchies): the one for these edges, or else the
+// one used least recently, brought up to date.
 std::shared_ptr<const EdgeHierarchy> Scene::kept_hierarchy(const std::function<bool(const EdgeHierarchy&)>& fits,
                                                            const std::vector<int32_t>* edges, size_t group) const {
     KeptHierarchies& h = *hierarchies_;

@@ -232,7 +232,6 @@ public:
     // The caller's name for the edges and group it was last updated with (Scene::edge_hierarchy
     // with a key), and whether its leaves are `scene`'s geometry as it is now: then a call with
     // the same key, whose edges are the same, needs not list them again.
-    const std::vector<uint8_t>& key() const { return key_; }
     void set_key(const std::vector<uint8_t>& key) { key_ = key; }
     bool current_for(const Scene& scene, const std::vector<uint8_t>& key) const;
     const std::vector<int32_t>& edges() const { return ids_; }

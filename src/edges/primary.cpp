@@ -301,7 +301,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     camera_eye.dir = cam.forward;
     camera_eye.skip_emitters = opt.hide_emitters;
     // Each edge's part on the film and its sampling length, in parallel over chunks of the edge
-    // list, then joined in the list's order (the same sums, whatever the thread count).
+    // list, summed after in the list's order (the same sums, whatever the thread count).
     const std::vector<Edge>& all_edges = scene.edges();
     // The share of the samples per unit film length given to a smooth edge that does not fold:
     // the angle between its faces over pi. Such an edge is a step only where the mesh shadows
