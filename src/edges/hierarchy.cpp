@@ -456,7 +456,8 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
     };
     // The scene's geometry as the leaves have it (the other views of a call, or a call that
     // changed materials, lights or the camera only): the flags at most (O(meshes) to check).
-    if (built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ && edges == ids_) {
+    if (built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ &&
+        (&edges == &ids_ || edges == ids_)) {
         if (mesh_flags(scene) != mesh_flags_) refresh_flags(Input(scene, edges));
         return done(Update::Reused);
     }
@@ -1428,6 +1429,11 @@ bool EdgeHierarchy::current_for(const Scene& scene, const std::vector<uint8_t>& 
     return built_ && !key.empty() && key == key_ && scene_ == &scene && version_ == scene.geometry_version();
 }
 
+bool EdgeHierarchy::unchanged_for(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const {
+    return built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ &&
+           (&edges == &ids_ || edges == ids_) && mesh_flags(scene) == mesh_flags_;
+}
+
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one for these edges, or else the
 // one used least recently, brought up to date.
 std::shared_ptr<const EdgeHierarchy> Scene::kept_hierarchy(const std::function<bool(const EdgeHierarchy&)>& fits,
@@ -1440,10 +1446,16 @@ std::shared_ptr<const EdgeHierarchy> Scene::kept_hierarchy(const std::function<b
         if (h.kept[k] && fits(*h.kept[k])) pick = k;
     h.used[pick] = ++h.calls;
     std::shared_ptr<EdgeHierarchy>& kept = h.kept[pick];
-    if (!kept)
-        kept = std::make_shared<EdgeHierarchy>();
-    else if (kept.use_count() > 1)
-        kept = std::make_shared<EdgeHierarchy>(*kept);  // a pass in another thread still reads it
+    if (kept && kept.use_count() > 1) {
+        // A pass in another thread still reads it: shared as it is where nothing would change
+        // (many threads rendering one scene), else copied before it is changed.
+        if (kept->unchanged_for(*this, edges ? *edges : kept->edges(), edges ? group : kept->group())) {
+            ++hierarchy_stats_.reuses;
+            return kept;
+        }
+        kept = std::make_shared<EdgeHierarchy>(*kept);
+    }
+    if (!kept) kept = std::make_shared<EdgeHierarchy>();
     switch (edges ? kept->update(*this, *edges, group) : kept->update(*this, kept->edges(), kept->group())) {
         case EdgeHierarchy::Update::Built: ++hierarchy_stats_.builds; break;
         case EdgeHierarchy::Update::Refit: ++hierarchy_stats_.refits; break;

@@ -234,6 +234,8 @@ public:
     // the same key, whose edges are the same, needs not list them again.
     void set_key(const std::vector<uint8_t>& key) { key_ = key; }
     bool current_for(const Scene& scene, const std::vector<uint8_t>& key) const;
+    // Whether update(scene, edges, group) would leave it as it is (reuse it, flags and all).
+    bool unchanged_for(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const;
     const std::vector<int32_t>& edges() const { return ids_; }
     size_t group() const { return group_; }
     // The node over the group's edges: 0 (the root) when they are all the edges, -1 when none.

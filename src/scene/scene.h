@@ -362,7 +362,8 @@ public:
     // `group` of them under a subtree of their own, kept across calls and views: the kept one
     // for these arguments brought up to date (EdgeHierarchy::update: rebuilt, refit or reused).
     // Two are kept (the views of one call may want different things: each keeps its own).
-    // Thread-safe: a tree still held by a pass is copied before it is changed for another.
+    // Thread-safe: a tree still held by a pass is shared as it is where nothing would change it
+    // (many threads rendering one scene), and copied before it is changed for another.
     std::shared_ptr<const EdgeHierarchy> edge_hierarchy(const std::vector<int32_t>& edges, size_t group) const;
     // The same for the edges and group that list(edges, group) writes, `key` naming them: a
     // function of the key and of the geometry alone. A tree kept for that key and the geometry

@@ -1068,7 +1068,8 @@ TEST(EdgeHierarchy, RefitBoundsHoldEveryEdgeAfterRandomMoves) {
 // A tree asked for by key (Scene::edge_hierarchy(key, list)): the list is asked for only when no
 // kept tree was updated for that key on the geometry as it is now; otherwise the same tree comes
 // back, reused. A move of the vertices, another key, or the same slot taken by other edges
-// asks for the list again, and the tree is then the one those edges give.
+// asks for the list again, and the tree is then the one those edges give. A tree a pass still
+// holds is shared while nothing would change it, and copied before a refit.
 TEST(EdgeHierarchy, KeyedTreeIsListedOnlyWhenTheGeometryOrTheKeyChanged) {
     HierarchyScene hs;
     SceneDesc d = hs.matte.desc();
@@ -1128,6 +1129,19 @@ TEST(EdgeHierarchy, KeyedTreeIsListedOnlyWhenTheGeometryOrTheKeyChanged) {
     EXPECT_EQ(scene->hierarchy_stats().builds, 5u);
     EXPECT_EQ(back->edges(), ids);
     EXPECT_EQ(back->group(), group);
+    // Held (a pass in another thread reads it): shared as it is while nothing would change it,
+    // by key or by its edges; copied before a move refits it, the held one left as it was.
+    const uint64_t reuses = scene->hierarchy_stats().reuses;
+    EXPECT_EQ(scene->edge_hierarchy(key_a, sphere_first).get(), back.get());
+    EXPECT_EQ(scene->edge_hierarchy(ids, group).get(), back.get());
+    EXPECT_EQ(scene->hierarchy_stats().reuses, reuses + 2);
+    for (float& x : hs.sphere.vertices) x *= 0.8f;
+    d.meshes = {hs.sphere.desc(0), hs.box.desc(0), hs.quad.desc(0)};
+    update_scene(*scene, d);
+    const std::shared_ptr<const EdgeHierarchy> refit = scene->edge_hierarchy(key_a, sphere_first);
+    EXPECT_NE(refit.get(), back.get());
+    EXPECT_EQ(refit->check_bounds(*scene, 1e-5f), -1);
+    EXPECT_GE(back->check_bounds(*scene, 1e-5f), 0);  // still the tree of the positions before
 }
 
 // A refit gives the hierarchy a build gives where the build would split alike: every vertex
