@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <thread>
 #include <vector>
 
 #include "edgepath.h"
@@ -445,6 +446,46 @@ TEST(SceneUpdate, MeshesKnownToMoveAreBuiltForRefittingFromTheStart) {
         EXPECT_EQ(tree.builds, moves ? 1u : 2u) << moves;
         EXPECT_EQ(tree.refits, moves ? 1u : 0u) << moves;
     }
+}
+
+// Gradient passes on one scene from several threads at once (the scene is documented as safe
+// for that): each equals the pass made alone, bit for bit, and they share the kept edge
+// hierarchy (reused by each, never rebuilt nor refit).
+TEST(SceneUpdate, ConcurrentGradientPassesShareTheKeptHierarchy) {
+    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
+    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
+    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
+    SceneDesc d;
+    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 24, 20, 45);
+    d.materials = {material(kd, ks, rough), material(black, black, rough)};
+    d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
+    d.meshes[2].emission = light.desc();
+    const std::shared_ptr<Scene> scene = build_scene(d);
+    RenderOptions opt;
+    opt.spp = 2;
+    opt.num_threads = 1;
+    const std::vector<float> adjoint(24 * 20 * 3, 1.f);
+    auto pass = [&](std::vector<float>& grad) {
+        grad.assign(ball.vertices.size(), 0.f);
+        SceneGradients slots;
+        slots.meshes.resize(3);
+        slots.meshes[0].vertices.grad = grad.data();
+        render_gradients(*scene, opt, adjoint.data(), slots);
+    };
+    std::vector<float> alone;
+    pass(alone);
+    ASSERT_GT(std::abs(alone[0]) + std::abs(alone[3]) + std::abs(alone[300]), 0.f);
+    constexpr int kThreads = 4;
+    std::vector<std::vector<float>> grads(kThreads);
+    std::vector<std::thread> threads;
+    for (int t = 0; t < kThreads; ++t) threads.emplace_back([&, t] { pass(grads[size_t(t)]); });
+    for (std::thread& t : threads) t.join();
+    for (int t = 0; t < kThreads; ++t) EXPECT_EQ(grads[size_t(t)], alone) << "thread " << t;
+    const SceneBuildCounts tree = scene_hierarchy_counts(*scene);
+    EXPECT_EQ(tree.builds, 1u);
+    EXPECT_EQ(tree.refits, 0u);
+    EXPECT_EQ(tree.reuses, uint64_t(kThreads));
 }
 
 TEST(SceneUpdate, EachKindOfTracingBuildsItsBvhOnFirstUse) {
