@@ -456,8 +456,7 @@ EdgeHierarchy::Update EdgeHierarchy::update(const Scene& scene, const std::vecto
     };
     // The scene's geometry as the leaves have it (the other views of a call, or a call that
     // changed materials, lights or the camera only): the flags at most (O(meshes) to check).
-    if (built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ &&
-        (&edges == &ids_ || edges == ids_)) {
+    if (holds(scene, edges, group)) {
         if (mesh_flags(scene) != mesh_flags_) refresh_flags(Input(scene, edges));
         return done(Update::Reused);
     }
@@ -1429,9 +1428,13 @@ bool EdgeHierarchy::current_for(const Scene& scene, const std::vector<uint8_t>& 
     return built_ && !key.empty() && key == key_ && scene_ == &scene && version_ == scene.geometry_version();
 }
 
-bool EdgeHierarchy::unchanged_for(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const {
+bool EdgeHierarchy::holds(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const {
     return built_ && scene_ == &scene && version_ == scene.geometry_version() && group == group_ &&
-           (&edges == &ids_ || edges == ids_) && mesh_flags(scene) == mesh_flags_;
+           (&edges == &ids_ || edges == ids_);
+}
+
+bool EdgeHierarchy::unchanged_for(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const {
+    return holds(scene, edges, group) && mesh_flags(scene) == mesh_flags_;
 }
 
 // The scene's kept hierarchies (Scene::KeptHierarchies): the one for these edges, or else the

@@ -456,6 +456,8 @@ private:
     uint64_t version_ = 0;
     std::vector<uint8_t> mesh_flags_;
     std::vector<uint8_t> key_;  // set_key(); empty: none
+    // Whether its leaves are `edges` in `group`, with `scene`'s geometry as it is now.
+    bool holds(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const;
     static std::vector<uint8_t> mesh_flags(const Scene& scene);
     Stats stats_;
 };
