@@ -404,28 +404,37 @@ TEST(Render, SamplingStrategiesAgree) {
     }
 }
 
-// The two BVHs (scene.h, Tracing): each built on its first use, the fast one by images no
-// gradient follows, the exact one by the rest; the gradient passes trace the exact one whatever
-// the options say; and the two give the same image but for the last bits of the intersections.
+// A sphere over a floor under a small lamp, described at a film size (the description points
+// into these meshes and textures).
+struct BallOverFloor {
+    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
+    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
+    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
+    ConstTex kd{{0.6f, 0.5f, 0.4f}}, ks{{0.1f, 0.1f, 0.1f}}, rough{{0.3f}}, black{{0, 0, 0}}, light{{5, 5, 5}};
+    SceneDesc desc(int width, int height) const {
+        SceneDesc d;
+        d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), width, height, 45);
+        d.materials = {material(kd, ks, rough), material(black, black, rough)};
+        d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
+        d.meshes[2].emission = light.desc();
+        return d;
+    }
+};
+
 // A mesh whose vertices are known to move (MeshDesc::moves): the scene is built in the form of
 // a scene whose vertices have moved, so the first move refits the BVH and the edge hierarchy
 // (without the hint it rebuilds both), and the edge list keeps its nearly flat edges from the
 // start (the sphere's planar quads' diagonals), as a scene built and then moved does.
 TEST(SceneUpdate, MeshesKnownToMoveAreBuiltForRefittingFromTheStart) {
-    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
-    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
-    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
-    SceneDesc d;
-    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 24, 20, 45);
-    d.materials = {material(kd, ks, rough), material(black, black, rough)};
-    d.meshes = {ball.desc(0), lamp.desc(1)};
-    d.meshes[1].emission = light.desc();
+    const BallOverFloor s;
+    const MeshData& ball = s.ball;
+    SceneDesc d = s.desc(24, 20);
     RenderOptions opt;
     opt.spp = 1;
     opt.num_threads = 1;
     std::vector<float> adjoint(24 * 20 * 3, 1.f), grad(ball.vertices.size());
     SceneGradients slots;
-    slots.meshes.resize(2);
+    slots.meshes.resize(3);
     slots.meshes[0].vertices.grad = grad.data();
     for (bool moves : {false, true}) {
         d.meshes[0].moves = moves;
@@ -452,16 +461,9 @@ TEST(SceneUpdate, MeshesKnownToMoveAreBuiltForRefittingFromTheStart) {
 // for that): each equals the pass made alone, bit for bit, and they share the kept edge
 // hierarchy (reused by each, never rebuilt nor refit).
 TEST(SceneUpdate, ConcurrentGradientPassesShareTheKeptHierarchy) {
-    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
-    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
-    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
-    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
-    SceneDesc d;
-    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 24, 20, 45);
-    d.materials = {material(kd, ks, rough), material(black, black, rough)};
-    d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
-    d.meshes[2].emission = light.desc();
-    const std::shared_ptr<Scene> scene = build_scene(d);
+    const BallOverFloor s;
+    const MeshData& ball = s.ball;
+    const std::shared_ptr<Scene> scene = build_scene(s.desc(24, 20));
     RenderOptions opt;
     opt.spp = 2;
     opt.num_threads = 1;
@@ -488,16 +490,13 @@ TEST(SceneUpdate, ConcurrentGradientPassesShareTheKeptHierarchy) {
     EXPECT_EQ(tree.reuses, uint64_t(kThreads));
 }
 
+// The two BVHs (scene.h, Tracing): each built on its first use, the fast one by images no
+// gradient follows, the exact one by the rest; the gradient passes trace the exact one whatever
+// the options say; and the two give the same image but for the last bits of the intersections.
 TEST(SceneUpdate, EachKindOfTracingBuildsItsBvhOnFirstUse) {
-    MeshData ball = make_sphere(Vec3f(0, 0, 0), 1.f, 16, 32);
-    MeshData floor = make_quad(Vec3f(-3, -1, 3), Vec3f(6, 0, 0), Vec3f(0, 0, -6));
-    MeshData lamp = make_quad(Vec3f(-0.5f, 3, -0.5f), Vec3f(1, 0, 0), Vec3f(0, 0, 1));
-    ConstTex kd({0.6f, 0.5f, 0.4f}), ks({0.1f, 0.1f, 0.1f}), rough({0.3f}), black({0, 0, 0}), light({5, 5, 5});
-    SceneDesc d;
-    d.camera = camera(Vec3f(0.5f, 1.f, 4.f), Vec3f(0, 0, 0), 48, 40, 45);
-    d.materials = {material(kd, ks, rough), material(black, black, rough)};
-    d.meshes = {ball.desc(0), floor.desc(0), lamp.desc(1)};
-    d.meshes[2].emission = light.desc();
+    BallOverFloor s;  // (its ball is moved below)
+    MeshData& ball = s.ball;
+    const SceneDesc d = s.desc(48, 40);
     const std::shared_ptr<Scene> scene = build_scene(d);
     EXPECT_FALSE(scene->has_bvh(Tracing::Exact));
     EXPECT_FALSE(scene->has_bvh(Tracing::Fast));
