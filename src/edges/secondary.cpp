@@ -15,18 +15,19 @@ namespace {
 constexpr float kTouchStep = 1e-4f;
 }  // namespace
 
-void SecondaryEdges::build_set(EdgeSet& set, const std::vector<float>& lengths,
-                               bool (*keep)(const SecondaryEdges&, const Edge&)) {
-    const std::vector<Edge>& all = scene_.edges();
+void SecondaryEdges::build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, int mesh)) {
+    const Scene::EdgeMeasures& measures = scene_.edge_measures();
     set.cumulative.assign(1, 0.0);
+    if (!by_length_) {  // only whether the set has an edge
+        for (size_t m = 0; m < scene_.meshes.size(); ++m)
+            if (keep(*this, int(m)) && measures.sampled[m] > 0) set.total = 1.0;
+        return;
+    }
+    const std::vector<Edge>& all = scene_.edges();
     for (size_t i = 0; i < all.size(); ++i) {
-        if (all[i].flat || !keep(*this, all[i])) continue;
-        const double len = lengths[i];
+        if (all[i].flat || !keep(*this, all[i].mesh)) continue;
+        const double len = measures.length[i];
         if (!(len > 0.0)) continue;
-        if (!by_length_) {  // only whether the set has an edge
-            set.total = 1.0;
-            return;
-        }
         set.edges.push_back(int32_t(i));
         set.cumulative.push_back(set.cumulative.back() + len);
     }
@@ -56,11 +57,11 @@ SecondaryEdges::SecondaryEdges(const Scene& scene, const RenderOptions& opt, con
     const std::vector<float>& lengths = scene.edge_measures().length;
     // Every edge: an occluder's edges move the shadow it casts, and any edge moves relative to a
     // shading point that moves (with the camera or its own surface).
-    build_set(all_, lengths, [](const SecondaryEdges&, const Edge&) { return true; });
+    build_set(all_, [](const SecondaryEdges&, int) { return true; });
     total_ = all_.total;
     // Where nothing wanted moves the shading point, only the wanted meshes' edges matter.
     if (!every) {
-        build_set(wanted_, lengths, [](const SecondaryEdges& self, const Edge& e) { return self.mesh_wanted(e.mesh); });
+        build_set(wanted_, [](const SecondaryEdges& self, int mesh) { return self.mesh_wanted(mesh); });
         has_wanted_set_ = true;
     }
     if (!uniform_ && all_.total > 0.0) {

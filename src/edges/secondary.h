@@ -116,15 +116,15 @@ private:
     template <class S>
     TVec3<S> send(const EdgeTerm& term, const S& s, GradSink& sink) const;
 
-    // A set of edges with its sampler by length (uniform): the edges kept by `keep` that are
-    // not flat and have a nonzero length (`lengths`: each edge's). Without by_length_, neither
-    // the edges nor a sampler: total 1 where the set has an edge, else 0.
+    // A set of edges with its sampler by length (uniform): the edges of the meshes `keep` keeps
+    // that are not flat and have a nonzero length. Without by_length_, neither the edges nor a
+    // sampler: total 1 where the set has an edge, else 0 (from the meshes' counts of such edges).
     struct EdgeSet {
         std::vector<int32_t> edges;  // indices into scene.edges()
         std::vector<double> cumulative;
         double total = 0.0;
     };
-    void build_set(EdgeSet& set, const std::vector<float>& lengths, bool (*keep)(const SecondaryEdges&, const Edge&));
+    void build_set(EdgeSet& set, bool (*keep)(const SecondaryEdges&, int mesh));
 
     const Scene& scene_;
     const RenderOptions& opt_;

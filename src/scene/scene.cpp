@@ -253,6 +253,9 @@ const Scene::EdgeMeasures& Scene::edge_measures() const {
                 measures_.smooth_weight[size_t(i)] = std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
             }
         });
+        measures_.sampled.assign(meshes.size(), 0);
+        for (size_t i = 0; i < all.size(); ++i)
+            measures_.sampled[size_t(all[i].mesh)] += !all[i].flat && measures_.length[i] > 0.f;
         measures_ready_.store(true, std::memory_order_release);
     }
     return measures_;

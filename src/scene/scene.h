@@ -355,6 +355,9 @@ public:
         // Of a smooth edge, the angle between its faces' normals over pi (the camera's pass
         // samples a smooth edge that does not fold by it); 0 for the other kinds.
         std::vector<double> smooth_weight;
+        // Per mesh: how many of its edges are not flat and have a nonzero length (what the
+        // passes can sample).
+        std::vector<int64_t> sampled;
     };
     const EdgeMeasures& edge_measures() const;
 
