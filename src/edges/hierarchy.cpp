@@ -1425,7 +1425,7 @@ void EdgePointSampler::pdfs(float t, bool lights, float& all, float& lights_out)
 }
 
 bool EdgeHierarchy::current_for(const Scene& scene, const std::vector<uint8_t>& key) const {
-    return built_ && !key.empty() && key == key_ && scene_ == &scene && version_ == scene.geometry_version();
+    return !key.empty() && key == key_ && holds(scene, ids_, group_);
 }
 
 bool EdgeHierarchy::holds(const Scene& scene, const std::vector<int32_t>& edges, size_t group) const {

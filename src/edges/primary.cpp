@@ -308,7 +308,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // itself along it, for the light arriving between the two faces' planes: a range of
     // directions as wide as that angle. (Any positive density is unbiased; this one puts the
     // samples where the steps are likely.)
-    const std::vector<double>& smooth_weights = scene.edge_measures().smooth_weight;
+    const Scene::EdgeMeasures& measures = scene.edge_measures();
+    const std::vector<double>& smooth_weights = measures.smooth_weight;
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
@@ -323,11 +324,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             FilmEdge fe;
             double len;
+            if (uniform || spherical) fe.world = measures.length[size_t(index)];
             if (uniform) {
-                fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
                 len = fe.world;  // world length; the film part is found per sample
             } else if (spherical) {
-                fe.world = length(m.vertex(e.v1) - m.vertex(e.v0));
                 // Folds (and the smooth edges by their weight, as below), by the angle they subtend
                 // at the camera's position; the points of an edge by world length.
                 if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {

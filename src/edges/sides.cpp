@@ -89,13 +89,27 @@ bool hit_on_plane(const Mesh& m, int mesh, int64_t f, const Ray& ray, Hit& h) {
 
 }  // namespace
 
-double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f& c) {
-    if (eye.parallel) {
-        const Vec3d a(e0 - c), b(e1 - c);
-        return dot(cross(a, b), Vec3d(eye.dir));
+namespace {
+
+// side_of for the one edge (e0, e1) and any point c: the plane through the eye and the edge found
+// once (a parallel eye's plane depends on c, so it is found per point).
+struct EyePlane {
+    const EdgeEye& eye;
+    Vec3f e0, e1;
+    Vec3d n;
+    EyePlane(const EdgeEye& eye_, const Vec3f& a, const Vec3f& b) : eye(eye_), e0(a), e1(b) {
+        if (!eye.parallel) n = cross(Vec3d(e0 - eye.origin), Vec3d(e1 - eye.origin));
     }
-    const Vec3d a(e0 - eye.origin), b(e1 - eye.origin);
-    return dot(cross(a, b), Vec3d(c - eye.origin));
+    double side(const Vec3f& c) const {
+        if (eye.parallel) return dot(cross(Vec3d(e0 - c), Vec3d(e1 - c)), Vec3d(eye.dir));
+        return dot(n, Vec3d(c - eye.origin));
+    }
+};
+
+}  // namespace
+
+double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f& c) {
+    return EyePlane(eye, e0, e1).side(c);
 }
 
 bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
@@ -103,18 +117,8 @@ bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
     const Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
     Vec3f c0, c1;
     if (!third_vertex(m, e.f0, p0, p1, c0) || !third_vertex(m, e.f1, p0, p1, c1)) return true;
-    // side_of(eye, p0, p1, c) for both c, the cross product (the same) once.
-    double s0, s1;
-    if (eye.parallel) {
-        const Vec3d d(eye.dir);
-        s0 = dot(cross(Vec3d(p0 - c0), Vec3d(p1 - c0)), d);
-        s1 = dot(cross(Vec3d(p0 - c1), Vec3d(p1 - c1)), d);
-    } else {
-        const Vec3d n = cross(Vec3d(p0 - eye.origin), Vec3d(p1 - eye.origin));
-        s0 = dot(n, Vec3d(c0 - eye.origin));
-        s1 = dot(n, Vec3d(c1 - eye.origin));
-    }
-    return (s0 > 0.0) == (s1 > 0.0);
+    const EyePlane plane(eye, p0, p1);
+    return (plane.side(c0) > 0.0) == (plane.side(c1) > 0.0);
 }
 
 bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray& ray, float s, float t_x,
