@@ -305,6 +305,10 @@ private:
         float sin = 0.f;
         // Smooth edges: the range of the faces' plane equations at the centre, n_f . (c - x_f).
         float plane_lo = 0.f, plane_hi = 0.f;
+        // The sum of its edges' faces' unit normals (n0 + n1 of each edge; zero for a boundary
+        // or a crease between faces of zero area), its children's added: every inner node has
+        // it, and the cone's axis is its direction.
+        Vec3f normals{0.f};
     };
     struct alignas(64) Node {
         Vec3f lo, hi;
