@@ -157,10 +157,9 @@ EdgeHierarchy::LeafInput EdgeHierarchy::leaf_input(const Scene& scene, const Edg
     // An edge between faces that are black seen from behind (a one-sided material, no
     // emission from the back): from a point behind both, either side of it looks black
     // (or both sides see what hides it), so it adds nothing there.
-    const Material& mat = scene.materials[size_t(m.material)];
     in.crease = e.kind == EdgeKind::Crease;
     in.seam = in.crease && e.seam;
-    in.dark_behind = e.kind != EdgeKind::Boundary && !mat.two_sided && !(m.is_emitter() && m.two_sided_emission);
+    in.dark_behind = e.kind != EdgeKind::Boundary && scene.dark_behind(m);
     in.emissive = m.is_emitter();
     in.n0 = in.n1 = Vec3f(0.f);
     if (!in.always || in.crease) {
@@ -440,8 +439,7 @@ std::vector<uint8_t> EdgeHierarchy::mesh_flags(const Scene& scene) {
     std::vector<uint8_t> out(scene.meshes.size());
     for (size_t i = 0; i < out.size(); ++i) {
         const Mesh& m = scene.meshes[i];
-        const bool dark = !scene.materials[size_t(m.material)].two_sided && !(m.is_emitter() && m.two_sided_emission);
-        out[i] = uint8_t((m.is_emitter() ? 1 : 0) | (dark ? 2 : 0));
+        out[i] = uint8_t((m.is_emitter() ? 1 : 0) | (scene.dark_behind(m) ? 2 : 0));
     }
     return out;
 }

@@ -310,6 +310,15 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // samples where the steps are likely.)
     const Scene::EdgeMeasures& measures = scene.edge_measures();
     const std::vector<double>& smooth_weights = measures.smooth_weight;
+    // An edge that does not fold, seen from behind both its faces on a mesh black from behind
+    // (Scene::dark_behind), has black on both its sides: no step in the radiance, and no edge
+    // sample there can add anything. Left out (before its projection) where radiance is all
+    // the pass differentiates: the other channels (depth, normals, ...) are not black from behind.
+    // (About half the edges of a closed mesh; their samples go to the edges that can step. A
+    // thin lens's other eyes may see the faces from the front: none left out there.)
+    std::vector<uint8_t> dark_behind(scene.meshes.size(), 0);
+    if (!hit_values && cam.type != CameraType::ThinLens)
+        for (size_t i = 0; i < scene.meshes.size(); ++i) dark_behind[i] = scene.dark_behind(scene.meshes[i]);
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
@@ -330,7 +339,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             } else if (spherical) {
                 // Folds (and the smooth edges by their weight, as below), by the angle they subtend
                 // at the camera's position; the points of an edge by world length.
-                if (!is_fold(camera_eye, m, e) && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
+                const bool fold = is_fold(camera_eye, m, e);
+                if (!fold && dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) continue;
+                if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
                     fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;
                 }
@@ -347,8 +358,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // proportion to the angle between its faces, the weight dividing the sample's.
                 // (Its part on the film first: an edge off the film needs neither its faces nor
                 // its weight.)
+                // (Where it may be left out, whether it folds is found first: a projection costs more.)
+                const bool known = dark_behind[size_t(e.mesh)] && e.kind != EdgeKind::Boundary;
+                const bool fold_known = known && is_fold(camera_eye, m, e);
+                if (known && !fold_known && seen_from_behind(camera_eye, m, e)) continue;
                 if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
-                const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e) : is_fold(camera_eye, m, e);
+                const bool fold = known                               ? fold_known
+                                  : cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e)
+                                                                      : is_fold(camera_eye, m, e);
                 if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
                     fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;

@@ -121,6 +121,16 @@ bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e) {
     return (plane.side(c0) > 0.0) == (plane.side(c1) > 0.0);
 }
 
+bool seen_from_behind(const EdgeEye& eye, const Mesh& m, const Edge& e) {
+    if (e.f0 < 0 || e.f1 < 0) return false;
+    const Vec3f p0 = m.vertex(e.v0);  // on both faces' planes
+    auto behind = [&](int64_t f) {
+        const Vec3f& ng = m.triangle_data[f].ng;
+        return eye.parallel ? dot(ng, eye.dir) > 0.f : dot(ng, eye.origin - p0) < 0.f;
+    };
+    return behind(e.f0) && behind(e.f1);
+}
+
 bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray& ray, float s, float t_x,
                 EdgeSide& upper, EdgeSide& lower) {
     const Mesh& m = scene.meshes[size_t(e.mesh)];

@@ -60,6 +60,11 @@ double side_of(const EdgeEye& eye, const Vec3f& e0, const Vec3f& e1, const Vec3f
 // Independent of the faces' winding.
 bool is_fold(const EdgeEye& eye, const Mesh& m, const Edge& e);
 
+// Whether the eye lies behind the planes of both faces of edge `e` (an edge with two faces), by
+// their geometric normals: the side from which the renderer shades a one-sided surface black.
+// Strictly: an eye in a face's plane is not behind it.
+bool seen_from_behind(const EdgeEye& eye, const Mesh& m, const Edge& e);
+
 // The hits on the upper and lower sides of edge `e` (side function of the eye's rays through
 // the edge's vertices e.v0, e.v1, in that order) for the eye's ray `ray` (unit direction) through
 // the point x = v0 + s (v1 - v0) of the edge, at distance t_x along it. False when x is hidden

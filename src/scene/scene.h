@@ -221,6 +221,12 @@ public:
     int crop_x = 0, crop_y = 0, out_width = 0, out_height = 0;
     std::vector<Mesh> meshes;
     std::vector<Material> materials;
+    // Whether mesh m is black seen from behind its faces (from the side opposite to their
+    // geometric normals, where the shading normal is bent away from the viewer): a one-sided
+    // material (glass is two-sided) and no emission from the back.
+    bool dark_behind(const Mesh& m) const {
+        return !materials[size_t(m.material)].two_sided && !(m.is_emitter() && m.two_sided_emission);
+    }
     bool has_envmap = false;
     Envmap envmap;
 
