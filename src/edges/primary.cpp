@@ -398,9 +398,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // the mesh shadows itself along it (the light between its faces' planes reaches one
                 // face and not the other, while the smooth normals give both a weight): sampled in
                 // proportion to the angle between its faces, the weight dividing the sample's.
-                // (Its part on the film first: an edge off the film needs neither its faces nor
-                // its weight.)
-                // (Where it may be left out, whether it folds is found first: a projection costs more.)
+                // (Its part on the film first, where no rule above can leave it out: an edge off
+                // the film needs neither its faces nor its weight. Where one can, whether it folds
+                // is found first: a projection costs more than the faces' tests.)
                 const bool dark = dark_behind[size_t(e.mesh)] != 0, lit = by_lights && e.kind == EdgeKind::Smooth;
                 const bool known = (dark || lit) && e.kind != EdgeKind::Boundary;
                 const bool fold_known = known && is_fold(camera_eye, m, e);
