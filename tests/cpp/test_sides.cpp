@@ -167,6 +167,30 @@ TEST(EdgeSides, CreaseSeesOneFaceOnEachSideWhateverTheWinding) {
     }
 }
 
+// Whether the eye is behind both faces' planes, by their geometric normals (the camera pass
+// leaves out an edge that does not fold seen so, on a mesh black from behind).
+TEST(EdgeSides, SeenFromBehindIsByBothFacesGeometricNormals) {
+    SidesScene s(false, 50.f);               // both faces' normals about +z, away from the eye
+    SidesScene flipped(false, 50.f, true);   // face 1 wound the other way: it faces the eye
+    const Mesh& m = s.scene->meshes[0];
+    EdgeEye eye;
+    EXPECT_TRUE(seen_from_behind(eye, m, s.edge()));
+    EXPECT_FALSE(seen_from_behind(eye, flipped.scene->meshes[0], flipped.edge()));
+    eye.origin = Vec3f(0, 0, 5);  // past both faces: in front of them
+    EXPECT_FALSE(seen_from_behind(eye, m, s.edge()));
+    eye.origin = Vec3f(0, 0, 2);  // in face 0's plane: not behind it
+    EXPECT_FALSE(seen_from_behind(eye, m, s.edge()));
+    EdgeEye parallel;
+    parallel.parallel = true;
+    parallel.dir = Vec3f(0, 0, 1);  // looking along the normals
+    EXPECT_TRUE(seen_from_behind(parallel, m, s.edge()));
+    parallel.dir = Vec3f(0, 0, -1);
+    EXPECT_FALSE(seen_from_behind(parallel, m, s.edge()));
+    Edge boundary = s.edge();  // one face: a boundary is never left out
+    boundary.f1 = -1;
+    EXPECT_FALSE(seen_from_behind(EdgeEye(), m, boundary));
+}
+
 TEST(EdgeSides, PointBehindTheEyeIsDropped) {
     SidesScene s(true, 50.f);
     EdgeEye eye;
