@@ -338,12 +338,12 @@ def test_outline_at_a_sphere_pole_and_seam_matches_finite_differences():
 # uniform sampler, which samples every edge by its world length and leaves none out, shows it: on
 # scenes made only of such edges its samples are all zero (or rounding), while the same scenes
 # changed so that the edges can step give it samples that are not. Where they step, the default
-# sampler, which leaves edges out, matches it. (That it leaves them out shows in the time and the
-# variance, `make bench`: these checks hold either way.)
+# sampler, which leaves edges out, matches it. (That it leaves them out shows in its time,
+# `edgepath_bench --edges-only`'s camera step, and in its variance: these checks hold either way.)
 
 def _shell(offset, two_sided, lamp_height):
     """The camera inside a smooth sphere of radius 2 (seen from inside: from behind every face,
-    and no edge folds), lit by a small lamp facing down from lamp_height."""
+    and no edge folds), lit by a small lamp at lamp_height that emits from both sides."""
     v, i, _, n = shapes.sphere(radius=2.0, rings=16, segments=24)
     shell = ep.Mesh(v + offset, i, normals=n, material=ep.Material(diffuse=0.7, two_sided=two_sided))
     lv, li = shapes.quad([[-0.2, lamp_height, -0.2], [0.2, lamp_height, -0.2], [0.2, lamp_height, 0.2],
