@@ -360,6 +360,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     const LightBoxes light_boxes(scene);
     const bool by_lights = !hit_values && cam.type != CameraType::ThinLens && opt.max_bounces <= 1 &&
                            !scene.has_envmap && light_boxes.center.size() <= 16;
+    // Whether one of these two rules may apply to edge e, and whether one does, e not folding.
+    auto may_leave_out = [&](const Edge& e) {
+        return dark_behind[size_t(e.mesh)] || (by_lights && e.kind == EdgeKind::Smooth);
+    };
+    auto left_out = [&](const Mesh& m, const Edge& e) {
+        return (dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) ||
+               (by_lights && e.kind == EdgeKind::Smooth && !light_boxes.between(m, e));
+    };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
@@ -381,8 +389,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // Folds (and the smooth edges by their weight, as below), by the angle they subtend
                 // at the camera's position; the points of an edge by world length.
                 const bool fold = is_fold(camera_eye, m, e);
-                if (!fold && dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) continue;
-                if (!fold && by_lights && e.kind == EdgeKind::Smooth && !light_boxes.between(m, e)) continue;
+                if (!fold && left_out(m, e)) continue;
                 if (!fold && e.kind == EdgeKind::Smooth && !smooth_edges_jump) {
                     fe.weight = smooth_weights[size_t(index)];
                     if (!(fe.weight > 0.0)) continue;
@@ -401,11 +408,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 // (Its part on the film first, where no rule above can leave it out: an edge off
                 // the film needs neither its faces nor its weight. Where one can, whether it folds
                 // is found first: a projection costs more than the faces' tests.)
-                const bool dark = dark_behind[size_t(e.mesh)] != 0, lit = by_lights && e.kind == EdgeKind::Smooth;
-                const bool known = (dark || lit) && e.kind != EdgeKind::Boundary;
+                const bool known = may_leave_out(e);
                 const bool fold_known = known && is_fold(camera_eye, m, e);
-                if (known && !fold_known && ((dark && seen_from_behind(camera_eye, m, e)) || (lit && !light_boxes.between(m, e))))
-                    continue;
+                if (known && !fold_known && left_out(m, e)) continue;
                 if (!project_edge(cam, m.vertex(e.v0), m.vertex(e.v1), wx0, wy0, wx1, wy1, fe)) continue;
                 const bool fold = known                               ? fold_known
                                   : cam.type == CameraType::ThinLens ? lens_may_fold(cam, m, e)
