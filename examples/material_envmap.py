@@ -39,23 +39,30 @@ def true_envmap() -> torch.Tensor:
 SPHERE = shapes.sphere(radius=0.7, rings=16, segments=32)
 
 
-def make_scenes(material: dict, envmap: torch.Tensor, size: int):
+def make_scene(material: dict, envmap: torch.Tensor, camera: ep.Camera) -> ep.Scene:
     v, i, uv, n = SPHERE
     glossy = ep.Mesh(v + torch.tensor([0.8, 0.0, 0.0]), i, uvs=uv, normals=n,
                      material=ep.Material(**material))
     probe = ep.Mesh(v - torch.tensor([0.8, 0.0, 0.0]), i, uvs=uv, normals=n,
                     material=ep.Material(diffuse=torch.tensor([0.8, 0.8, 0.8])))
-    sky = ep.EnvironmentMap(envmap)
-    return [ep.Scene(camera, [glossy, probe], sky)
-            for camera in orbit_cameras(size, count=3, distance=4.0, height=0.8, fov=50.0, offset_degrees=-60.0)]
+    return ep.Scene(camera, [glossy, probe], ep.EnvironmentMap(envmap))
+
+
+def set_unknowns(scene: ep.Scene, material: dict, envmap: torch.Tensor) -> None:
+    """The glossy sphere's material and the map, changed on a kept scene (no scene build)."""
+    scene.meshes[0].material = ep.Material(**material)
+    scene.envmap = ep.EnvironmentMap(envmap)
 
 
 def main(argv=None):
     args = parser(__doc__.splitlines()[0], iterations=200, size=64, spp=8).parse_args(argv)
     out = output_dir(args, "material_envmap")
     truth_map = true_envmap()
-    targets = [ep.render(s, spp=128, seed=args.seed + 10_000 + k)
-               for k, s in enumerate(make_scenes(TRUE_MATERIAL, truth_map, args.size))]
+    cameras = orbit_cameras(args.size, count=3, distance=4.0, height=0.8, fov=50.0, offset_degrees=-60.0)
+    # One scene for every step and view, the three views in one call: only the material and
+    # the map change between steps, so no step builds anything (scene.build_counts()).
+    scene = make_scene(TRUE_MATERIAL, truth_map, cameras[0])
+    targets = ep.render(scene, spp=128, seed=args.seed + 10_000, cameras=cameras)
 
     # Unknowns, all positive: optimised through their logarithms.
     log_material = {k: v.log().requires_grad_() for k, v in START_MATERIAL.items()}
@@ -67,9 +74,9 @@ def main(argv=None):
     for step in range(args.iterations):
         optimizer.zero_grad()
         material = {k: v.exp() for k, v in log_material.items()}
-        scenes = make_scenes(material, log_map.exp(), args.size)
-        images = [ep.render(s, spp=args.spp, seed=args.seed + 3 * step + k) for k, s in enumerate(scenes)]
-        loss = sum((i - t).square().mean() for i, t in zip(images, targets)) / len(images)
+        set_unknowns(scene, material, log_map.exp())
+        images = ep.render(scene, spp=args.spp, seed=args.seed + step, cameras=cameras)
+        loss = (images - targets).square().mean()  # the views' mean of each view's mean
         loss.backward()
         optimizer.step()
         losses.append(loss.item())
@@ -80,8 +87,10 @@ def main(argv=None):
     material = {k: v.detach().exp() for k, v in log_material.items()}
     recovered_map = log_map.detach().exp()
     start_map = torch.full(MAP_SIZE + (3,), 0.5)
-    start_views = [ep.render(s, spp=128) for s in make_scenes(START_MATERIAL, start_map, args.size)]
-    result_views = [ep.render(s, spp=128) for s in make_scenes(material, recovered_map, args.size)]
+    set_unknowns(scene, START_MATERIAL, start_map)
+    start_views = ep.render(scene, spp=128, cameras=cameras)
+    set_unknowns(scene, material, recovered_map)
+    result_views = ep.render(scene, spp=128, cameras=cameras)
     # The maps scaled up 8x (nearest) and tone-mapped so that the sun does not hide the sky.
     show = lambda m: (m / (1 + m)).repeat_interleave(8, 0).repeat_interleave(8, 1)  # noqa: E731
     save_images(out, {"target": row(targets), "start": row(start_views), "result": row(result_views),
@@ -94,7 +103,7 @@ def main(argv=None):
           f"{[round(x, 3) for x in material['specular'].tolist()]}, roughness "
           f"{float(material['roughness']):.3f}; pictures in {out}")
     return {"loss": losses, "material_error": material_errors, "material": material,
-            "envmap": recovered_map}
+            "envmap": recovered_map, "build_counts": scene.build_counts()}
 
 
 if __name__ == "__main__":

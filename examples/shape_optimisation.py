@@ -48,9 +48,9 @@ LAMPS = [lamp((0.0, 4.0, 0.0), 1.5, 5.0)] + [
     for a in (0.0, 120.0, 240.0)]
 
 
-def make_scenes(vertices: torch.Tensor, size: int):
+def make_scene(vertices: torch.Tensor, camera: ep.Camera) -> ep.Scene:
     mesh = ep.Mesh(vertices, SPHERE_I, material=ep.Material(diffuse=torch.tensor([0.7, 0.7, 0.7])))
-    return [ep.Scene(camera, [mesh] + LAMPS) for camera in orbit_cameras(size)]
+    return ep.Scene(camera, [mesh] + LAMPS)
 
 
 def surface_distance(vertices: torch.Tensor) -> float:
@@ -63,9 +63,12 @@ def main(argv=None):
     p.add_argument("--smoothness", type=float, default=0.2, help="weight of the Laplacian term")
     args = p.parse_args(argv)
     out = output_dir(args, "shape_optimisation")
-    true_v = target_vertices()
-    targets = [ep.render(s, spp=64, seed=args.seed + 10_000 + k)
-               for k, s in enumerate(make_scenes(true_v, args.size))]
+    cameras = orbit_cameras(args.size)
+    targets = ep.render(make_scene(target_vertices(), cameras[0]), spp=64, seed=args.seed + 10_000,
+                        cameras=cameras)
+    # One scene for every step and view: its core scene is kept and refitted as the vertices
+    # move, and the three views are rendered (and differentiated) in one call.
+    scene = make_scene(SPHERE_V, cameras[0])
     average = neighbours_matrix(SPHERE_I, SPHERE_V.shape[0])
 
     offsets = torch.zeros_like(SPHERE_V, requires_grad=True)
@@ -75,12 +78,12 @@ def main(argv=None):
     for step in range(args.iterations):
         optimizer.zero_grad()
         vertices = SPHERE_V + offsets
+        scene.meshes[0].vertices = vertices
         # Many cheap samples for the image (its noise would enter the gradient through the
         # loss), fewer for the gradient pass.
-        images = [ep.render(s, spp=args.spp, backward_spp=max(1, args.spp // 4),
-                            seed=args.seed + 3 * step + k)
-                  for k, s in enumerate(make_scenes(vertices, args.size))]
-        image_loss = sum((i - t).square().mean() for i, t in zip(images, targets)) / len(images)
+        images = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 4), seed=args.seed + step,
+                           cameras=cameras)
+        image_loss = (images - targets).square().mean()  # the views' mean of each view's mean
         # The Laplacian of the offsets: zero for any smooth deformation of the sphere (that of
         # the vertices themselves would also pull the sphere to shrink).
         laplacian = offsets - average @ offsets
@@ -94,8 +97,10 @@ def main(argv=None):
         report(args, step, losses[-1], extra=f"  distance to the target surface {errors[-1]:.4f}")
 
     final = (SPHERE_V + offsets).detach()
-    views = {name: [ep.render(s, spp=64, seed=args.seed + 20_000) for s in make_scenes(v, args.size)]
-             for name, v in (("start", SPHERE_V), ("result", final))}
+    views = {}
+    for name, v in (("start", SPHERE_V), ("result", final)):
+        scene.meshes[0].vertices = v
+        views[name] = ep.render(scene, spp=64, seed=args.seed + 20_000, cameras=cameras)
     save_images(out, {"target": row(targets), "start": row(views["start"]),
                       "result": row(views["result"])})
     plot(f"{out}/loss.png", {"total loss": losses, "image loss": image_losses,
@@ -103,7 +108,8 @@ def main(argv=None):
          "shape optimisation")
     print(f"shape optimisation: loss {losses[0]:.4g} -> {losses[-1]:.4g}, distance to the target "
           f"{errors[0]:.4f} -> {errors[-1]:.4f}; pictures in {out}")
-    return {"loss": losses, "image_loss": image_losses, "surface_distance": errors, "vertices": final}
+    return {"loss": losses, "image_loss": image_losses, "surface_distance": errors, "vertices": final,
+            "build_counts": scene.build_counts()}
 
 
 if __name__ == "__main__":

@@ -39,19 +39,24 @@ LAMPS = [lamp((4.0 * math.sin(math.radians(a + 30)), 2.5, 4.0 * math.cos(math.ra
          for a in range(0, 360, 360 // VIEWS)]
 
 
-def make_scenes(texture: torch.Tensor, size: int):
+def make_scene(texture: torch.Tensor, camera: ep.Camera) -> ep.Scene:
     v, i, uv, n = SPHERE
     ball = ep.Mesh(v, i, uvs=uv, normals=n, material=ep.Material(diffuse=texture))
-    return [ep.Scene(camera, [ball] + LAMPS)
-            for camera in orbit_cameras(size, count=VIEWS, distance=3.5, height=0.5, fov=40.0)]
+    return ep.Scene(camera, [ball] + LAMPS)
 
 
 def main(argv=None):
     args = parser(__doc__.splitlines()[0], iterations=150, size=64, spp=8).parse_args(argv)
     out = output_dir(args, "texture_recovery")
     truth = true_texture()
-    targets = [ep.render(s, spp=128, seed=args.seed + 10_000 + k)
-               for k, s in enumerate(make_scenes(truth, args.size))]
+    cameras = orbit_cameras(args.size, count=VIEWS, distance=3.5, height=0.5, fov=40.0)
+    # One scene for every step and view: only the texture and the camera change between
+    # calls, so no call after the first builds anything (scene.build_counts()). The views are
+    # rendered one call each, with seeds of their own: the rig turns with the lamps, so the
+    # views are alike up to a rotation, and one call for all (cameras=..., the same seed for
+    # every view) would give them the same noise: four times the variance of the loss's noise.
+    scene = make_scene(truth, cameras[0])
+    targets = ep.render(scene, spp=128, seed=args.seed + 10_000, cameras=cameras)
     # Texels as logits: the albedo stays in (0, 1).
     logits = torch.zeros(TEXTURE_SIZE + (3,), requires_grad=True)
     optimizer = torch.optim.Adam([logits], lr=0.1)
@@ -61,10 +66,13 @@ def main(argv=None):
     for step in range(args.iterations):
         optimizer.zero_grad()
         texture = torch.sigmoid(logits)
-        images = [ep.render(s, spp=args.spp, backward_spp=max(1, args.spp // 2),
-                            seed=args.seed + VIEWS * step + k)
-                  for k, s in enumerate(make_scenes(texture, args.size))]
-        loss = sum((i - t).square().mean() for i, t in zip(images, targets)) / len(images)
+        scene.meshes[0].material = ep.Material(diffuse=texture)
+        loss = 0.0
+        for k, camera in enumerate(cameras):
+            scene.camera = camera
+            image = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 2),
+                              seed=args.seed + VIEWS * step + k)
+            loss = loss + (image - targets[k]).square().mean() / VIEWS
         loss.backward()
         optimizer.step()
         losses.append(loss.item())
@@ -72,7 +80,8 @@ def main(argv=None):
         report(args, step, losses[-1], extra=f"  texel error (band) {errors[-1]:.4f}")
 
     recovered = torch.sigmoid(logits.detach())
-    views = [ep.render(s, spp=128) for s in make_scenes(recovered, args.size)]
+    scene.meshes[0].material = ep.Material(diffuse=recovered)
+    views = ep.render(scene, spp=128, cameras=cameras)
     big = lambda t: t.repeat_interleave(4, 0).repeat_interleave(4, 1)  # noqa: E731
     save_images(out, {"target": row(targets), "result": row(views),
                       "texture_true_vs_recovered": row([big(truth), big(recovered)])})
@@ -80,7 +89,7 @@ def main(argv=None):
          "texture recovery")
     print(f"texture recovery: loss {losses[0]:.4g} -> {losses[-1]:.4g}, mean texel error in the "
           f"seen band {errors[0]:.3f} -> {errors[-1]:.4f}; pictures in {out}")
-    return {"loss": losses, "texel_error": errors, "texture": recovered}
+    return {"loss": losses, "texel_error": errors, "texture": recovered, "build_counts": scene.build_counts()}
 
 
 if __name__ == "__main__":

@@ -48,6 +48,10 @@ def test_shape_optimisation(tmp_path):
     assert fell(r["image_loss"], 0.9)
     assert r["surface_distance"][-1] < r["surface_distance"][0]
     assert (tmp_path / "result.png").is_file()
+    # One kept scene: its two BVHs (the gradient passes' exact one, the plain renders' fast one)
+    # each built once, then refitted as the vertices move, however many steps.
+    assert r["build_counts"]["builds"] == 2
+    assert r["build_counts"]["refits"] > 0
 
 
 def test_shadow_occluder(tmp_path):
@@ -65,6 +69,8 @@ def test_material_envmap(tmp_path):
     assert fell(r["loss"], 0.7)
     assert r["material_error"][-1] < r["material_error"][0]
     assert (tmp_path / "envmap_true_vs_recovered.png").is_file()
+    # Material and map steps on one kept scene: each of its two BVHs built once, never again.
+    assert r["build_counts"]["builds"] == 2 and r["build_counts"]["refits"] == 0
 
 
 def test_texture_recovery(tmp_path):
@@ -72,6 +78,7 @@ def test_texture_recovery(tmp_path):
     assert fell(r["loss"], 0.9)
     assert r["texel_error"][-1] < r["texel_error"][0]
     assert (tmp_path / "texture_true_vs_recovered.png").is_file()
+    assert r["build_counts"]["builds"] == 2 and r["build_counts"]["refits"] == 0
 
 
 def test_adversarial(tmp_path):
