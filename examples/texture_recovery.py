@@ -54,7 +54,8 @@ def main(argv=None):
     # calls, so no call after the first builds anything (scene.build_counts()). The views are
     # rendered one call each, with seeds of their own: the rig turns with the lamps, so the
     # views are alike up to a rotation, and one call for all (cameras=..., the same seed for
-    # every view) would give them the same noise, which would add up in the loss instead of averaging out.
+    # every view) would give them the same noise, which would add up in the loss instead of
+    # averaging out.
     scene = make_scene(truth, cameras[0])
     targets = ep.render(scene, spp=128, seed=args.seed + 10_000, cameras=cameras)
     # Texels as logits: the albedo stays in (0, 1).
