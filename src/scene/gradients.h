@@ -108,8 +108,8 @@ private:
     std::map<int64_t, GradLog> pending_;
 };
 
-// Receives d(sample value)/d(parameter) contributions. Reverse mode buffers them in a small
-// direct-mapped cache (constant textures and the camera get hit by every sample) and flushes
+// Receives d(sample value)/d(parameter) contributions. Reverse mode buffers them in a
+// set-associative cache (constant textures and the camera get hit by every sample) and flushes
 // them to the buffers; forward mode sums value * direction. A sink made `ordered` keeps its
 // flushes (and the additions given to add_out) in a log that commit() hands to an OrderedAdds,
 // once per work item: the sink's cache is empty between items, so an item's additions do not
@@ -249,7 +249,12 @@ public:
     }
 
 private:
-    static constexpr int kCacheSize = 256, kWays = 4;
+    // 4096 entries (64 KiB): a tile's scattered additions (an environment map's texels, a
+    // texture's, the vertices a tile sees) mostly stay in it. With 256, on the benchmark scene
+    // (every parameter wanted), the interior term spent about a tenth of its time logging
+    // evictions; at 4096 it is 9-12% faster (1 and 3 bounces), and a flush per tile (a 16 x 16
+    // pixel tile, or 4096 primary-edge samples) reads 64 KiB, a few microseconds.
+    static constexpr int kCacheSize = 4096, kWays = 4;
     static constexpr uint64_t kKeyStride = 97;  // slots' first values spread over the cache
     unsigned evict_ = 0;
     struct Entry {
