@@ -60,7 +60,8 @@ def main(argv=None):
     truth_map = true_envmap()
     cameras = orbit_cameras(args.size, count=3, distance=4.0, height=0.8, fov=50.0, offset_degrees=-60.0)
     # One scene for every step and view, the three views in one call: only the material and
-    # the map change between steps, so no step builds anything (scene.build_counts()).
+    # the map change between steps, so nothing is built after the first step (scene.build_counts():
+    # its two BVHs, the plain renders' and the gradient passes', each built once).
     scene = make_scene(TRUE_MATERIAL, truth_map, cameras[0])
     targets = ep.render(scene, spp=128, seed=args.seed + 10_000, cameras=cameras)
 

@@ -51,7 +51,7 @@ def main(argv=None):
     truth = true_texture()
     cameras = orbit_cameras(args.size, count=VIEWS, distance=3.5, height=0.5, fov=40.0)
     # One scene for every step and view: only the texture and the camera change between
-    # calls, so no call after the first builds anything (scene.build_counts()). The views are
+    # calls, so nothing is built after the first step (scene.build_counts()). The views are
     # rendered one call each, with seeds of their own: the rig turns with the lamps, so the
     # views are alike up to a rotation, and one call for all (cameras=..., the same seed for
     # every view) would give them the same noise, which would add up in the loss instead of
