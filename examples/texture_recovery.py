@@ -90,7 +90,8 @@ def main(argv=None):
          "texture recovery")
     print(f"texture recovery: loss {losses[0]:.4g} -> {losses[-1]:.4g}, mean texel error in the "
           f"seen band {errors[0]:.3f} -> {errors[-1]:.4f}; pictures in {out}")
-    return {"loss": losses, "texel_error": errors, "texture": recovered, "build_counts": scene.build_counts()}
+    return {"loss": losses, "texel_error": errors, "texture": recovered,
+            "build_counts": scene.build_counts()}
 
 
 if __name__ == "__main__":
