@@ -443,6 +443,17 @@ CallScene build_views(const edgepath::SceneDesc& desc, const std::vector<edgepat
     return scene;
 }
 
+// The views' own seeds (options "view_seeds": one per view), or none: every view takes the
+// options' seed.
+std::vector<uint64_t> view_seeds(const nb::dict& options, size_t views) {
+    std::vector<uint64_t> seeds;
+    if (!has(options, "view_seeds")) return seeds;
+    if (!nb::try_cast(options["view_seeds"], seeds) || seeds.size() != views)
+        fail("options.view_seeds", "expected one seed (a non-negative integer) per view, " + std::to_string(views) +
+                                       " in all");
+    return seeds;
+}
+
 // Renders view k into images[k]; the counters are summed over the views.
 nb::dict render_views(const nb::list& cameras, const nb::list& materials, const nb::list& meshes,
                       nb::object envmap, nb::handle images, const nb::dict& options, SceneCache* cache,
@@ -451,6 +462,7 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
     Described d;
     describe(d, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, point_lights);
     edgepath::RenderOptions opt = render_options(options);
+    const std::vector<uint64_t> seeds = view_seeds(options, views.size());
     const CallScene scene = build_views(d.desc, views, cache);
     const ImageOut out = views_buffer<ImageOut>(images, *scene, views.size(), 3, "images", "a");
     const size_t pixels = out.size() / views.size();
@@ -458,6 +470,7 @@ nb::dict render_views(const nb::list& cameras, const nb::list& materials, const 
         edgepath::RenderStats sum;
         for (size_t k = 0; k < views.size(); ++k) {
             edgepath::set_scene_camera(*scene, views[k]);
+            if (!seeds.empty()) opt.seed = seeds[k];
             const edgepath::RenderStats s = edgepath::render(*scene, opt, out.data() + k * pixels);
             sum.camera_rays += s.camera_rays;
             sum.shadow_rays += s.shadow_rays;
@@ -624,6 +637,7 @@ void render_views_gradients(const nb::list& cameras, const nb::list& materials, 
     if (grads.contains("camera")) fail("gradients.camera", "give the cameras' gradients in camera_grads");
     if (camera_grads.size() != views.size()) fail("camera_grads", "must have one entry per view");
     GradientCall c(true, nb::cast<nb::dict>(cameras[0]), materials, meshes, envmap, options, nullptr, grads, cache, point_lights);
+    const std::vector<uint64_t> seeds = view_seeds(options, views.size());
     std::vector<edgepath::GradSlot> camera_slots;
     for (size_t k = 0; k < views.size(); ++k) {
         nb::dict one;
@@ -638,6 +652,7 @@ void render_views_gradients(const nb::list& cameras, const nb::list& materials, 
         for (size_t k = 0; k < views.size(); ++k) {
             edgepath::set_scene_camera(*c.scene, views[k]);
             c.slots.camera = camera_slots[k];
+            if (!seeds.empty()) c.opt.seed = seeds[k];
             edgepath::render_gradients(*c.scene, c.opt, a.data() + k * pixels, c.slots);
         }
     });
@@ -821,7 +836,8 @@ NB_MODULE(_core, m) {
     m.def("render_views", &render_views, "cameras"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "images"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Renders the scene once per camera into `images` (V, H, W, 3) float32, in place; one "
-          "scene build. Returns the render counters summed over the views.");
+          "scene build; options[\"view_seeds\"] (optional): a seed per view, instead of "
+          "options[\"seed\"] for all. Returns the render counters summed over the views.");
     m.def("render_gradients", &render_gradients, "camera"_a, "materials"_a, "meshes"_a,
           "envmap"_a.none(), "adjoint"_a, "gradients"_a, "options"_a, "cache"_a.none() = nb::none(), "point_lights"_a = nb::list(),
           "Adds d(sum(adjoint * image))/d(parameter) into the buffers of `gradients`.");

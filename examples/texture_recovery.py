@@ -50,14 +50,13 @@ def main(argv=None):
     out = output_dir(args, "texture_recovery")
     truth = true_texture()
     cameras = orbit_cameras(args.size, count=VIEWS, distance=3.5, height=0.5, fov=40.0)
-    # One scene for every step and view: only the texture and the camera change between
-    # calls, so nothing is built after the first step (scene.build_counts()). The views are
-    # rendered one call each, with seeds of their own: the rig turns with the lamps, so the
-    # views are alike up to a rotation, and one call for all (cameras=..., the same seed for
-    # every view) would give them the same noise, which would add up in the loss instead of
-    # averaging out.
+    # One scene for every step and view, the views in one call: only the texture changes
+    # between steps, so nothing is built after the first step (scene.build_counts()). Each
+    # view has a seed of its own (seed=[...]): the rig turns with the lamps, so the views are
+    # alike up to a rotation, and with one seed for all they would have the same noise, which
+    # would add up in the loss instead of averaging out.
     scene = make_scene(truth, cameras[0])
-    targets = ep.render(scene, spp=128, seed=args.seed + 10_000, cameras=cameras)
+    targets = ep.render(scene, spp=128, seed=[args.seed + 10_000 + k for k in range(VIEWS)], cameras=cameras)
     # Texels as logits: the albedo stays in (0, 1).
     logits = torch.zeros(TEXTURE_SIZE + (3,), requires_grad=True)
     optimizer = torch.optim.Adam([logits], lr=0.1)
@@ -68,12 +67,9 @@ def main(argv=None):
         optimizer.zero_grad()
         texture = torch.sigmoid(logits)
         scene.meshes[0].material = ep.Material(diffuse=texture)
-        loss = 0.0
-        for k, camera in enumerate(cameras):
-            scene.camera = camera
-            image = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 2),
-                              seed=args.seed + VIEWS * step + k)
-            loss = loss + (image - targets[k]).square().mean() / VIEWS
+        images = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 2), cameras=cameras,
+                           seed=[args.seed + VIEWS * step + k for k in range(VIEWS)])
+        loss = (images - targets).square().mean()  # the views' mean of each view's mean
         loss.backward()
         optimizer.step()
         losses.append(loss.item())

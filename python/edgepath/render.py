@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 import threading
 from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple, Union
 
 import torch
 import torch.autograd.forward_ad as fwad
@@ -107,6 +107,8 @@ class RenderOptions:
     # above its mean, a uniform sky not at all (docs/conventions.md, "How lights are sampled"),
     # and the rays trace the BVH built for images alone.
     replayable: bool = True
+    # Many views: a seed per view (``seed`` is the first), or None: every view takes ``seed``.
+    view_seeds: Optional[List[int]] = None
 
     def core(self) -> dict:
         out = {"spp": self.spp, "max_bounces": self.max_bounces, "seed": self.seed,
@@ -116,13 +118,15 @@ class RenderOptions:
                "hide_emitters": self.hide_emitters, "replayable": self.replayable}
         if self.secondary_survival is not None:
             out["secondary_survival"] = self.secondary_survival
+        if self.view_seeds is not None:
+            out["view_seeds"] = list(self.view_seeds)
         return out
 
 
-def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
+def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: Union[int, Sequence[int]] = 0,
            num_threads: Optional[int] = None, sampling: str = "mis",
            backward_spp: Optional[int] = None,
-           backward_seed: Optional[int] = None, primary_edges: bool = True,
+           backward_seed: Union[None, int, Sequence[int]] = None, primary_edges: bool = True,
            secondary_edges: bool = True, edge_samples: Optional[int] = None,
            edge_sampling: str = "importance", hide_emitters: bool = False,
            cameras: Optional[Sequence[Camera]] = None,
@@ -161,22 +165,32 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
 
     Many views: with ``cameras`` (a list of ``Camera`` of one film size), renders the scene once
     per camera (``scene.camera`` is not used) and returns (V, H, W, 3), view k exactly the image
-    ``render`` gives with ``scene.camera = cameras[k]`` and the same options (the same seed for
-    every view); the scene is built once for all of them, and the backward pass is one core
-    call that sums the scene's gradients over the views. Each camera's parameters are
-    differentiable as ``scene.camera``'s are.
+    ``render`` gives with ``scene.camera = cameras[k]`` and the same options; the scene is built
+    once for all of them, and the backward pass is one core call that sums the scene's
+    gradients over the views. Each camera's parameters are differentiable as ``scene.camera``'s
+    are. ``seed`` (and ``backward_seed``) may then be a list of one seed per view: view k is
+    rendered (and differentiated) with ``seed[k]`` (``backward_seed[k]``; by default a seed
+    derived from ``seed[k]`` as for one view), so that views alike up to a symmetry of the scene
+    do not share their noise; an integer gives every view the same seed.
 
     The core scene (the ray-tracing BVH, the edge list) is kept on ``scene`` across calls and
     updated from what changed: nothing is rebuilt when only materials, lights, textures, the
     environment or the camera change, the BVH is refitted when only vertices move, and rebuilt
     when the topology does (``Scene.build_counts`` counts them)."""
-    options = render_options(spp, max_bounces, seed, num_threads, sampling, primary_edges,
-                             secondary_edges, edge_samples, edge_sampling, hide_emitters,
-                             secondary_survival)
+    view_seeds = grad_view_seeds = None
     if cameras is not None:
         flat, views, view_params = _flatten_views(scene, cameras)
+        view_seeds = _view_seeds(seed, "seed", len(views))
+        grad_view_seeds = _view_seeds(backward_seed, "backward_seed", len(views))
     else:
+        for value, name in ((seed, "seed"), (backward_seed, "backward_seed")):
+            if isinstance(value, (list, tuple)):
+                v.fail(name, "a list of seeds (one per view) needs cameras=[...]")
         flat = flatten_scene(scene)
+    options = render_options(spp, max_bounces, seed if view_seeds is None else view_seeds[0], num_threads,
+                             sampling, primary_edges, secondary_edges, edge_samples, edge_sampling,
+                             hide_emitters, secondary_survival)
+    options.view_seeds = view_seeds
     attached = [(slot, t) for slot, t in flat.params.items() if t.requires_grad]
     attached_views = [] if cameras is None else [(k, t) for k, t in enumerate(view_params) if t.requires_grad]
     if (not attached and not attached_views) or not torch.is_grad_enabled():
@@ -185,11 +199,16 @@ def render(scene: Scene, spp: int = 16, max_bounces: int = 1, seed: int = 0,
             return render_views_flat(flat, views, options)
         image, _ = render_flat(flat, options)
         return image
+    if backward_seed is None and view_seeds is not None:
+        grad_view_seeds = [_backward_seed(s) for s in view_seeds]
+    if grad_view_seeds is not None:
+        backward_seed = grad_view_seeds[0]
     grad_options = render_options(spp if backward_spp is None else backward_spp, max_bounces,
                                   _backward_seed(options.seed) if backward_seed is None else backward_seed,
                                   num_threads, sampling, primary_edges, secondary_edges,
                                   edge_samples, edge_sampling, hide_emitters, secondary_survival)
-    options.replayable = _retraced(options, grad_options)
+    grad_options.view_seeds = grad_view_seeds
+    options.replayable = _retraced(options, grad_options, None if cameras is None else len(views))
     slots = [slot for slot, _ in attached]
     if cameras is not None:
         return _RenderViewsFunction.apply(flat, views, options, grad_options, slots,
@@ -642,19 +661,37 @@ def _call_core(fn, *args, flat: Optional[FlatScene] = None):
         raise ValueError(_user_field_names(str(error))) from None
 
 
-def _seed(seed) -> int:
-    seed = v.integer(seed, "seed", minimum=0)
+def _seed(seed, name: str = "seed") -> int:
+    seed = v.integer(seed, name, minimum=0)
     if seed >= 2**64:
-        v.fail("seed", f"must be < 2**64, got {seed}")
+        v.fail(name, f"must be < 2**64, got {seed}")
     return seed
 
 
-def _retraced(options: RenderOptions, grad_options: RenderOptions) -> bool:
+def _view_seeds(value, name: str, views: int) -> Optional[List[int]]:
+    """A list (or tuple) of one seed per view, checked; None for anything else (one seed for
+    every view, checked where it is used)."""
+    if not isinstance(value, (list, tuple)):
+        return None
+    if len(value) != views:
+        v.fail(name, f"expected one seed per camera ({views}), got {len(value)}")
+    return [_seed(s, f"{name}[{k}]") for k, s in enumerate(value)]
+
+
+def _retraced(options: RenderOptions, grad_options: RenderOptions, views: Optional[int] = None) -> bool:
     """Whether the gradient pass retraces the image's paths (it has the image's seed: its
     samples are the image's, or the first of them): only then is the image traced as that pass
     traces (``RenderOptions.replayable``). Otherwise the image is the one rendered without a
-    gradient, bit for bit."""
-    return grad_options.seed == options.seed
+    gradient, bit for bit. With seeds per view, every view alike: all retraced or none."""
+    if views is None or (options.view_seeds is None and grad_options.view_seeds is None):
+        return grad_options.seed == options.seed
+    image = options.view_seeds or [options.seed] * views
+    grad = grad_options.view_seeds or [grad_options.seed] * views
+    same = [a == b for a, b in zip(image, grad)]
+    if any(same) and not all(same):
+        v.fail("backward_seed", "equals seed for some views and not for others: give every view its "
+                                "image's seed (to differentiate the image's own paths) or none")
+    return all(same)
 
 
 def _backward_seed(seed: int) -> int:
