@@ -64,8 +64,11 @@ def main(argv=None):
     args = p.parse_args(argv)
     out = output_dir(args, "shape_optimisation")
     cameras = orbit_cameras(args.size)
-    targets = ep.render(make_scene(target_vertices(), cameras[0]), spp=64, seed=args.seed + 10_000,
-                        cameras=cameras)
+    views = len(cameras)
+    # A seed per view (seed=[...]): the lamps turn with the cameras, so with one seed for all,
+    # the views of the (symmetric) starting sphere would have the same noise.
+    targets = ep.render(make_scene(target_vertices(), cameras[0]), spp=64, cameras=cameras,
+                        seed=[args.seed + 10_000 + k for k in range(views)])
     # One scene for every step and view: its core scene is kept and refitted as the vertices
     # move, and the three views are rendered (and differentiated) in one call.
     scene = make_scene(SPHERE_V, cameras[0])
@@ -81,8 +84,8 @@ def main(argv=None):
         scene.meshes[0].vertices = vertices
         # Many cheap samples for the image (its noise would enter the gradient through the
         # loss), fewer for the gradient pass.
-        images = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 4), seed=args.seed + step,
-                           cameras=cameras)
+        images = ep.render(scene, spp=args.spp, backward_spp=max(1, args.spp // 4), cameras=cameras,
+                           seed=[args.seed + views * step + k for k in range(views)])
         image_loss = (images - targets).square().mean()  # the views' mean of each view's mean
         # The Laplacian of the offsets: zero for any smooth deformation of the sphere (that of
         # the vertices themselves would also pull the sphere to shrink).
@@ -97,12 +100,12 @@ def main(argv=None):
         report(args, step, losses[-1], extra=f"  distance to the target surface {errors[-1]:.4f}")
 
     final = (SPHERE_V + offsets).detach()
-    views = {}
+    pictures = {}
     for name, v in (("start", SPHERE_V), ("result", final)):
         scene.meshes[0].vertices = v
-        views[name] = ep.render(scene, spp=64, seed=args.seed + 20_000, cameras=cameras)
-    save_images(out, {"target": row(targets), "start": row(views["start"]),
-                      "result": row(views["result"])})
+        pictures[name] = ep.render(scene, spp=64, seed=args.seed + 20_000, cameras=cameras)
+    save_images(out, {"target": row(targets), "start": row(pictures["start"]),
+                      "result": row(pictures["result"])})
     plot(f"{out}/loss.png", {"total loss": losses, "image loss": image_losses,
                              "mean distance to the target surface": errors}, "value",
          "shape optimisation")
