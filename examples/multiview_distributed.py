@@ -34,9 +34,13 @@ def train(rank: int, world: int, args) -> dict:
     threads = max(1, (os.cpu_count() or 1) // world) if world > 1 else None
     cameras = orbit_cameras(args.size, count=args.views, height=1.2)
     mine = cameras[rank::world]
+    # A seed per view, from its index among all the views: the views' noise is their own, and
+    # whichever rank renders a view renders it alike, so any split gives the same gradient.
+    indices = range(rank, args.views, world)
     with torch.no_grad():
         target = ep.Scene(None, [ep.Mesh(target_vertices(), SPHERE_I, material=MATERIAL)] + LAMPS)
-        targets = ep.render(target, cameras=mine, spp=64, seed=args.seed + 10_000, num_threads=threads)
+        targets = ep.render(target, cameras=mine, spp=64, seed=[args.seed + 10_000 + k for k in indices],
+                            num_threads=threads)
     average = neighbours_matrix(SPHERE_I, SPHERE_V.shape[0])
 
     # One scene for the whole run: its ray-tracing structures are kept between steps and only
@@ -50,7 +54,7 @@ def train(rank: int, world: int, args) -> dict:
         optimizer.zero_grad()
         mesh.vertices = SPHERE_V + offsets
         images = ep.render(scene, cameras=mine, spp=args.spp, backward_spp=max(1, args.spp // 4),
-                           seed=args.seed + step, num_threads=threads)
+                           seed=[args.seed + args.views * step + k for k in indices], num_threads=threads)
         # This rank's share of the mean over every view, and of the smoothness term (a
         # Laplacian of the offsets, as in shape_optimisation.py): the ranks' losses sum to the
         # loss of one process rendering every view.
