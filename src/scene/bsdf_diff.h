@@ -70,15 +70,16 @@ template <class T> T smith_g1(T c, T ch, T a) {
 }
 template <class T, class A> void d_smith_g1(T c, T ch, T a, A dG, A& dc, A& da) {
     if (ch * c <= 0 || c * c >= 1) return;
-    T t2 = (1 - c * c) / (c * c);
-    T q = std::sqrt(1 + a * a * t2);
-    // G = 2 / (1 + q)
-    A dq = -2 / ((1 + q) * (1 + q)) * dG;
-    // q = sqrt(1 + a^2 t2)
-    da += dq * a * t2 / q;
-    A dt2 = dq * a * a / (2 * q);
-    // t2 = 1 / c^2 - 1
-    dc += dt2 * (-2 / (c * c * c));
+    // With s = sqrt(c^2 + a^2 (1 - c^2)), G = 2 |c| / (|c| + s), so
+    //   dG/d|c| = 2 a^2 / (s (|c| + s)^2),  dG/da = -2 a |c| (1 - c^2) / (s (|c| + s)^2),
+    // bounded for every c (s >= min(1, a) > 0). (Differentiated through tan^2 = 1 / c^2 - 1,
+    // they overflowed for a direction within about 1e-13 of the surface's plane, a light on a
+    // floor's plane: zero times infinity, a NaN in every gradient.)
+    T ac = std::abs(c);
+    T s = std::sqrt(c * c + a * a * (1 - c * c));
+    T k = 2 / (s * (ac + s) * (ac + s));
+    dc += dG * (c > 0 ? k * a * a : -(k * a * a));
+    da += dG * (-(k * a * ac * (1 - c * c)));
 }
 
 // The GGX microfacet reflection at (wo, wi) without its Fresnel factor, S = D Go Gi / (4 co),

@@ -318,6 +318,34 @@ def test_bright_radiance_within_range_stays_finite():
     assert torch.isfinite(image).all() and float(image.max()) > 1e13
 
 
+def test_light_in_a_glossy_floors_plane_gives_finite_gradients():
+    """A point light just above a glossy floor's plane: the light arrives at grazing angles, where
+    the GGX shadowing term's derivative once overflowed (zero times infinity: every gradient NaN,
+    the image finite). The gradients are finite and, as the height goes to zero, tend to their
+    value a little higher up."""
+    def gradients(height):
+        v = torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]], requires_grad=True)
+        roughness = torch.tensor([0.3], requires_grad=True)
+        floor = ep.Mesh(v, torch.tensor([[0, 2, 1], [0, 3, 2]]),
+                        material=ep.Material(diffuse=torch.tensor([.5, .5, .5]),
+                                             specular=torch.tensor([.2, .2, .2]), roughness=roughness))
+        light = torch.tensor([height, height, height], requires_grad=True)
+        camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., 0., 0.]),
+                           resolution=(12, 16))
+        s = ep.Scene(camera, [floor], point_lights=[ep.PointLight(light, intensity=torch.tensor([2., 2., 2.]))])
+        image = ep.render(s, spp=2, max_bounces=1, seed=1)
+        image.sum().backward()
+        assert torch.isfinite(image).all()
+        return torch.cat([v.grad.flatten(), roughness.grad, light.grad])
+
+    reference = gradients(1e-9)
+    assert torch.isfinite(reference).all() and float(reference.abs().max()) > 1.0
+    for height in (1e-15, 1e-20, 1e-30):
+        g = gradients(height)
+        assert torch.isfinite(g).all(), height
+        assert torch.allclose(g, reference, rtol=1e-3, atol=1e-3 * float(reference.abs().max())), height
+
+
 # ---- ray offsets -----------------------------------------------------------------------------
 
 def offset_scene(shift=0.0, scale=1.0):
