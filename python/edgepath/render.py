@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import re
 import threading
+import warnings
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Sequence, Tuple, Union
 
@@ -251,6 +252,7 @@ def render_views_flat(flat: FlatScene, views: List[dict], options: RenderOptions
     """One call into the core for every view: (V, H, W, 3)."""
     images = torch.empty((len(views), flat.height, flat.width, 3), dtype=torch.float32)
     _call_core(_core.render_views, views, *flat.core_args()[1:], images, options.core(), flat=flat)
+    _check_finite(images, "the rendered images")
     return images
 
 
@@ -283,6 +285,8 @@ class _RenderViewsFunction(torch.autograd.Function):
             _call_core(_core.render_views_gradients, ctx.views, *flat.core_args()[1:], adjoint,
                        flat.slot_buffers(buffers), camera_grads, ctx.grad_options.core(),
                        flat=flat)
+            _check_gradients(adjoint, [(_slot_field(s), g) for s, g in buffers.items()] +
+                             [(f"cameras[{k}]", g) for k, g in enumerate(camera_grads)])
         gradients = [buffers.get(s) for s in ctx.slots] + [camera_grads[k] for k in ctx.view_indices]
         return (None,) * 6 + tuple(_first_order_only(ctx, gradients))
 
@@ -309,6 +313,7 @@ class _RenderFunction(torch.autograd.Function):
             adjoint = grad_image.detach().to(torch.float32).contiguous()
             _call_core(_core.render_gradients, *flat.core_args(), adjoint,
                        flat.slot_buffers(buffers), ctx.grad_options.core(), flat=flat)
+            _check_gradients(adjoint, [(_slot_field(s), g) for s, g in buffers.items()])
         return (None, None, None, None, *_first_order_only(ctx, [buffers.get(s) for s in ctx.slots]))
 
 
@@ -610,7 +615,50 @@ def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, 
     """One call into the core. Returns the image and the core's counters."""
     image = torch.empty((flat.height, flat.width, 3), dtype=torch.float32)
     stats = _call_core(_core.render, *flat.core_args(), image, options.core(), flat=flat)
+    _check_finite(image, "the rendered image")
     return image, stats
+
+
+def _non_finite(values: torch.Tensor, what: str) -> Optional[str]:
+    """What is wrong where the core's float32 output overflowed (None where it did not): every
+    input is in its range by then (checked), but products of several may not be."""
+    bad = ~torch.isfinite(values)
+    if not bool(bad.any()):
+        return None
+    first = tuple(int(i) for i in bad.nonzero()[0])
+    return (f"{what}: {int(bad.sum())} non-finite values (the first at index {first}): float32 "
+            f"overflowed, though each input is within its range; look for reflectances far above 1 "
+            f"(diffuse, specular, vertex colours) carried over several bounces, emission and "
+            f"intensities near their limit (1e16), or a loss scaled beyond float32")
+
+
+def _check_finite(values: torch.Tensor, what: str) -> None:
+    """An image that overflowed is an error, not an image of Inf or NaN."""
+    message = _non_finite(values, what)
+    if message is not None:
+        raise ValueError(message)
+
+
+def _slot_field(slot: Slot) -> str:
+    """The user's name of the parameter a gradient slot holds."""
+    if slot[0] == "materials":
+        return f"meshes[{slot[1]}].material.{slot[2]}"
+    if slot[0] == "meshes":
+        return f"meshes[{slot[1]}].{slot[2]}"
+    return {"envmap": "envmap.values", "envmap_rotation": "envmap.to_world"}.get(slot[0], slot[0])
+
+
+def _check_gradients(adjoint: torch.Tensor, named: List[Tuple[str, Optional[torch.Tensor]]]) -> None:
+    """A warning for each gradient that overflowed where the incoming adjoint is finite (a loss
+    that is Inf or NaN makes them so, as any torch operation passes such values on). Warned,
+    not raised: as torch's own operations, the gradients pass Inf and NaN on to what tests for
+    them (a gradient scaler lowering its scale, anomaly detection)."""
+    if not bool(torch.isfinite(adjoint).all()):
+        return
+    for name, g in named:
+        message = None if g is None else _non_finite(g, f"the gradient with respect to {name}")
+        if message is not None:
+            warnings.warn(message, RuntimeWarning, stacklevel=2)
 
 
 def _scene_cache(scene: Scene):

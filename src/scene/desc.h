@@ -107,6 +107,10 @@ struct PointLightDesc {
 // environment's scale), so that a path's throughput times it stays finite.
 constexpr float kMaxCoordinate = 1e16f;
 constexpr float kMaxRadiance = 1e16f;
+// Roughness (GGX alpha): its square must stay finite (beyond about 1.8e19 the lobe's density is
+// infinity over infinity, a NaN image). Far beyond any lobe's use: above a few units the specular
+// lobe is already all but black.
+constexpr float kMaxRoughness = 1e16f;
 // The film's pixel count: a pixel's index fits in int32, and the default number of primary
 // edge samples (pixels times spp) in int64.
 constexpr int64_t kMaxPixels = (int64_t(1) << 31) - 1;

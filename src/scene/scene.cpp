@@ -292,6 +292,10 @@ void validate(const SceneDesc& desc) {
         check_texture(desc.materials[i].diffuse, 3, f + ".diffuse", true);
         check_texture(desc.materials[i].specular, 3, f + ".specular", true);
         check_texture(desc.materials[i].roughness, 1, f + ".roughness", true);
+        for (int64_t k = 0; k < desc.materials[i].roughness.num_values(); ++k)
+            if (!(desc.materials[i].roughness.data[k] <= kMaxRoughness))
+                fail(f + ".roughness", "value " + str(desc.materials[i].roughness.data[k]) + " at flat index " + str(k) +
+                                           " is out of range (at most " + str(kMaxRoughness) + ")");
         const MaterialDesc& md = desc.materials[i];
         if (!md.normal_map.empty()) check_texture(md.normal_map, 3, f + ".normal_map", false);
         if (int(md.kind) < 0 || int(md.kind) > int(MaterialKind::Plastic))

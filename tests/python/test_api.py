@@ -184,6 +184,8 @@ def render_small(scene):
      r"meshes\[0\]\.material\.diffuse"),  # a value the core rejects, named for the mesh
     (lambda s: setattr(s.meshes[0].material, "roughness", torch.ones(3)),
      r"meshes\[0\]\.material\.roughness"),
+    (lambda s: setattr(s.meshes[0].material, "roughness", torch.tensor([1e25])),
+     r"meshes\[0\]\.material\.roughness: value 1e\+25 at flat index 0 is out of range"),
     (lambda s: setattr(s.meshes[0], "material", "red"), r"meshes\[0\]\.material"),
     (lambda s: setattr(s, "meshes", []), r"meshes: the scene has no meshes"),
     (lambda s: setattr(s, "meshes", [s.meshes[0], "lamp"]), r"meshes\[1\]"),

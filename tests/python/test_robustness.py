@@ -346,6 +346,52 @@ def test_light_in_a_glossy_floors_plane_gives_finite_gradients():
         assert torch.allclose(g, reference, rtol=1e-3, atol=1e-3 * float(reference.abs().max())), height
 
 
+def overflow_scene(diffuse):
+    """A floor and a box under a lamp, the floor's diffuse reflectance `diffuse`: in range, but
+    far above 1 its product over three bounces overflows float32."""
+    floor = ep.Mesh(torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]]),
+                    torch.tensor([[0, 2, 1], [0, 3, 2]]), material=ep.Material(diffuse=diffuse))
+    box = ep.Mesh(torch.tensor([[-.3, .2, -.3], [.3, .2, -.3], [.3, .8, .3], [-.3, .8, .3]]),
+                  torch.tensor([[0, 1, 2], [0, 2, 3]]), material=ep.Material(diffuse=torch.tensor([.7, .3, .2])))
+    lamp = ep.Mesh(torch.tensor([[-.2, 2., -.2], [.2, 2., -.2], [.2, 2., .2], [-.2, 2., .2]]),
+                   torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor([5., 5., 5.]))
+    camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., 0., 0.]),
+                       resolution=(12, 16))
+    return ep.Scene(camera, [floor, box, lamp], envmap=ep.EnvironmentMap(torch.full((4, 8, 3), 0.5)))
+
+
+def test_an_image_that_overflows_is_an_error_not_inf():
+    """Each value in range, their product over the bounces beyond float32: an error that says
+    so, for one view and for many, never an image of Inf or NaN. Just below, a finite image."""
+    with pytest.raises(ValueError, match=r"the rendered image: \d+ non-finite values .*float32 overflowed"):
+        ep.render(overflow_scene(1e30), spp=2, max_bounces=3)
+    scene = overflow_scene(1e30)
+    with pytest.raises(ValueError, match=r"the rendered images: \d+ non-finite values"):
+        ep.render(scene, cameras=[scene.camera, scene.camera], spp=2, max_bounces=3)
+    image = ep.render(overflow_scene(1e9), spp=2, max_bounces=3)
+    assert torch.isfinite(image).all() and float(image.max()) > 1e16
+
+
+def test_a_gradient_that_overflows_warns_and_passes_inf_on():
+    """A loss scaled beyond float32 overflows the vertices' gradient: a warning naming them, and
+    the Inf handed on as torch's own operations hand it on (what a gradient scaler tests for).
+    A loss that is itself NaN warns of nothing: the gradients follow from it."""
+    def gradient(scale):
+        scene = overflow_scene(torch.tensor([.5, .5, .5]))
+        vertices = scene.meshes[0].vertices.requires_grad_(True)
+        (ep.render(scene, spp=2, seed=1) * scale).sum().backward()
+        return vertices.grad
+
+    with pytest.warns(RuntimeWarning, match=r"the gradient with respect to meshes\[0\]\.vertices: "
+                                            r"\d+ non-finite values"):
+        g = gradient(3e38)
+    assert not torch.isfinite(g).all()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert torch.isfinite(gradient(1.0)).all()
+        assert not torch.isfinite(gradient(float("nan"))).all()
+
+
 # ---- ray offsets -----------------------------------------------------------------------------
 
 def offset_scene(shift=0.0, scale=1.0):
