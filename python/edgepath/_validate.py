@@ -160,6 +160,16 @@ def choice(value, field: str, options: dict):
     return options[value]
 
 
+def constant(value, field: str, channels: int) -> torch.Tensor:
+    """A constant (as ``texture`` takes one; not a texture), as a float32 tensor of shape
+    (channels,), attached to the caller's tensor like ``float_tensor``."""
+    shape = tuple(getattr(value, "shape", ()))
+    if len(shape) >= 2 and shape[:2] != (1, 1):  # (a 1x1 texture is a constant)
+        expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
+        fail(field, f"a constant must have shape {expected}, got {_shape_str(shape)}")
+    return texture(value, field, channels).reshape(channels)
+
+
 def texture(value, field: str, channels: int) -> torch.Tensor:
     """A constant or a texture, as a float32 (H, W, channels) tensor; a constant is 1x1.
     Attached to the caller's tensor like ``float_tensor``.

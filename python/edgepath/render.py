@@ -952,7 +952,7 @@ def _flatten_point_light(light, i: int, flat: FlatScene) -> None:
     if not isinstance(light, PointLight):
         v.fail(f, f"expected an edgepath.PointLight, got {type(light).__name__}")
     position = v.float_tensor(light.position, f + ".position", (3,))
-    intensity = v.texture(light.intensity, f + ".intensity", 3).reshape(3)
+    intensity = v.constant(light.intensity, f + ".intensity", 3)
     slot = ("point_lights", i)
     out = {"position": [float(x) for x in _param(flat, slot + ("position",), position).tolist()],
            "intensity": [float(x) for x in _param(flat, slot + ("intensity",), intensity).tolist()]}

@@ -387,7 +387,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
     }
     set_views(desc);
     Update what = !same_topology ? Update::Built : !same_vertices ? Update::Refit : Update::Reused;
-    // Which triangles are degenerate (skipped by the BVHs, collapsed in their index buffers:
+    // Which triangles are degenerate (skipped by the BVHs, a NaN vertex in their index buffers:
     // prepare_bvh) depends on the positions; a change of that is a build, as is the first move (a
     // scene whose vertices have moved once is built for refitting from then on).
     std::vector<std::vector<uint8_t>> degenerate(n);
@@ -561,15 +561,22 @@ RTCScene Scene::prepare_bvh(Tracing tracing) const {
         const size_t triangles = k.degenerate.size();
         RTCGeometry g = rtcNewGeometry(device, RTC_GEOMETRY_TYPE_TRIANGLE);
         if (moving_) rtcSetGeometryBuildQuality(g, RTC_BUILD_QUALITY_REFIT);
+        // The mesh's vertices and one more, NaN, after them (a refit copies the first ones only).
         float* vb = static_cast<float*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3,
-                                                                3 * sizeof(float), size_t(k.num_vertices)));
+                                                                3 * sizeof(float), size_t(k.num_vertices) + 1));
         std::copy(k.vertices.begin(), k.vertices.end(), vb);
+        std::fill(vb + 3 * k.num_vertices, vb + 3 * k.num_vertices + 3, std::numeric_limits<float>::quiet_NaN());
         uint32_t* ib = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(g, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3,
                                                                       3 * sizeof(uint32_t), triangles));
-        // A degenerate triangle collapsed to its first vertex: it keeps its primitive id, so
-        // hits index the caller's triangles, and has exactly zero area, so no ray hits it.
+        // A degenerate triangle has the NaN vertex for all three corners: Embree's builders leave
+        // out a triangle with a vertex that is not finite, so no ray hits it, and it keeps its
+        // primitive id, so hits index the caller's triangles. (Collapsed to its first vertex
+        // instead, it was a box of zero size: degenerate triangles clustered apart from the rest,
+        // at a vertex far from the others, failed an assertion of the two-level builder a moving
+        // mesh gets, which aborted the process.)
+        const uint32_t invalid = uint32_t(k.num_vertices);
         for (size_t t = 0; t < triangles; ++t)
-            for (int c = 0; c < 3; ++c) ib[3 * t + c] = uint32_t(k.indices[3 * t + (k.degenerate[t] ? 0 : c)]);
+            for (int c = 0; c < 3; ++c) ib[3 * t + c] = k.degenerate[t] ? invalid : uint32_t(k.indices[3 * t + c]);
         rtcCommitGeometry(g);
         rtcAttachGeometryByID(rtc, g, unsigned(i));
         rtcReleaseGeometry(g);

@@ -14,7 +14,7 @@ from typing import Callable, Dict, List, Tuple
 # The loaders the fuzzer exercises, in the order cases cycle through them; each maps to the
 # extension its files get.
 KINDS = {"obj": ".obj", "ply_ascii": ".ply", "ply_binary": ".ply", "xml": ".xml",
-         "png": ".png", "jpeg": ".jpg", "exr": ".exr"}
+         "png": ".png", "jpeg": ".jpg", "exr": ".exr", "api": ".json"}
 
 # ---- seed files ------------------------------------------------------------------------------
 
@@ -166,6 +166,7 @@ def write_seeds(directory: str) -> Dict[str, List[str]]:
         "seed.png": png(), "seed_rgba.png": png(5, 3, 6), "seed_grey.png": png(4, 4, 0),
         "seed.jpg": jpeg(False), "seed_prog.jpg": jpeg(True),
     }
+    files["seed_api.json"] = b"[]"  # the API's scene (fuzz.py: _api_scene) as it is
     for name, data in files.items():
         with open(os.path.join(directory, name), "wb") as f:
             f.write(data)
@@ -173,7 +174,7 @@ def write_seeds(directory: str) -> Dict[str, List[str]]:
     return {"obj": ["seed.obj"], "ply_ascii": ["seed.ply"],
             "ply_binary": ["seed_le.ply", "seed_be.ply"], "xml": ["seed.xml"],
             "png": ["seed.png", "seed_rgba.png", "seed_grey.png"],
-            "jpeg": ["seed.jpg", "seed_prog.jpg"], "exr": ["seed.exr"]}
+            "jpeg": ["seed.jpg", "seed_prog.jpg"], "exr": ["seed.exr"], "api": ["seed_api.json"]}
 
 
 # ---- mutations -------------------------------------------------------------------------------
@@ -285,8 +286,37 @@ EXTRA = {"xml": [nest_xml], "png": [png_size], "jpeg": [jpeg_size],
          "ply_binary": [replace_number], "exr": [truncate]}
 
 
+# The Python API's inputs: which object of the scene (fuzz.py: _api_scene), which of its fields,
+# and what is done to the value there (fuzz.py: API_MUTATIONS).
+API_FIELDS = {"floor": ["vertices", "indices", "uvs"], "box": ["vertices", "indices", "normals", "colors"],
+              "lamp": ["vertices", "indices", "emission"],
+              "camera": ["position", "look_at", "up", "fov", "aperture_radius", "focus_distance"],
+              "envmap": ["values", "scale"], "floor_material": ["diffuse", "specular", "roughness"],
+              "box_material": ["diffuse", "roughness", "ior"], "point_light": ["position", "intensity"]}
+API_MUTATIONS = ["nan", "inf", "-inf", "huge", "tiny", "negate", "zero", "empty", "float64", "float16",
+                 "int64", "int32", "bool", "unsqueeze", "flatten", "transpose", "strided", "index_big",
+                 "index_negative", "index_2**40", "meta", "first_value", "expand", "coplanar", "repeat_row",
+                 "offset_tiny", "permute"]
+
+
+def mutate_api(data: bytes, rng: random.Random) -> Tuple[bytes, List[str]]:
+    """One to three changes of the API scene's values, appended to the list ``data`` holds."""
+    import json
+    changes = json.loads(data)
+    names = []
+    for _ in range(rng.choice([1, 1, 1, 2, 3])):
+        target = rng.choice(sorted(API_FIELDS))
+        change = {"target": target, "field": rng.choice(API_FIELDS[target]),
+                  "mutation": rng.choice(API_MUTATIONS), "index": rng.randrange(64)}
+        changes.append(change)
+        names.append(f"{change['target']}.{change['field']}:{change['mutation']}")
+    return json.dumps(changes).encode(), names
+
+
 def mutate(kind: str, data: bytes, rng: random.Random) -> Tuple[bytes, List[str]]:
     """One to three mutations of ``data``; returns the bytes and the mutations' names."""
+    if kind == "api":
+        return mutate_api(data, rng)
     text = kind in ("obj", "ply_ascii", "xml")
     choices = (TEXT_MUTATIONS if text else BINARY_MUTATIONS) + EXTRA.get(kind, [])
     names = []

@@ -1,6 +1,9 @@
 """Fuzzing the loaders: mutated OBJ, PLY (ASCII and binary), Mitsuba XML, PNG, JPEG and EXR
 files go through ``edgepath``'s loader and a small render, each in a child process with a time
-and memory cap, and every outcome is classified:
+and memory cap; and the Python API (kind ``api``): a small scene built in Python whose values
+are changed (a JSON list of changes, corpus.mutate_api: NaN, Inf, huge and tiny values, other
+dtypes, shapes, devices, out-of-range indices, coplanar points) is rendered with a gradient of
+everything that can have one. Every outcome is classified:
 
   ok          loaded (and rendered, where the input makes a scene)
   error       a clean error: ValueError or OSError whose message names the file (loading)
@@ -11,6 +14,7 @@ and memory cap, and every outcome is classified:
   signal      the child died by a signal (abort, segfault, the memory cap)
   hang        the child computed past the time cap on one case (CPU time), or waited six
               times that without an answer (wall time)
+  nonfinite   (api) rendered without an error, but the image or a gradient holds Inf or NaN
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
 imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
@@ -45,7 +49,7 @@ from typing import Dict, List, Optional, Tuple
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import corpus  # noqa: E402
 
-BAD = ("unexpected", "signal", "hang")
+BAD = ("unexpected", "signal", "hang", "nonfinite")
 OUTCOMES = ("ok", "error", "unnamed") + BAD
 
 # Per case: seconds of the child's CPU time (a case that computes that long hangs), bytes of
@@ -76,7 +80,7 @@ def kind_of(path: str) -> str:
             return kind
     ext = os.path.splitext(name)[1].lower()
     return {".obj": "obj", ".ply": "ply_ascii", ".xml": "xml", ".png": "png", ".jpg": "jpeg",
-            ".jpeg": "jpeg", ".exr": "exr"}[ext]
+            ".jpeg": "jpeg", ".exr": "exr", ".json": "api"}[ext]
 
 
 # ---- one case, in the child ------------------------------------------------------------------
@@ -92,10 +96,89 @@ def _framing_camera(ep, meshes):
                      resolution=(6, 8))
 
 
+def _api_scene(ep):
+    """The API kind's scene: a textured glossy floor, a box with normals and colours in glass-like
+    material, an area lamp, a sky and a point light; its float tensors require grad. Returns the
+    scene and its objects by the names corpus.API_FIELDS uses."""
+    import torch
+    gen = torch.Generator().manual_seed(0)
+    floor = ep.Mesh(torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]]),
+                    torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32),
+                    uvs=torch.tensor([[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
+                    material=ep.Material(diffuse=torch.rand(4, 5, 3, generator=gen),
+                                         specular=torch.tensor([.2, .2, .2]), roughness=torch.tensor([.3])))
+    box_vertices, box_indices = ep.shapes.box((0., .5, 0.), (.3, .3, .3))
+    box = ep.Mesh(box_vertices, box_indices,
+                  normals=torch.nn.functional.normalize(box_vertices - torch.tensor([0., .5, 0.]), dim=1),
+                  colors=torch.rand(box_vertices.shape[0], 3, generator=gen),
+                  material=ep.Material(diffuse=torch.tensor([.7, .3, .2]), roughness=torch.tensor([.2]),
+                                       kind="dielectric", ior=1.4))
+    lamp = ep.Mesh(torch.tensor([[-.2, 2., -.2], [.2, 2., -.2], [.2, 2., .2], [-.2, 2., .2]]),
+                   torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor([5., 5., 5.]))
+    camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., .3, 0.]),
+                       up=torch.tensor([0., 1., 0.]), fov=45.0, resolution=(6, 8))
+    envmap = ep.EnvironmentMap(torch.rand(4, 8, 3, generator=gen), scale=torch.tensor(1.0))
+    light = ep.PointLight(torch.tensor([1., 1., 1.]), intensity=torch.tensor([2., 2., 2.]))
+    scene = ep.Scene(camera, [floor, box, lamp], envmap=envmap, point_lights=[light])
+    objects = {"floor": floor, "box": box, "lamp": lamp, "camera": camera, "envmap": envmap,
+               "floor_material": floor.material, "box_material": box.material, "point_light": light}
+    for obj in objects.values():
+        for name, value in vars(obj).items():
+            if isinstance(value, torch.Tensor) and value.is_floating_point():
+                setattr(obj, name, value.detach().clone().requires_grad_(True))
+    return scene, objects
+
+
+def _api_change(value, mutation: str, index: int):
+    """``value`` (a tensor, or a float made one) changed as ``mutation`` says."""
+    import torch
+    t = value.detach() if isinstance(value, torch.Tensor) else torch.tensor(float(value))
+
+    def at(x, v):
+        x = x.contiguous().clone()
+        if x.numel():
+            x.view(-1)[index % x.numel()] = v
+        return x
+
+    changes = {
+        "nan": lambda: at(t.float(), float("nan")), "inf": lambda: at(t.float(), float("inf")),
+        "-inf": lambda: at(t.float(), -float("inf")), "huge": lambda: t.float() * 1e30,
+        "tiny": lambda: t.float() * 1e-30, "negate": lambda: ~t if t.dtype == torch.bool else -t, "zero": lambda: torch.zeros_like(t),
+        "empty": lambda: t.reshape(-1)[:0] if t.dim() == 0 else t[:0], "float64": lambda: t.double(),
+        "float16": lambda: t.half(), "int64": lambda: t.long(), "int32": lambda: t.int(),
+        "bool": lambda: t.bool(), "unsqueeze": lambda: t.unsqueeze(0), "flatten": lambda: t.reshape(-1),
+        "transpose": lambda: t.t() if t.dim() == 2 else t.flip(0) if t.dim() else t,
+        "strided": lambda: torch.cat([t, t], 0)[::2] if t.dim() else t,
+        "index_big": lambda: at(t, 10**6), "index_negative": lambda: at(t, -1),
+        "index_2**40": lambda: at(t.long(), 2**40), "meta": lambda: torch.empty(t.shape, device="meta"),
+        "first_value": lambda: t.reshape(-1)[0] if t.numel() else t,
+        "expand": lambda: t.expand(3, *t.shape) if t.dim() < 4 else t,
+        "coplanar": lambda: torch.cat([t[..., :-1], t[..., -1:].mean().expand(t[..., -1:].shape)], -1)
+        if t.dim() and t.shape[-1] > 1 and t.is_floating_point() else t,
+        "repeat_row": lambda: t[:1].expand(t.shape).clone() if t.dim() >= 2 and t.shape[0] else t,
+        "offset_tiny": lambda: t.float() + 1e-30,
+        "permute": lambda: t[..., [t.shape[-1] - 1 - k for k in range(t.shape[-1])]] if t.dim() else t,
+    }
+    changed = changes[mutation]()
+    # A float value the scene differentiates stays differentiable where it can.
+    if isinstance(value, torch.Tensor) and value.requires_grad and changed.is_floating_point() \
+            and changed.device.type == "cpu":
+        changed = changed.detach().clone().requires_grad_(True)
+    return changed
+
+
 def _scene_of(ep, kind: str, path: str):
     """Loads ``path`` with the loader of ``kind``; returns a small scene that uses what was
     loaded (or None when there is nothing to render)."""
     import torch
+    if kind == "api":
+        scene, objects = _api_scene(ep)
+        with open(path) as f:
+            for change in json.load(f):
+                obj = objects[change["target"]]
+                setattr(obj, change["field"], _api_change(getattr(obj, change["field"]),
+                                                          change["mutation"], change["index"]))
+        return scene, 2
     if kind == "xml":
         loaded = ep.load_mitsuba(path)
         scene = loaded.scene
@@ -138,10 +221,24 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
             return "ok", "nothing to render"
         stage = "render"
         report("rendering")
-        for mesh in scene.meshes:
-            mesh.vertices.requires_grad_(True)
+        if kind != "api":
+            for mesh in scene.meshes:
+                mesh.vertices.requires_grad_(True)
         image = ep.render(scene, spp=1, max_bounces=bounces, num_threads=1)
         image.sum().backward()
+        if kind == "api":
+            import torch
+            leaves = [(name, value) for obj in [scene.camera, scene.envmap, *scene.meshes,
+                                                *(m.material for m in scene.meshes), *scene.point_lights]
+                      if obj is not None for name, value in vars(obj).items()
+                      if isinstance(value, torch.Tensor) and value.grad is not None]
+            # A half-precision parameter gets its gradient in half precision, which overflows
+            # where float32 does not (as with torch's own operations): there, only NaN counts.
+            bad = [name for name, value in leaves
+                   if not bool((~torch.isnan(value.grad) if value.dtype == torch.float16
+                                else torch.isfinite(value.grad)).all())]
+            if not bool(torch.isfinite(image).all()) or bad:
+                return "nonfinite", f"image finite: {bool(torch.isfinite(image).all())}; gradients of {bad}"
         return "ok", f"rendered, sum {float(image.detach().sum()):.6g}"
     except (ValueError, OSError) as error:
         message = f"{stage}: {type(error).__name__}: {error}"

@@ -43,12 +43,12 @@ def test_regression_file(replayed, name):
 
 @pytest.mark.slow
 def test_fuzz_slice(tmp_path):
-    """560 fresh cases (80 per loader), about a minute on two cores."""
+    """640 fresh cases (80 per loader and 80 of the Python API), about a minute on two cores."""
     log = tmp_path / "log.jsonl"
-    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "560", "--seed", "20260101",
+    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "640", "--seed", "20260101",
                              "--log", str(log), "-q"], capture_output=True, text=True, timeout=900)
     cases = [json.loads(line) for line in log.read_text().splitlines()]
-    assert len(cases) == 560, result.stdout + result.stderr
+    assert len(cases) == 640, result.stdout + result.stderr
     counts = {}
     for case in cases:
         counts[case["outcome"]] = counts.get(case["outcome"], 0) + 1

@@ -287,6 +287,9 @@ def test_recover_the_position_of_a_spot_sphere_from_its_lit_region():
     (dict(position=torch.tensor([0.0, 1, 0]), intensity=torch.tensor([1.0, -1, 1])),
      r"point_lights\[0\].intensity"),
     (dict(position=torch.tensor([0.0, 1, 0]), intensity=torch.ones(2)), r"point_lights\[0\].intensity"),
+    # A texture's shape is no constant (found by the fuzzer: it was a RuntimeError of reshape).
+    (dict(position=torch.tensor([0.0, 1, 0]), intensity=torch.ones(3, 3, 3)),
+     r"point_lights\[0\].intensity: a constant must have shape \(3,\) or \(1,\), got \(3, 3, 3\)"),
     (dict(position=torch.zeros(2)), r"point_lights\[0\].position"),
 ])
 def test_bad_point_light_names_the_field(light, message):

@@ -128,6 +128,37 @@ def test_degenerate_triangles_render_as_nothing_with_zero_gradients():
     assert torch.equal(vertices.grad[3:], torch.zeros(5, 3))
 
 
+def test_degenerate_triangles_far_from_the_rest_of_a_moving_mesh():
+    """Degenerate triangles in a cluster of their own, at a vertex far from the others, on a mesh
+    whose vertices require grad (the refittable BVH, Embree's two-level builder): they used to
+    be boxes of zero size there, which failed an assertion of the builder and aborted the
+    process (found by the fuzzer). Run in a child: it renders, with finite gradients."""
+    result = run_child(CHILD_PRELUDE + textwrap.dedent("""
+        import warnings
+        from edgepath import shapes
+        def scene(far):
+            v, i = shapes.box((0., .5, 0.), (.3, .3, .3))
+            v = v.clone()
+            v[0, 0] = far
+            floor = ep.Mesh(torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]]),
+                            torch.tensor([[0, 2, 1], [0, 3, 2]]))
+            lamp = ep.Mesh(torch.tensor([[-.2, 2., -.2], [.2, 2., -.2], [.2, 2., .2], [-.2, 2., .2]]),
+                           torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor([5., 5., 5.]))
+            camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., .3, 0.]),
+                               resolution=(6, 8))
+            return ep.Scene(camera, [floor, ep.Mesh(v.requires_grad_(True), i), lamp])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            s = scene(1e6)
+            image = ep.render(s, spp=2, seed=1, max_bounces=2)
+            image.sum().backward()
+        print(bool(torch.isfinite(image).all()), bool(torch.isfinite(s.meshes[1].vertices.grad).all()),
+              any("triangles are degenerate" in str(w.message) for w in caught))
+        """))
+    assert result.returncode == 0, result.stderr[-2000:]
+    assert result.stdout.split() == ["True", "True", "True"], result.stdout + result.stderr[-2000:]
+
+
 def test_triangle_collapsing_during_an_optimisation_step():
     """Moving a vertex onto the opposite edge makes the triangle flat for one step: the step
     renders (with a warning) and backpropagates finite gradients instead of raising."""
