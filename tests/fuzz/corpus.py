@@ -291,8 +291,9 @@ EXTRA = {"xml": [nest_xml], "png": [png_size], "jpeg": [jpeg_size],
 API_FIELDS = {"floor": ["vertices", "indices", "uvs"], "box": ["vertices", "indices", "normals", "colors"],
               "lamp": ["vertices", "indices", "emission"],
               "camera": ["position", "look_at", "up", "fov", "aperture_radius", "focus_distance"],
-              "envmap": ["values", "scale"], "floor_material": ["diffuse", "specular", "roughness"],
-              "box_material": ["diffuse", "roughness", "ior"], "point_light": ["position", "intensity"]}
+              "envmap": ["values", "scale"], "floor_material": ["diffuse", "specular", "roughness", "normal_map"],
+              "box_material": ["diffuse", "roughness", "ior"], "point_light": ["position", "intensity"],
+              "spot": ["direction", "cutoff_angle", "beam_width"]}
 API_MUTATIONS = ["nan", "inf", "-inf", "huge", "tiny", "negate", "zero", "empty", "float64", "float16",
                  "int64", "int32", "bool", "unsqueeze", "flatten", "transpose", "strided", "index_big",
                  "index_negative", "index_2**40", "meta", "first_value", "expand", "coplanar", "repeat_row",

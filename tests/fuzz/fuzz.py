@@ -97,16 +97,17 @@ def _framing_camera(ep, meshes):
 
 
 def _api_scene(ep):
-    """The API kind's scene: a textured glossy floor, a box with normals and colours in glass-like
-    material, an area lamp, a sky and a point light; its float tensors require grad. Returns the
-    scene and its objects by the names corpus.API_FIELDS uses."""
+    """The API kind's scene: a textured, normal-mapped glossy floor, a box of rough glass with
+    normals and colours, an area lamp, a sky, a point light and a spot light; its float tensors
+    require grad. Returns the scene and its objects by the names corpus.API_FIELDS uses."""
     import torch
     gen = torch.Generator().manual_seed(0)
     floor = ep.Mesh(torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]]),
                     torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32),
                     uvs=torch.tensor([[0., 0.], [1., 0.], [1., 1.], [0., 1.]]),
                     material=ep.Material(diffuse=torch.rand(4, 5, 3, generator=gen),
-                                         specular=torch.tensor([.2, .2, .2]), roughness=torch.tensor([.3])))
+                                         specular=torch.tensor([.2, .2, .2]), roughness=torch.tensor([.3]),
+                                         normal_map=torch.rand(3, 4, 3, generator=gen) * .4 + .3))
     box_vertices, box_indices = ep.shapes.box((0., .5, 0.), (.3, .3, .3))
     box = ep.Mesh(box_vertices, box_indices,
                   normals=torch.nn.functional.normalize(box_vertices - torch.tensor([0., .5, 0.]), dim=1),
@@ -119,9 +120,12 @@ def _api_scene(ep):
                        up=torch.tensor([0., 1., 0.]), fov=45.0, resolution=(6, 8))
     envmap = ep.EnvironmentMap(torch.rand(4, 8, 3, generator=gen), scale=torch.tensor(1.0))
     light = ep.PointLight(torch.tensor([1., 1., 1.]), intensity=torch.tensor([2., 2., 2.]))
-    scene = ep.Scene(camera, [floor, box, lamp], envmap=envmap, point_lights=[light])
+    spot = ep.Spot(torch.tensor([1., -1., -1.]), cutoff_angle=torch.tensor(40.0), beam_width=torch.tensor(20.0))
+    spot_light = ep.PointLight(torch.tensor([-1., 1., 1.]), intensity=torch.tensor([1., 2., 3.]), spot=spot)
+    scene = ep.Scene(camera, [floor, box, lamp], envmap=envmap, point_lights=[light, spot_light])
     objects = {"floor": floor, "box": box, "lamp": lamp, "camera": camera, "envmap": envmap,
-               "floor_material": floor.material, "box_material": box.material, "point_light": light}
+               "floor_material": floor.material, "box_material": box.material, "point_light": light,
+               "spot": spot}
     for obj in objects.values():
         for name, value in vars(obj).items():
             if isinstance(value, torch.Tensor) and value.is_floating_point():
@@ -229,7 +233,8 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
         if kind == "api":
             import torch
             leaves = [(name, value) for obj in [scene.camera, scene.envmap, *scene.meshes,
-                                                *(m.material for m in scene.meshes), *scene.point_lights]
+                                                *(m.material for m in scene.meshes), *scene.point_lights,
+                                                *(p.spot for p in scene.point_lights)]
                       if obj is not None for name, value in vars(obj).items()
                       if isinstance(value, torch.Tensor) and value.grad is not None]
             # A half-precision parameter gets its gradient in half precision, which overflows
