@@ -640,12 +640,14 @@ def _check_finite(values: torch.Tensor, what: str) -> None:
 
 
 def _slot_field(slot: Slot) -> str:
-    """The user's name of the parameter a gradient slot holds."""
+    """The user's name of the parameter a gradient slot holds: ("meshes", 0, "vertices") is
+    meshes[0].vertices, ("materials", 0, "diffuse") meshes[0].material.diffuse."""
     if slot[0] == "materials":
         return f"meshes[{slot[1]}].material.{slot[2]}"
-    if slot[0] == "meshes":
-        return f"meshes[{slot[1]}].{slot[2]}"
-    return {"envmap": "envmap.values", "envmap_rotation": "envmap.to_world"}.get(slot[0], slot[0])
+    name = {"envmap": "envmap.values", "envmap_rotation": "envmap.to_world"}.get(slot[0], slot[0])
+    for part in slot[1:]:
+        name += f"[{part}]" if isinstance(part, int) else f".{part}"
+    return name
 
 
 def _check_gradients(adjoint: torch.Tensor, named: List[Tuple[str, Optional[torch.Tensor]]]) -> None:
