@@ -123,8 +123,10 @@ def _api_scene(ep):
                        up=torch.tensor([0., 1., 0.]), fov=45.0, resolution=(6, 8))
     envmap = ep.EnvironmentMap(torch.rand(4, 8, 3, generator=gen), scale=torch.tensor(1.0))
     light = ep.PointLight(torch.tensor([1., 1., 1.]), intensity=torch.tensor([2., 2., 2.]))
-    spot = ep.Spot(torch.tensor([1., -1., -1.]), cutoff_angle=torch.tensor(40.0), beam_width=torch.tensor(20.0))
-    spot_light = ep.PointLight(torch.tensor([-1., 1., 1.]), intensity=torch.tensor([1., 2., 3.]), spot=spot)
+    spot = ep.Spot(torch.tensor([1., -1., -1.]), cutoff_angle=torch.tensor(40.0),
+                   beam_width=torch.tensor(20.0))
+    spot_light = ep.PointLight(torch.tensor([-1., 1., 1.]), intensity=torch.tensor([1., 2., 3.]),
+                               spot=spot)
     scene = ep.Scene(camera, [floor, box, lamp], envmap=envmap, point_lights=[light, spot_light])
     objects = {"floor": floor, "box": box, "lamp": lamp, "camera": camera, "envmap": envmap,
                "floor_material": floor.material, "box_material": box.material, "point_light": light,
@@ -150,7 +152,8 @@ def _api_change(value, mutation: str, index: int):
     changes = {
         "nan": lambda: at(t.float(), float("nan")), "inf": lambda: at(t.float(), float("inf")),
         "-inf": lambda: at(t.float(), -float("inf")), "huge": lambda: t.float() * 1e30,
-        "tiny": lambda: t.float() * 1e-30, "negate": lambda: ~t if t.dtype == torch.bool else -t, "zero": lambda: torch.zeros_like(t),
+        "tiny": lambda: t.float() * 1e-30, "negate": lambda: ~t if t.dtype == torch.bool else -t,
+        "zero": lambda: torch.zeros_like(t),
         "empty": lambda: t.reshape(-1)[:0] if t.dim() == 0 else t[:0], "float64": lambda: t.double(),
         "float16": lambda: t.half(), "int64": lambda: t.long(), "int32": lambda: t.int(),
         "bool": lambda: t.bool(), "unsqueeze": lambda: t.unsqueeze(0), "flatten": lambda: t.reshape(-1),

@@ -363,7 +363,8 @@ def test_light_in_a_glossy_floors_plane_gives_finite_gradients():
         light = torch.tensor([height, height, height], requires_grad=True)
         camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., 0., 0.]),
                            resolution=(12, 16))
-        s = ep.Scene(camera, [floor], point_lights=[ep.PointLight(light, intensity=torch.tensor([2., 2., 2.]))])
+        lamp = ep.PointLight(light, intensity=torch.tensor([2., 2., 2.]))
+        s = ep.Scene(camera, [floor], point_lights=[lamp])
         image = ep.render(s, spp=2, max_bounces=1, seed=1)
         image.sum().backward()
         assert torch.isfinite(image).all()
@@ -383,7 +384,8 @@ def overflow_scene(diffuse):
     floor = ep.Mesh(torch.tensor([[-1., 0., -1.], [1., 0., -1.], [1., 0., 1.], [-1., 0., 1.]]),
                     torch.tensor([[0, 2, 1], [0, 3, 2]]), material=ep.Material(diffuse=diffuse))
     box = ep.Mesh(torch.tensor([[-.3, .2, -.3], [.3, .2, -.3], [.3, .8, .3], [-.3, .8, .3]]),
-                  torch.tensor([[0, 1, 2], [0, 2, 3]]), material=ep.Material(diffuse=torch.tensor([.7, .3, .2])))
+                  torch.tensor([[0, 1, 2], [0, 2, 3]]),
+                  material=ep.Material(diffuse=torch.tensor([.7, .3, .2])))
     lamp = ep.Mesh(torch.tensor([[-.2, 2., -.2], [.2, 2., -.2], [.2, 2., .2], [-.2, 2., .2]]),
                    torch.tensor([[0, 1, 2], [0, 2, 3]]), emission=torch.tensor([5., 5., 5.]))
     camera = ep.Camera(position=torch.tensor([0., 1.5, 3.]), look_at=torch.tensor([0., 0., 0.]),
