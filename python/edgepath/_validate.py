@@ -165,9 +165,13 @@ def constant(value, field: str, channels: int) -> torch.Tensor:
     (channels,), attached to the caller's tensor like ``float_tensor``."""
     shape = tuple(getattr(value, "shape", ()))
     if len(shape) >= 2 and shape[:2] != (1, 1):  # (a 1x1 texture is a constant)
-        expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
-        fail(field, f"a constant must have shape {expected}, got {_shape_str(shape)}")
+        _not_a_constant(field, channels, shape)
     return texture(value, field, channels).reshape(channels)
+
+
+def _not_a_constant(field: str, channels: int, shape: Sequence) -> None:
+    expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
+    fail(field, f"a constant must have shape {expected}, got {_shape_str(tuple(shape))}")
 
 
 def texture(value, field: str, channels: int) -> torch.Tensor:
@@ -183,8 +187,7 @@ def texture(value, field: str, channels: int) -> torch.Tensor:
         fail(field, f"expected a floating-point tensor, got {t.dtype}")
     if t.dim() <= 1:
         if t.numel() not in (1, channels):
-            expected = "(1,)" if channels == 1 else f"({channels},) or (1,)"
-            fail(field, f"a constant must have shape {expected}, got {_shape_str(tuple(t.shape))}")
+            _not_a_constant(field, channels, t.shape)
         t = t.to(torch.float32).reshape(1, 1, -1)
         return t.expand(1, 1, channels).contiguous()
     if channels == 1 and t.dim() == 2:

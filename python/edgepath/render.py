@@ -619,17 +619,19 @@ def render_flat(flat: FlatScene, options: RenderOptions) -> Tuple[torch.Tensor, 
     return image, stats
 
 
-def _non_finite(values: torch.Tensor, what: str) -> Optional[str]:
+def _non_finite(values: torch.Tensor, what: str, causes: str = "") -> Optional[str]:
     """What is wrong where the core's float32 output overflowed (None where it did not): every
-    input is in its range by then (checked), but products of several may not be."""
-    bad = ~torch.isfinite(values)
-    if not bool(bad.any()):
+    input is in its range by then (checked), but products of several may not be. ``causes``:
+    more of them, after the scene's own."""
+    finite = torch.isfinite(values)
+    if bool(finite.all()):
         return None
+    bad = ~finite
     first = tuple(int(i) for i in bad.nonzero()[0])
     return (f"{what}: {int(bad.sum())} non-finite values (the first at index {first}): float32 "
             f"overflowed, though each input is within its range; look for reflectances far above 1 "
             f"(diffuse, specular, vertex colours) carried over several bounces, emission and "
-            f"intensities near their limit (1e16), or a loss scaled beyond float32")
+            f"intensities near their limit (1e16){causes}")
 
 
 def _check_finite(values: torch.Tensor, what: str) -> None:
@@ -658,7 +660,8 @@ def _check_gradients(adjoint: torch.Tensor, named: List[Tuple[str, Optional[torc
     if not bool(torch.isfinite(adjoint).all()):
         return
     for name, g in named:
-        message = None if g is None else _non_finite(g, f"the gradient with respect to {name}")
+        message = None if g is None else _non_finite(g, f"the gradient with respect to {name}",
+                                                     ", or a loss scaled beyond float32")
         if message is not None:
             warnings.warn(message, RuntimeWarning, stacklevel=2)
 
