@@ -704,12 +704,31 @@ def flatten_scene(scene: Scene) -> FlatScene:
 
 # ---- pieces -------------------------------------------------------------------------------
 
+def _as_arrays(value):
+    """``value`` (nested dicts, lists and tuples) with its CPU tensors as numpy views of the same
+    memory. The core's arguments are read through DLPack, and torch's ``Tensor.__dlpack__`` is
+    Python code: a Ctrl-C whose handler ran inside it would raise KeyboardInterrupt there, which
+    the binding's array conversion discards when it falls back to another route, and the
+    interrupt would be lost. numpy's ``__dlpack__`` runs no Python code, so a signal waits for
+    the core call's own check (which cancels the call). Other devices are left as they are, for
+    the binding to refuse with the field's name."""
+    if isinstance(value, torch.Tensor):
+        if value.device.type != "cpu":
+            return value
+        return (value.detach() if value.requires_grad else value).numpy()
+    if isinstance(value, dict):
+        return {k: _as_arrays(x) for k, x in value.items()}
+    if isinstance(value, (list, tuple)):
+        return type(value)(_as_arrays(x) for x in value)
+    return value
+
+
 def _call_core(fn, *args, flat: Optional[FlatScene] = None):
     """``fn(*args)`` with the flat scene's cache and point lights; core errors name the user's
     fields."""
     try:
-        return fn(*args, cache=None if flat is None else flat.cache,
-                  point_lights=[] if flat is None else flat.point_lights)
+        return fn(*_as_arrays(args), cache=None if flat is None else flat.cache,
+                  point_lights=_as_arrays([] if flat is None else flat.point_lights))
     except ValueError as error:
         raise ValueError(_user_field_names(str(error))) from None
 

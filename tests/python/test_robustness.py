@@ -238,6 +238,53 @@ def test_ctrl_c_stops_long_core_calls(call):
     assert child.returncode == 0
 
 
+def interrupt_at_call(n):
+    """A trace function that raises KeyboardInterrupt at the n-th Python function call (0-based)
+    it sees, as a Ctrl-C handler would there; counts[0] is the number of calls seen."""
+    counts = [0]
+
+    def trace(frame, event, arg):
+        if event == "call":
+            counts[0] += 1
+            if counts[0] - 1 == n:
+                raise KeyboardInterrupt
+        return None
+    return trace, counts
+
+
+@pytest.mark.parametrize("backward", [False, True])
+def test_ctrl_c_at_any_python_call_of_a_render_is_never_lost(backward):
+    """A Ctrl-C is handled at whichever Python bytecode runs when it arrives. Raised at each
+    Python call of ep.render (and of its backward) in turn, KeyboardInterrupt reaches the caller
+    every time: none lands in code whose caller discards it (torch's Tensor.__dlpack__ was, when
+    the core's arguments were read as torch tensors, and the interrupt was lost)."""
+    scene = small_scene((8, 8))
+    diffuse = scene.meshes[0].material.diffuse.requires_grad_()
+
+    def call():
+        image = ep.render(scene, spp=1)
+        if backward:
+            image.sum().backward()
+
+    lost, n = [], 0
+    while True:  # until a call makes fewer than n + 1 Python calls (later calls reuse a cache)
+        trace, counts = interrupt_at_call(n)
+        sys.settrace(trace)
+        try:
+            call()
+            if counts[0] <= n:
+                break
+            lost.append(n)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sys.settrace(None)
+        diffuse.grad = None
+        n += 1
+    assert n > 100, n
+    assert not lost, f"KeyboardInterrupt lost at calls {lost[:10]} of {n}"
+
+
 # ---- memory ----------------------------------------------------------------------------------
 
 def test_no_memory_growth_over_many_calls():
