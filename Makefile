@@ -9,7 +9,8 @@
 #   make demo      the inverse-rendering demo: images, GIF and convergence plot in demo_out/
 #   make bench     run bench/run.sh, if there is one (options: BENCH_ARGS="--runs 3")
 #   make fuzz      N mutated scene, mesh and image files through the loaders and a small render,
-#                  and mutated values of a Python scene through ep.render and its gradients,
+#                  and mutated values and forms of a Python scene through ep.render (one view
+#                  or two), render_channels or derivative_image and their gradients,
 #                  each in a child process with time and memory caps (N=1000 SEED=0; inputs
 #                  that crash are copied to build/fuzz/found, a line per case in build/fuzz/log.jsonl)
 #   make sanitize  C++ tests built with AddressSanitizer + UBSan (build/asan)

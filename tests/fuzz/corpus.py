@@ -290,22 +290,46 @@ EXTRA = {"xml": [nest_xml], "png": [png_size], "jpeg": [jpeg_size],
 # and what is done to the value there (fuzz.py: API_MUTATIONS).
 API_FIELDS = {"floor": ["vertices", "indices", "uvs"], "box": ["vertices", "indices", "normals", "colors"],
               "lamp": ["vertices", "indices", "emission"],
-              "camera": ["position", "look_at", "up", "fov", "aperture_radius", "focus_distance"],
+              "camera": ["position", "look_at", "up", "fov", "aperture_radius", "focus_distance",
+                         "ortho_scale", "filter_stddev", "filter_radius", "to_world", "crop_window"],
               "envmap": ["values", "scale"],
-              "floor_material": ["diffuse", "specular", "roughness", "normal_map"],
+              "floor_material": ["diffuse", "specular", "roughness", "normal_map", "ior"],
               "box_material": ["diffuse", "roughness", "ior"], "point_light": ["position", "intensity"],
               "spot": ["direction", "cutoff_angle", "beam_width"]}
 API_MUTATIONS = ["nan", "inf", "-inf", "huge", "tiny", "negate", "zero", "empty", "float64", "float16",
                  "int64", "int32", "bool", "unsqueeze", "flatten", "transpose", "strided", "index_big",
                  "index_negative", "index_2**40", "meta", "first_value", "expand", "coplanar", "repeat_row",
                  "offset_tiny", "permute"]
+# Other forms of the API scene, valid and not (fuzz.py: _api_variant): a case may start from one
+# or two of them ({"target": "variant", "field": name, "value": value}) before its changes.
+API_VARIANTS = {
+    "camera_type": ["orthographic", "thinlens", "fisheye", "panorama", "pinhole"],
+    "pixel_filter": ["gaussian", "tent", "mitchell"],
+    "crop_window": [[1, 1, 3, 2], [0, 0, 8, 6], [7, 5, 1, 1], [0, 0, 0, 0], [-1, 0, 2, 2], [0, 0, 9, 6],
+                    [2, 2, -1, 1], [1.5, 0, 2, 2]],
+    "resolution": [[1, 1], [1, 9], [9, 1], [0, 4], [-1, 3], [2.5, 3]],
+    "to_world": ["look_at", "scaled", "mirrored", "singular", "sheared"],
+    "floor_kind": ["plastic", "conductor", "dielectric", "metal"],
+    "box_kind": ["standard", "plastic", "conductor"],
+    "two_sided": [True, "yes"],
+    "nonlinear": [True],
+    "max_bounces": [0, 1, 5],
+    # the entry point (fuzz.py: _api_call): two views, channels, a derivative image, options
+    "call": ["views", "channels", "derivative", "options"],
+}
 
 
 def mutate_api(data: bytes, rng: random.Random) -> Tuple[bytes, List[str]]:
-    """One to three changes of the API scene's values, appended to the list ``data`` holds."""
+    """One to three changes of the API scene's values, appended to the list ``data`` holds;
+    where the list is still empty, first (one time in two) one or two of the scene's variants."""
     import json
     changes = json.loads(data)
     names = []
+    if not changes and rng.random() < 0.5:
+        for field in rng.sample(sorted(API_VARIANTS), rng.choice([1, 1, 2])):
+            value = rng.choice(API_VARIANTS[field])
+            changes.append({"target": "variant", "field": field, "value": value})
+            names.append(f"variant.{field}={value}")
     for _ in range(rng.choice([1, 1, 1, 2, 3])):
         target = rng.choice(sorted(API_FIELDS))
         change = {"target": target, "field": rng.choice(API_FIELDS[target]),

@@ -2,7 +2,9 @@
 files go through ``edgepath``'s loader and a small render, each in a child process with a time
 and memory cap; and the Python API (kind ``api``): a small scene built in Python whose values
 are changed (a JSON list of changes, corpus.mutate_api: NaN, Inf, huge and tiny values, other
-dtypes, shapes, devices, out-of-range indices, coplanar points) is rendered with a gradient of
+dtypes, shapes, devices, out-of-range indices, coplanar points), and may first be put in another
+form (corpus.API_VARIANTS: camera types, pixel filters, crop windows, resolutions, camera
+matrices, material kinds, bounce counts, the entry point), is rendered with a gradient of
 everything that can have one. Every outcome is classified:
 
   ok          loaded (and rendered, where the input makes a scene)
@@ -138,10 +140,78 @@ def _api_scene(ep):
     return scene, objects
 
 
-def _api_change(value, mutation: str, index: int):
-    """``value`` (a tensor, or a float made one) changed as ``mutation`` says."""
+def _api_variant(scene, objects, field: str, value):
+    """Puts the API scene in one of its other forms (corpus.API_VARIANTS), valid or not, before
+    a case's changes; returns the max_bounces it asks for (None: the case's default)."""
     import torch
-    t = value.detach() if isinstance(value, torch.Tensor) else torch.tensor(float(value))
+    camera = objects["camera"]
+
+    def leaf(x):
+        return torch.tensor(x).requires_grad_(True)
+
+    if field == "camera_type":
+        camera.camera_type = value
+        camera.aperture_radius, camera.focus_distance = leaf(0.05), leaf(3.0)
+        camera.ortho_scale = leaf(1.5)
+    elif field == "pixel_filter":
+        camera.pixel_filter = value
+        camera.filter_stddev, camera.filter_radius = leaf(0.6), leaf(1.2)
+    elif field in ("crop_window", "resolution"):
+        setattr(camera, field, tuple(value))
+    elif field == "to_world":
+        position, look_at, up = (x.detach() for x in camera.frame())
+        z = torch.nn.functional.normalize(look_at - position, dim=0)
+        x = torch.nn.functional.normalize(torch.linalg.cross(up, z), dim=0)
+        y = torch.linalg.cross(z, x)
+        axes = {"look_at": (x, y, z), "scaled": (2 * x, 2 * y, 2 * z), "mirrored": (-x, y, z),
+                "singular": (x, x, z), "sheared": (x, y + 0.5 * x, z)}[value]
+        matrix = torch.eye(4)
+        matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = *axes, position
+        camera.to_world = matrix.requires_grad_(True)
+        camera.position = camera.look_at = camera.up = None
+    elif field in ("floor_kind", "box_kind"):
+        material = objects[field.replace("kind", "material")]
+        material.kind = value
+    elif field in ("two_sided", "nonlinear"):
+        setattr(objects["floor_material"], field, value)
+    elif field in ("max_bounces", "call"):
+        return value
+    return None
+
+
+def _api_call(ep, scene, call: Optional[str], bounces: int):
+    """Renders the API scene through entry point ``call`` (corpus.API_VARIANTS["call"]; None:
+    ``ep.render``); returns what the gradient is taken of."""
+    import torch
+    if call == "views":
+        second = ep.Camera(position=torch.tensor([1., 1., 2.5]), look_at=torch.tensor([0., .3, 0.]),
+                           fov=50.0, resolution=scene.camera.resolution)
+        return ep.render(scene, spp=1, max_bounces=bounces, num_threads=1, seed=[0, 1],
+                         cameras=[scene.camera, second])
+    if call == "channels":
+        channels = ep.render_channels(scene, ["radiance", "alpha", "depth", "position", "uv",
+                                              "albedo", "mesh_id"], spp=1, max_bounces=bounces,
+                                      num_threads=1)
+        return sum((v.sum() for v in channels.values() if v.is_floating_point()), torch.zeros(()))
+    if call == "derivative":
+        vertices = scene.meshes[1].vertices
+        direction = torch.ones(vertices.shape) if isinstance(vertices, torch.Tensor) else None
+        return ep.derivative_image(scene, vertices, direction, spp=1, max_bounces=bounces,
+                                   num_threads=1)
+    options = dict(sampling="bsdf", backward_spp=2, backward_seed=3, edge_samples=64,
+                   edge_sampling="uniform", hide_emitters=True, secondary_survival=0.5) \
+        if call == "options" else {}
+    return ep.render(scene, spp=1, max_bounces=bounces, num_threads=1, **options)
+
+
+def _api_change(value, mutation: str, index: int):
+    """``value`` (a tensor, or a float or tuple made one) changed as ``mutation`` says; None
+    (a field the scene leaves unset) stays None."""
+    import torch
+    if value is None:
+        return None
+    t = value.detach() if isinstance(value, torch.Tensor) else \
+        torch.tensor(value) if isinstance(value, (tuple, list)) else torch.tensor(float(value))
 
     def at(x, v):
         x = x.contiguous().clone()
@@ -180,30 +250,39 @@ def _api_change(value, mutation: str, index: int):
 def _scales_by_1e30(path: str) -> bool:
     """Whether an API case's changes scale some value by 1e30."""
     with open(path) as f:
-        return any(change["mutation"] == "huge" for change in json.load(f))
+        return any(change.get("mutation") == "huge" for change in json.load(f))
 
 
 def _scene_of(ep, kind: str, path: str):
     """Loads ``path`` with the loader of ``kind``; returns a small scene that uses what was
-    loaded (or None when there is nothing to render)."""
+    loaded (or None when there is nothing to render), its max_bounces and the API kind's entry
+    point (_api_call)."""
     import torch
     if kind == "api":
         scene, objects = _api_scene(ep)
+        bounces, call = 2, None
         with open(path) as f:
             for change in json.load(f):
+                if change["target"] == "variant":
+                    asked = _api_variant(scene, objects, change["field"], change["value"])
+                    if change["field"] == "call":
+                        call = asked
+                    elif asked is not None:
+                        bounces = asked
+                    continue
                 obj = objects[change["target"]]
                 setattr(obj, change["field"], _api_change(getattr(obj, change["field"]),
                                                           change["mutation"], change["index"]))
-        return scene, 2
+        return scene, bounces, call
     if kind == "xml":
         loaded = ep.load_mitsuba(path)
         scene = loaded.scene
         scene.camera.resolution, scene.camera.crop_window = (6, 8), None
-        return scene, min(loaded.max_bounces if loaded.max_bounces is not None else 2, 2)
+        return scene, min(loaded.max_bounces if loaded.max_bounces is not None else 2, 2), None
     if kind == "obj":
         meshes = ep.load_obj(path)
         if not meshes:
-            return None, 0
+            return None, 0, None
     elif kind.startswith("ply"):
         meshes = [ep.load_ply(path)]
     else:
@@ -215,9 +294,9 @@ def _scene_of(ep, kind: str, path: str):
                        material=ep.Material(diffuse=rgb.clamp(0, 1)))
         camera = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3),
                            fov=40.0, resolution=(6, 8))
-        return ep.Scene(camera=camera, meshes=[mesh], envmap=ep.EnvironmentMap(values=rgb)), 1
+        return ep.Scene(camera=camera, meshes=[mesh], envmap=ep.EnvironmentMap(values=rgb)), 1, None
     envmap = ep.EnvironmentMap(values=torch.ones(1, 1, 3))
-    return ep.Scene(camera=_framing_camera(ep, meshes), meshes=meshes, envmap=envmap), 1
+    return ep.Scene(camera=_framing_camera(ep, meshes), meshes=meshes, envmap=envmap), 1, None
 
 
 def _names_source(message: str, path: str) -> bool:
@@ -232,7 +311,7 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
     import edgepath.shapes  # noqa: F401  (ep.shapes)
     stage = "load"
     try:
-        scene, bounces = _scene_of(ep, kind, path)
+        scene, bounces, call = _scene_of(ep, kind, path)
         if scene is None:
             return "ok", "nothing to render"
         stage = "render"
@@ -242,8 +321,9 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
                 mesh.vertices.requires_grad_(True)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            image = ep.render(scene, spp=1, max_bounces=bounces, num_threads=1)
-            image.sum().backward()
+            image = _api_call(ep, scene, call, bounces)
+            if image.requires_grad:  # not a derivative image
+                image.sum().backward()
         if kind == "api":
             import torch
             leaves = [(name, value) for obj in [scene.camera, scene.envmap, *scene.meshes,

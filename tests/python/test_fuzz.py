@@ -41,6 +41,40 @@ def test_regression_file(replayed, name):
     _check(*replayed[name], name)
 
 
+# The API scene's forms that are not valid input, and the field their error names.
+INVALID_VARIANTS = {("camera_type", "pinhole"): "camera.camera_type",
+                    ("pixel_filter", "mitchell"): "camera.pixel_filter",
+                    ("crop_window", (0, 0, 0, 0)): "camera.crop_window",
+                    ("crop_window", (-1, 0, 2, 2)): "camera.crop_window",
+                    ("crop_window", (0, 0, 9, 6)): "camera.crop_window",
+                    ("crop_window", (2, 2, -1, 1)): "camera.crop_window",
+                    ("crop_window", (1.5, 0, 2, 2)): "camera.crop_window",
+                    ("resolution", (0, 4)): "camera.resolution",
+                    ("resolution", (-1, 3)): "camera.resolution",
+                    ("resolution", (2.5, 3)): "camera.resolution",
+                    ("to_world", "mirrored"): "camera.to_world",
+                    ("to_world", "singular"): "camera.to_world",
+                    ("to_world", "sheared"): "camera.to_world",
+                    ("floor_kind", "metal"): "meshes[0].material.kind",
+                    ("two_sided", "yes"): "meshes[0].material.two_sided"}
+
+
+@pytest.mark.parametrize("field,value", [(f, v) for f, values in fuzz.corpus.API_VARIANTS.items()
+                                         for v in values])
+def test_each_form_of_the_api_scene_renders_or_names_its_field(tmp_path, field, value):
+    """Every form the fuzzer puts the API scene in, unchanged otherwise: a valid one renders
+    (with finite gradients, through its entry point), an invalid one is a ValueError naming its
+    field. Without this, a form that always failed would leave its code unfuzzed."""
+    path = tmp_path / "case.json"
+    path.write_text(json.dumps([{"target": "variant", "field": field, "value": value}]))
+    outcome, detail = fuzz.run_case("api", str(path))
+    expected = INVALID_VARIANTS.get((field, tuple(value) if isinstance(value, list) else value))
+    if expected is None:
+        assert outcome == "ok", detail
+    else:
+        assert outcome == "error" and f"ValueError: {expected}:" in detail, detail
+
+
 @pytest.mark.slow
 def test_fuzz_slice(tmp_path):
     """640 fresh cases (80 per loader and 80 of the Python API), about a minute on two cores."""
