@@ -19,6 +19,8 @@ everything that can have one. Every outcome is classified:
   nonfinite   (api) rendered without an error, but the image or a gradient holds Inf or NaN
               (except gradients that overflowed, with the warning that says so, where the case
               scaled values by 1e30: every value in range, their product is not)
+  modified    (api) the call, with or without an error, changed a tensor the caller gave it:
+              its values, dtype, shape, version counter (an in-place operation) or requires_grad
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
 imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
@@ -54,7 +56,7 @@ from typing import Dict, List, Optional, Tuple
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import corpus  # noqa: E402
 
-BAD = ("unexpected", "signal", "hang", "nonfinite")
+BAD = ("unexpected", "signal", "hang", "nonfinite", "modified")
 OUTCOMES = ("ok", "error", "unnamed") + BAD
 
 # Per case: seconds of the child's CPU time (a case that computes that long hangs), bytes of
@@ -304,6 +306,33 @@ def _names_source(message: str, path: str) -> bool:
     return os.path.basename(path) in message or "seed" in message
 
 
+def _api_objects(scene) -> list:
+    """The objects of an API scene that hold its values (camera, lights, meshes, materials)."""
+    return [obj for obj in [scene.camera, scene.envmap, *scene.meshes,
+                            *(m.material for m in scene.meshes), *scene.point_lights,
+                            *(p.spot for p in scene.point_lights)] if obj is not None]
+
+
+def _inputs_state(scene) -> Dict[str, tuple]:
+    """What the caller gave an API scene: every CPU tensor's bytes, dtype, shape, version
+    counter and requires_grad, by name."""
+    import torch
+    state = {}
+    for k, obj in enumerate(_api_objects(scene)):
+        for name, value in vars(obj).items():
+            if isinstance(value, torch.Tensor) and value.device.type == "cpu":
+                state[f"{type(obj).__name__}[{k}].{name}"] = (
+                    value.detach().numpy().tobytes(),
+                    value.dtype, tuple(value.shape), value._version, value.requires_grad)
+    return state
+
+
+def _modified(before: Dict[str, tuple], scene) -> List[str]:
+    """The names of the inputs ``before`` (_inputs_state) that a call changed."""
+    after = _inputs_state(scene)
+    return [name for name, state in before.items() if after.get(name) != state]
+
+
 def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
     """Runs one case in this process: (outcome, detail). Only ``run_batch``'s children call it;
     ``report`` gets a note before the render (the detail if the render kills the process)."""
@@ -319,6 +348,8 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
         if kind != "api":
             for mesh in scene.meshes:
                 mesh.vertices.requires_grad_(True)
+        else:
+            before = _inputs_state(scene)
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             image = _api_call(ep, scene, call, bounces)
@@ -326,10 +357,10 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
                 image.sum().backward()
         if kind == "api":
             import torch
-            leaves = [(name, value) for obj in [scene.camera, scene.envmap, *scene.meshes,
-                                                *(m.material for m in scene.meshes), *scene.point_lights,
-                                                *(p.spot for p in scene.point_lights)]
-                      if obj is not None for name, value in vars(obj).items()
+            modified = _modified(before, scene)
+            if modified:
+                return "modified", f"rendered, and changed the caller's {modified}"
+            leaves = [(name, value) for obj in _api_objects(scene) for name, value in vars(obj).items()
                       if isinstance(value, torch.Tensor) and value.grad is not None]
             # A half-precision parameter gets its gradient in half precision, which overflows
             # where float32 does not (as with torch's own operations): there, only NaN counts.
@@ -347,6 +378,8 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
         return "ok", f"rendered, sum {float(image.detach().sum()):.6g}"
     except (ValueError, OSError) as error:
         message = f"{stage}: {type(error).__name__}: {error}"
+        if kind == "api" and stage == "render" and _modified(before, scene):
+            return "modified", f"{message}; and changed the caller's {_modified(before, scene)}"
         named = _names_source(str(error), path) if stage == "load" else ":" in str(error)
         return ("error" if named else "unnamed"), message
     except Exception as error:  # noqa: BLE001  (classifying is the point)

@@ -75,6 +75,26 @@ def test_each_form_of_the_api_scene_renders_or_names_its_field(tmp_path, field, 
         assert outcome == "error" and f"ValueError: {expected}:" in detail, detail
 
 
+def test_the_api_kind_tells_a_changed_input():
+    """The 'modified' outcome's check sees each way a call could change the caller's tensors:
+    their values (even behind the version counter's back), an in-place operation that leaves
+    them equal, and requires_grad."""
+    import torch
+    import edgepath as ep
+    import edgepath.shapes  # noqa: F401
+    scene, objects = fuzz._api_scene(ep)
+    before = fuzz._inputs_state(scene)
+    assert fuzz._modified(before, scene) == []
+    objects["floor"].vertices.data[0, 0] += 1
+    assert fuzz._modified(before, scene) == ["Mesh[2].vertices"]
+    scene, objects = fuzz._api_scene(ep)
+    before = fuzz._inputs_state(scene)
+    with torch.no_grad():
+        objects["lamp"].emission.mul_(1)
+    objects["box_material"].roughness.requires_grad_(False)
+    assert fuzz._modified(before, scene) == ["Mesh[4].emission", "Material[6].roughness"]
+
+
 @pytest.mark.slow
 def test_fuzz_slice(tmp_path):
     """640 fresh cases (80 per loader and 80 of the Python API), about a minute on two cores."""
