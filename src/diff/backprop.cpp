@@ -182,7 +182,7 @@ void finish_hit(const VertexGeometry& g, const THitAdjoint<A>& a, const SceneGra
     const TVec3<A> dng = m.normals ? a.dng : a.dng + a.dn;
     if (!is_black(dng)) {
         Vec3f e1 = g.v[1] - g.v[0], e2 = g.v[2] - g.v[0];
-        TVec3<A> dC = d_normalize(cross(e1, e2), dng);
+        TVec3<A> dC = d_cross_normal(e1, e2, dng);
         TVec3<A> de1(A(0)), de2(A(0));
         d_cross(e1, e2, dC, de1, de2);
         dv[1] += de1;

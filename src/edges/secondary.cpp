@@ -276,9 +276,9 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     // the light reaching its faces can differ: the steps where the mesh shadows itself along it,
     // seen after a bounce (not at a last one, which sees emission only).
     if (e.kind == EdgeKind::Smooth && bounces_left == 0 && !is_fold(eye, m, e)) return d_p;
-    // The plane through p and the edge; degenerate when p lies on the edge's line.
-    const Vec3f N = cross(v0 - p, v1 - p);
-    const float n_len = length(N);
+    // The plane through p and the edge, normal N = cross(v0 - p, v1 - p); degenerate when p lies
+    // on the edge's line.
+    const float n_len = cross_length(v0 - p, v1 - p);  // in range also where |N|^2 is not
     if (!(n_len > 1e-6f * length(v0 - p) * length(v1 - p))) return d_p;
 
     // The jump is the BSDF's value towards each side times the light arriving from there, both

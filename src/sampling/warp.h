@@ -1,6 +1,7 @@
 // Warps from the unit square to common domains, with their densities.
 #pragma once
 #include <cmath>
+#include <limits>
 #include "math/vec.h"
 
 namespace edgepath {
@@ -45,11 +46,25 @@ inline Vec3f square_to_sphere(float u1, float u2) {
     return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
-// Power heuristic with exponent 2 (Veach).
+// mis_power where the squares overflow or underflow (a, b > 0, one of them past about 1.8e19,
+// as a far light seen edge-on has, or both below about 1e-22): the same weight from the ratio
+// of the smaller density to the larger, which stays in range (Inf / Inf would be NaN).
+inline float mis_power_ratio(float a, float b) {
+    if (a == b) return 0.5f;
+    if (a > b) {
+        const float r = b / a;
+        return 1.f / (1.f + r * r);
+    }
+    const float r = a / b, r2 = r * r;
+    return r2 / (1.f + r2);
+}
+
+// Power heuristic with exponent 2 (Veach): a^2 / (a^2 + b^2), 0 where a is not positive.
 inline float mis_power(float a, float b) {
-    a *= a;
-    b *= b;
-    return a > 0.f ? a / (a + b) : 0.f;
+    if (!(a > 0.f)) return 0.f;
+    const float a2 = a * a, sum = a2 + b * b;
+    if (sum > 0.f && sum < std::numeric_limits<float>::infinity()) return a2 / sum;
+    return mis_power_ratio(a, b);
 }
 
 }  // namespace edgepath

@@ -100,12 +100,15 @@ struct PointLightDesc {
     float spot_profile[5] = {0, 0, 1, 0.349066f, 0.261799f};
 };
 
-// The ranges the kernels (and Embree, whose rays must stay within about 1.8e18) assume, checked
-// when a scene is built. Coordinates: vertex positions, the camera's position, look_at and up,
-// and an orthographic camera's half extents; within this bound every hit point, offset ray
-// origin and squared distance stays finite in float. Radiance: emitted radiance (times the
-// environment's scale), so that a path's throughput times it stays finite.
-constexpr float kMaxCoordinate = 1e16f;
+// The ranges the kernels (and Embree) assume, checked when a scene is built. Coordinates:
+// vertex positions, the camera's position, look_at and up, and an orthographic camera's half
+// extents. Embree's float ray-triangle test forms products of three lengths (a distance times
+// twice a triangle's area): within +-1e12 they stay below about 4.2e37, under float's 3.4e38;
+// beyond about 2e12 a large triangle far from the ray's origin overflows to Inf and is missed
+// (at 1e16, the former bound, a box 3e12 wide was seen through). Within the bound every hit
+// point, offset ray origin and squared distance stays finite as well. Radiance: emitted
+// radiance (times the environment's scale), so that a path's throughput times it stays finite.
+constexpr float kMaxCoordinate = 1e12f;
 constexpr float kMaxRadiance = 1e16f;
 // Roughness (GGX alpha): its square must stay finite (beyond about 1.8e19 the lobe's density is
 // infinity over infinity, a NaN image). Far beyond any lobe's use: above a few units the specular

@@ -1,6 +1,10 @@
 // Where a fixed ray meets a triangle's plane, and its adjoint. The gradient pass holds ray
 // directions fixed, so a hit point moves with the ray origin and with the triangle it lands on.
 #pragma once
+#include <cmath>
+#include <limits>
+#include <type_traits>
+
 #include "math/adjoint.h"
 #include "math/vec.h"
 
@@ -15,6 +19,28 @@ constexpr double kDegenerateSine = 1e-6;
 inline bool is_degenerate_triangle(const Vec3f& v0, const Vec3f& v1, const Vec3f& v2) {
     const Vec3d e1 = Vec3d(v1) - Vec3d(v0), e2 = Vec3d(v2) - Vec3d(v0);
     return !(length(cross(e1, e2)) > kDegenerateSine * length(e1) * length(e2));
+}
+
+// |cross(e1, e2)| (twice a triangle's area) and normalize(cross(e1, e2)) (its geometric
+// normal), bit for bit as those expressions where the squared length is a normal float, and
+// from the cross product in double where it is not: edges past about 4e9 units (coordinates go
+// to 1e16) would overflow the square to Inf (an area of Inf, a zero normal), edges below about
+// 3e-10 underflow it to 0.
+constexpr float kCrossLengthLow = 1e-18f, kCrossLengthHigh = 1e18f;
+
+inline float cross_length(const Vec3f& e1, const Vec3f& e2) {
+    const float l = length(cross(e1, e2));
+    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return l;
+    return float(length(cross(Vec3d(e1), Vec3d(e2))));
+}
+
+inline Vec3f cross_normal(const Vec3f& e1, const Vec3f& e2) {
+    const Vec3f c = cross(e1, e2);
+    const float l = length(c);
+    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return c / l;
+    const Vec3d cd = cross(Vec3d(e1), Vec3d(e2));
+    const double ld = length(cd);
+    return ld > 0.0 ? Vec3f(cd / ld) : c;
 }
 
 template <class T>
@@ -36,6 +62,18 @@ bool intersect_triangle(const TVec3<T>& o, const TVec3<T>& d, const TVec3<T>& v0
     h.b1 = dot(tvec, pvec) * inv;
     h.b2 = dot(d, qvec) * inv;
     h.t = dot(e2, qvec) * inv;
+    if constexpr (std::is_same_v<T, float>) {
+        // dot(e2, qvec) is a product of three lengths: past about 7e12 units (coordinates go to
+        // 1e16) it overflows float, and t would be Inf. Solved in double there.
+        constexpr float kMax = std::numeric_limits<float>::max();
+        if (!(std::abs(h.t) <= kMax && std::abs(h.b1) <= kMax && std::abs(h.b2) <= kMax)) {
+            TriangleHit<double> hd;
+            if (!intersect_triangle(Vec3d(o), Vec3d(d), Vec3d(v0), Vec3d(v1), Vec3d(v2), hd)) return false;
+            h.t = float(hd.t);
+            h.b1 = float(hd.b1);
+            h.b2 = float(hd.b2);
+        }
+    }
     return true;
 }
 

@@ -439,7 +439,7 @@ Scene::Update Scene::update(const SceneDesc& desc) {
                     td.v0 = Vec3f::load(md.vertices + 3 * int64_t(tri[0]));
                     td.v1 = Vec3f::load(md.vertices + 3 * int64_t(tri[1]));
                     td.v2 = Vec3f::load(md.vertices + 3 * int64_t(tri[2]));
-                    td.ng = normalize(cross(td.v1 - td.v0, td.v2 - td.v0));
+                    td.ng = cross_normal(td.v1 - td.v0, td.v2 - td.v0);
                     td.largest_edge = triangle_largest_edge(td.v0, td.v1, td.v2);
                 }
             });
@@ -616,7 +616,7 @@ void Scene::build_lights() {
         Vec3f lo, hi;  // the box of the triangles' vertices
         for (int64_t t = 0; t < m.num_triangles; ++t) {
             Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
-            float area = m.is_degenerate(t) ? 0.f : 0.5f * length(cross(b - a, c - a));
+            float area = m.is_degenerate(t) ? 0.f : 0.5f * cross_length(b - a, c - a);
             total += area;
             if (t == 0) lo = hi = a;
             for (const Vec3f& v : {a, b, c}) {

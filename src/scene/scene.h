@@ -111,7 +111,7 @@ struct Mesh {
     float triangle_area(int64_t f) const {
         const int32_t* t = indices + 3 * f;
         const Vec3f a = vertex(t[0]), b = vertex(t[1]), c = vertex(t[2]);
-        return 0.5f * length(cross(b - a, c - a));
+        return 0.5f * cross_length(b - a, c - a);
     }
     bool is_degenerate(int64_t f) const {
         const int32_t* t = indices + 3 * f;

@@ -15,8 +15,13 @@
 
 #include "edgepath.h"
 #include "math/ray.h"
+#include "math/simd4.h"
+#include "math/vec_diff.h"
+#include "render/shade_kernel.h"
+#include "sampling/warp.h"
 #include "sampling/rng.h"
 #include "render/tiles.h"
+#include "scene/geometry.h"
 #include "scene/scene.h"
 #include "support/shapes.h"
 
@@ -235,6 +240,65 @@ TEST(Robust, ParallelIndicesRunEachOnceAndStopAtAnException) {
     // (Item 200: by then both threads are in the loop.) The other stops within an item or two
     // of the failure, not after all 20000 at 50 us each.
     EXPECT_LT(done.load(), 400);
+}
+
+// The power heuristic where the densities' squares overflow or underflow: a light seen edge-on
+// from far away has a density past 1.8e19 (Inf / Inf was a NaN image). The lanes' version
+// agrees with the scalar one bit for bit.
+TEST(Robust, MisWeightsOfHugeAndTinyDensities) {
+    const float inf = std::numeric_limits<float>::infinity(), nan = std::nanf("");
+    EXPECT_EQ(mis_power(inf, 1.f), 1.f);
+    EXPECT_EQ(mis_power(1.f, inf), 0.f);
+    EXPECT_EQ(mis_power(inf, inf), 0.5f);
+    EXPECT_EQ(mis_power(1e20f, 1e20f), 0.5f);
+    EXPECT_FLOAT_EQ(mis_power(3e19f, 1e19f), 0.9f);
+    EXPECT_FLOAT_EQ(mis_power(1e19f, 3e19f), 0.1f);
+    EXPECT_EQ(mis_power(1e-25f, 1e-25f), 0.5f);
+    EXPECT_FLOAT_EQ(mis_power(2e-25f, 1e-25f), 0.8f);
+    EXPECT_EQ(mis_power(0.f, 1.f), 0.f);
+    EXPECT_EQ(mis_power(nan, 1.f), 0.f);
+    EXPECT_EQ(mis_power(0.3f, 0.7f), 0.09f / (0.09f + 0.7f * 0.7f));
+    const float a[8] = {inf, 1.f, 3e19f, 1e-25f, 0.3f, 0.f, 2e-25f, 1e20f};
+    const float b[8] = {1.f, inf, 1e19f, 1e-25f, 0.7f, 1.f, 1e-25f, 1e20f};
+    for (int k = 0; k < 8; k += 4) {
+        alignas(16) float w[4];
+        lanes::mis_power_lanes(F4::loadu(a + k), F4::loadu(b + k)).store(w);
+        for (int i = 0; i < 4; ++i) {
+            const float s = mis_power(a[k + i], b[k + i]);
+            EXPECT_EQ(std::memcmp(&w[i], &s, sizeof s), 0) << a[k + i] << ", " << b[k + i] << ": " << w[i] << " != " << s;
+        }
+    }
+}
+
+// Twice a triangle's area, its normal, where a ray meets it and the normal's adjoint, for
+// triangles of any float size: the squared length of a cross product of two edges overflows
+// float past about 4e9 units and underflows below about 3e-10; the re-solved hit's triple
+// product overflows past about 7e12. Against double, and the adjoint against the same triangle
+// at scale 1 (normalize(cross) does not change with the scale; its adjoint scales as 1/s^2).
+TEST(Robust, TriangleGeometryOfHugeAndTinyTriangles) {
+    const Vec3d e1d(1.0, 0.2, 0.0), e2d(0.3, 2.0, 0.5);
+    const Vec3f dn(0.3f, -0.5f, 0.8f);
+    const Vec3f d1 = d_cross_normal(Vec3f(e1d), Vec3f(e2d), dn);
+    for (double s : {1e-12, 1.0, 1e6, 1e10, 1e14}) {
+        const Vec3f e1(e1d * s), e2(e2d * s);
+        const Vec3d c = cross(Vec3d(e1), Vec3d(e2));
+        EXPECT_NEAR(cross_length(e1, e2) / length(c), 1.0, 1e-6) << s;
+        const Vec3f n = cross_normal(e1, e2);
+        EXPECT_NEAR(length(Vec3d(n) - c / length(c)), 0.0, 1e-6) << s;
+        const Vec3f dc = d_cross_normal(e1, e2, dn) * float(s * s);
+        EXPECT_NEAR(length(Vec3d(dc) - Vec3d(d1)) / length(Vec3d(d1)), 0.0, 1e-5) << s;
+        // A ray from s (0.1, 0.1, 0) towards a triangle at z = 5 s.
+        const Vec3d v0d(-1, -1, 5), v1d(2, -1, 5.5), v2d(0, 2, 4.5), od(0.1, 0.1, 0);
+        const Vec3f dir = normalize(Vec3f(0.05f, 0.1f, 1.f));
+        TriangleHit<float> h;
+        TriangleHit<double> hd;
+        ASSERT_TRUE(intersect_triangle(Vec3f(od * s), dir, Vec3f(v0d * s), Vec3f(v1d * s), Vec3f(v2d * s), h)) << s;
+        ASSERT_TRUE(intersect_triangle(Vec3d(Vec3f(od * s)), Vec3d(dir), Vec3d(Vec3f(v0d * s)), Vec3d(Vec3f(v1d * s)),
+                                       Vec3d(Vec3f(v2d * s)), hd));
+        EXPECT_NEAR(h.t / hd.t, 1.0, 1e-5) << s;
+        EXPECT_NEAR(h.b1, hd.b1, 1e-5) << s;
+        EXPECT_NEAR(h.b2, hd.b2, 1e-5) << s;
+    }
 }
 
 }  // namespace

@@ -299,7 +299,7 @@ API_FIELDS = {"floor": ["vertices", "indices", "uvs"], "box": ["vertices", "indi
 API_MUTATIONS = ["nan", "inf", "-inf", "huge", "tiny", "negate", "zero", "empty", "float64", "float16",
                  "int64", "int32", "bool", "unsqueeze", "flatten", "transpose", "strided", "index_big",
                  "index_negative", "index_2**40", "meta", "first_value", "expand", "coplanar", "repeat_row",
-                 "offset_tiny", "permute"]
+                 "offset_tiny", "permute", "large", "one_large", "subnormal"]
 # Other forms of the API scene, valid and not (fuzz.py: _api_variant): a case may start from one
 # or two of them ({"target": "variant", "field": name, "value": value}) before its changes.
 API_VARIANTS = {

@@ -239,6 +239,9 @@ def _api_change(value, mutation: str, index: int):
         if t.dim() and t.shape[-1] > 1 and t.is_floating_point() else t,
         "repeat_row": lambda: t[:1].expand(t.shape).clone() if t.dim() >= 2 and t.shape[0] else t,
         "offset_tiny": lambda: t.float() + 1e-30,
+        # in range, at its edge: coordinates up to their 1e12 bound, subnormals
+        "large": lambda: t.float() * 1e11, "one_large": lambda: at(t.float(), 9e11),
+        "subnormal": lambda: at(t.float(), 1e-40),
         "permute": lambda: t[..., [t.shape[-1] - 1 - k for k in range(t.shape[-1])]] if t.dim() else t,
     }
     changed = changes[mutation]()

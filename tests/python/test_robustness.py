@@ -50,6 +50,9 @@ from test_robustness import small_scene
 OUT_OF_RANGE = {
     "far camera": ("s = small_scene(position=torch.tensor([0., 0., -2e18]))", r"camera\.position"),
     "camera at 1e17": ("s = small_scene(position=torch.tensor([1e17, 0., -5.]))", r"camera\.position"),
+    # Embree would miss a triangle this large this far away (products of three lengths overflow)
+    "vertex at 2e12": ("s = small_scene(); s.meshes[0].vertices[1, 0] = 2e12",
+                       r"meshes\[0\]\.vertices: value 2e\+12 of vertex 1 is out of range \(\|x\| <= 1e\+12\)"),
     "orthographic scale": ("s = small_scene(camera_type='orthographic', ortho_scale=1e19)",
                            r"camera\.ortho_scale"),
     "vertex at 1e19": ("s = small_scene(); s.meshes[0].vertices[1, 0] = 1e19",
@@ -59,8 +62,9 @@ OUT_OF_RANGE = {
 
 @pytest.mark.parametrize("name", list(OUT_OF_RANGE))
 def test_coordinates_out_of_range_are_errors_not_aborts(name):
-    """Embree asserts its rays are within about 1.8e18: such scenes must be refused with the
-    field named, in a process that goes on."""
+    """Embree asserts its rays are within about 1.8e18, and misses a large triangle far away
+    beyond about 2e12: such scenes must be refused with the field named, in a process that goes
+    on."""
     setup, field = OUT_OF_RANGE[name]
     result = run_child(CHILD_PRELUDE + setup + """
 try:
@@ -75,13 +79,13 @@ print("alive")
 
 
 def test_largest_coordinates_in_range_render_finite():
-    """Just inside the bound (1e16) everything still renders, with finite gradients."""
-    s = small_scene(position=torch.tensor([0., 0., -1e16]), fov=1e-6)
+    """Just inside the bound (1e12) everything still renders, with finite gradients."""
+    s = small_scene(position=torch.tensor([0., 0., -1e12]), fov=1e-6)
     assert torch.isfinite(ep.render(s, spp=1, max_bounces=2)).all()
-    s = small_scene(camera_type="orthographic", ortho_scale=1e16, resolution=(4, 16))
+    s = small_scene(camera_type="orthographic", ortho_scale=1e12, resolution=(4, 16))
     assert torch.isfinite(ep.render(s, spp=1, max_bounces=2)).all()
     s = small_scene()
-    s.meshes[1].vertices = s.meshes[1].vertices * 1e15
+    s.meshes[1].vertices = s.meshes[1].vertices * 1.4e11
     s.meshes[1].vertices.requires_grad_(True)
     image = ep.render(s, spp=1, max_bounces=2)
     image.sum().backward()
@@ -504,3 +508,27 @@ def test_image_does_not_depend_on_where_the_scene_is(placement):
     moved = float(ep.render(offset_scene(**placement), **options).double().sum())
     assert base > 0
     assert moved == pytest.approx(base, rel=1e-2)
+
+
+def scaled_gradients(scale):
+    """offset_scene at ``scale``: its image sum, and the sums of |gradient| x scale of every
+    mesh's vertices and of the camera position (what they are at scale 1, for the same paths)."""
+    s = offset_scene(scale=scale)
+    leaves = [m.vertices.requires_grad_() for m in s.meshes] + [s.camera.position.requires_grad_()]
+    image = ep.render(s, spp=32, max_bounces=3, seed=1)
+    image.sum().backward()
+    return float(image.detach().double().sum()), [float(t.grad.double().abs().sum()) * scale for t in leaves]
+
+
+@pytest.mark.parametrize("scale", [1e-4, 1e11], ids=["scale 1e-4", "scale 1e11 (coordinates to 6e11)"])
+def test_gradients_do_not_depend_on_the_scenes_scale(scale):
+    """The same scene at another scale, up to the coordinate bound: the same image, and each
+    gradient scaled by 1 / scale, within the noise of paths that round differently (about 5%
+    here). Scaled up, areas, normals, MIS weights, re-solved hits and the secondary edges' plane
+    once overflowed float: an image with NaN or a third of its sum missing, gradients of NaN
+    or 0."""
+    base_sum, base = scaled_gradients(1.0)
+    moved_sum, moved = scaled_gradients(scale)
+    assert moved_sum == pytest.approx(base_sum, rel=1e-2)
+    for k, (b, m) in enumerate(zip(base, moved)):
+        assert b > 0 and m == pytest.approx(b, rel=0.12), f"leaf {k}: {m} against {b}"
