@@ -1,5 +1,6 @@
-// Where a fixed ray meets a triangle's plane, and its adjoint. The gradient pass holds ray
-// directions fixed, so a hit point moves with the ray origin and with the triangle it lands on.
+// A triangle's area and normal for any float size, where a fixed ray meets its plane, and their
+// adjoints. The gradient pass holds ray directions fixed, so a hit point moves with the ray
+// origin and with the triangle it lands on.
 #pragma once
 #include <cmath>
 #include <limits>
@@ -7,6 +8,7 @@
 
 #include "math/adjoint.h"
 #include "math/vec.h"
+#include "math/vec_diff.h"
 
 namespace edgepath {
 
@@ -24,7 +26,7 @@ inline bool is_degenerate_triangle(const Vec3f& v0, const Vec3f& v1, const Vec3f
 // |cross(e1, e2)| (twice a triangle's area) and normalize(cross(e1, e2)) (its geometric
 // normal), bit for bit as those expressions where the squared length is a normal float, and
 // from the cross product in double where it is not: edges past about 4e9 units (coordinates go
-// to 1e16) would overflow the square to Inf (an area of Inf, a zero normal), edges below about
+// to 1e12) would overflow the square to Inf (an area of Inf, a zero normal), edges below about
 // 3e-10 underflow it to 0.
 constexpr float kCrossLengthLow = 1e-18f, kCrossLengthHigh = 1e18f;
 
@@ -41,6 +43,22 @@ inline Vec3f cross_normal(const Vec3f& e1, const Vec3f& e2) {
     const Vec3d cd = cross(Vec3d(e1), Vec3d(e2));
     const double ld = length(cd);
     return ld > 0.0 ? Vec3f(cd / ld) : c;
+}
+
+// n = normalize(cross(e1, e2)) as cross_normal computes it: the adjoint of the cross product C,
+// from d_normalize(C) where |C| is a normal float and otherwise from d_normalize(C / s) / s,
+// s = C's largest component (normalize(C) = normalize(C / s)), which is in range for any C of
+// float edges.
+template <class A>
+TVec3<A> d_cross_normal(const Vec3f& e1, const Vec3f& e2, const TVec3<A>& dn) {
+    const Vec3f c = cross(e1, e2);
+    const float l = length(c);
+    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return d_normalize(c, dn);
+    const Vec3d cd = cross(Vec3d(e1), Vec3d(e2));
+    const double s = max_abs_component(cd);
+    if (!(s > 0.0)) return TVec3<A>(A(0));
+    const TVec3<A> d = d_normalize(Vec3f(cd / s), dn);
+    return d * float(1.0 / s);
 }
 
 template <class T>
@@ -63,8 +81,9 @@ bool intersect_triangle(const TVec3<T>& o, const TVec3<T>& d, const TVec3<T>& v0
     h.b2 = dot(d, qvec) * inv;
     h.t = dot(e2, qvec) * inv;
     if constexpr (std::is_same_v<T, float>) {
-        // dot(e2, qvec) is a product of three lengths: past about 7e12 units (coordinates go to
-        // 1e16) it overflows float, and t would be Inf. Solved in double there.
+        // dot(e2, qvec) is a product of three lengths: past about 7e12 units it overflows float
+        // and t would be Inf (beyond the coordinate bound, 1e12, but this holds for any float
+        // input). Solved in double there.
         constexpr float kMax = std::numeric_limits<float>::max();
         if (!(std::abs(h.t) <= kMax && std::abs(h.b1) <= kMax && std::abs(h.b2) <= kMax)) {
             TriangleHit<double> hd;

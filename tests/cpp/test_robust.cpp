@@ -16,7 +16,6 @@
 #include "edgepath.h"
 #include "math/ray.h"
 #include "math/simd4.h"
-#include "math/vec_diff.h"
 #include "render/shade_kernel.h"
 #include "sampling/warp.h"
 #include "sampling/rng.h"
