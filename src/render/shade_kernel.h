@@ -222,24 +222,26 @@ inline void plastic_oriented(const PlasticLanes<F, M, V>& P, const V& o, const V
     }
 }
 
-// mis_power (sampling/warp.h), lane by lane, bit for bit: lanes whose squares overflow or
-// underflow (rare) are redone one at a time.
+// mis_power_lanes's lanes `redo` (a bit each) again, one at a time (rare: out of line).
+template <class F>
+[[gnu::noinline]] F mis_power_redo(F a, F b, F w, int redo) {
+    alignas(32) float av[F::width], bv[F::width], wv[F::width];
+    a.store(av);
+    b.store(bv);
+    w.store(wv);
+    for (int i = 0; i < F::width; ++i)
+        if ((redo >> i) & 1) wv[i] = mis_power_ratio(av[i], bv[i]);
+    return F::load(wv);
+}
+
+// mis_power (sampling/warp.h), lane by lane, bit for bit.
 template <class F>
 inline F mis_power_lanes(F a, F b) {
     const F zero(0.f), a2 = a * a, sum = a2 + b * b;
     const auto positive = a > zero;
-    F w = select(positive, a2 / sum, zero);
-    const auto redo = and_not(positive, (sum > zero) & is_finite(sum));
-    if (redo.bits() != 0) {
-        alignas(32) float av[F::width], bv[F::width], wv[F::width];
-        a.store(av);
-        b.store(bv);
-        w.store(wv);
-        for (int i = 0; i < F::width; ++i)
-            if ((redo.bits() >> i) & 1) wv[i] = mis_power_ratio(av[i], bv[i]);
-        w = F::load(wv);
-    }
-    return w;
+    const F w = select(positive, a2 / sum, zero);
+    const int redo = and_not(positive, (sum > zero) & (sum < F(std::numeric_limits<float>::infinity()))).bits();
+    return redo == 0 ? w : mis_power_redo(a, b, w, redo);
 }
 
 }  // namespace lanes

@@ -46,9 +46,10 @@ inline Vec3f square_to_sphere(float u1, float u2) {
     return {r * std::cos(phi), r * std::sin(phi), z};
 }
 
-// mis_power where the squares overflow or underflow (a, b > 0, one of them past about 1.8e19,
-// as a far light seen edge-on has, or both below about 1e-22): the same weight from the ratio
-// of the smaller density to the larger, which stays in range (Inf / Inf would be NaN).
+// mis_power where the sum of the squares overflows or underflows (a, b > 0, one of them past
+// about 1.8e19, as a far light seen edge-on has, or both below about 1e-22): the same weight
+// from the ratio of the smaller density to the larger, which stays in range (Inf / Inf or
+// 0 / 0 would be NaN, a finite square over Inf 0).
 inline float mis_power_ratio(float a, float b) {
     if (a == b) return 0.5f;
     if (a > b) {
