@@ -163,8 +163,8 @@ EdgeHierarchy::LeafInput EdgeHierarchy::leaf_input(const Scene& scene, const Edg
     in.emissive = m.is_emitter();
     in.n0 = in.n1 = Vec3f(0.f);
     if (!in.always || in.crease) {
-        // The faces' unit normals, as the scene keeps them (normalize(face_normal(f)),
-        // the face normal itself where its length is 0: one read for each face).
+        // The faces' unit normals, as the scene keeps them (unit_face_normal(f), the face
+        // normal itself where its length is 0: one read for each face).
         const Vec3f a = m.triangle_data[e.f0].ng, b = m.triangle_data[e.f1].ng;
         // A face of zero area has no side: its edge is treated as a discontinuity.
         if (length(a) > 0.f && length(b) > 0.f) {
@@ -587,7 +587,7 @@ int32_t EdgeHierarchy::check_bounds(const Scene& scene, float tol) const {
                 if (length(x - node.center) > node.radius + scale) return int32_t(k);
             }
             if (node.cone_cos > -1.f && !node.mixed && length(leaf.leaf.n0) > 0.f) {
-                const Vec3f n0 = normalize(m.face_normal(e.f0)), n1 = normalize(m.face_normal(e.f1));
+                const Vec3f n0 = m.unit_face_normal(e.f0), n1 = m.unit_face_normal(e.f1);
                 // A leaf keeps no axis: its cone's is its faces' normals' mean.
                 const Vec3f axis = node.left >= 0 ? node.cone.axis : normalize(node.leaf.n0 + node.leaf.n1);
                 for (const Vec3f& nf : {n0, n1})

@@ -248,7 +248,7 @@ const Scene::EdgeMeasures& Scene::edge_measures() const {
                 const Mesh& m = meshes[size_t(e.mesh)];
                 measures_.length[size_t(i)] = length(m.vertex(e.v1) - m.vertex(e.v0));
                 if (e.kind != EdgeKind::Smooth) continue;
-                // The faces' unit normals as the scene keeps them: normalize(m.face_normal(f)).
+                // The faces' unit normals as the scene keeps them: m.unit_face_normal(f).
                 const float c = dot(m.triangle_data[e.f0].ng, m.triangle_data[e.f1].ng);
                 measures_.smooth_weight[size_t(i)] = std::acos(std::clamp(double(c), -1.0, 1.0)) / kPi;
             }

@@ -55,7 +55,7 @@ inline RTCRayHit to_rtc_ray_hit(const Ray& ray) {
 // triangle (Mesh::triangle_data): 52 bytes a triangle, found without the index array.
 struct TriangleData {
     Vec3f v0, v1, v2;  // its vertices 0, 1, 2, as the mesh's `vertices` holds them
-    Vec3f ng;          // normalize(cross(v1 - v0, v2 - v0))
+    Vec3f ng;          // cross_normal(v1 - v0, v2 - v0): normalize(cross(v1 - v0, v2 - v0))
     float largest_edge = 0.f;  // triangle_largest_edge(v0, v1, v2) (math/ray.h)
 };
 
@@ -97,6 +97,12 @@ struct Mesh {
         const int32_t* t = indices + 3 * f;
         const Vec3f p0 = vertex(t[0]);
         return cross(vertex(t[1]) - p0, vertex(t[2]) - p0);
+    }
+    // Its unit normal as the scene keeps it (TriangleData::ng): cross_normal of those edges.
+    Vec3f unit_face_normal(int64_t f) const {
+        const int32_t* t = indices + 3 * f;
+        const Vec3f p0 = vertex(t[0]);
+        return cross_normal(vertex(t[1]) - p0, vertex(t[2]) - p0);
     }
     bool is_emitter() const { return !emission.empty(); }
     // The vertex colour at barycentrics (b1, b2) of triangle f; 1 without colours.
