@@ -525,8 +525,8 @@ def test_gradients_do_not_depend_on_the_scenes_scale(scale):
     """The same scene at another scale, up to the coordinate bound: the same image, and each
     gradient scaled by 1 / scale, within the noise of paths that round differently (about 5%
     here). Scaled up, areas, normals, MIS weights, re-solved hits and the secondary edges' plane
-    once overflowed float: an image with NaN or a third of its sum missing, gradients of NaN
-    or 0."""
+    once overflowed float: images with NaN pixels, gradients of NaN (the camera's) or 0 (the
+    lamp's, at 1e10)."""
     base_sum, base = scaled_gradients(1.0)
     moved_sum, moved = scaled_gradients(scale)
     assert moved_sum == pytest.approx(base_sum, rel=1e-2)
