@@ -142,7 +142,7 @@ def _api_scene(ep):
     return scene, objects
 
 
-def _api_variant(scene, objects, field: str, value):
+def _api_variant(objects, field: str, value):
     """Puts the API scene in one of its other forms (corpus.API_VARIANTS), valid or not, before
     a case's changes; returns the max_bounces it asks for (None: the case's default)."""
     import torch
@@ -182,8 +182,8 @@ def _api_variant(scene, objects, field: str, value):
 
 
 def _api_call(ep, scene, call: Optional[str], bounces: int):
-    """Renders the API scene through entry point ``call`` (corpus.API_VARIANTS["call"]; None:
-    ``ep.render``); returns what the gradient is taken of."""
+    """Renders ``scene`` through entry point ``call`` (the API kind's corpus.API_VARIANTS["call"];
+    None, as for every other kind: ``ep.render``); returns what the gradient is taken of."""
     import torch
     if call == "views":
         second = ep.Camera(position=torch.tensor([1., 1., 2.5]), look_at=torch.tensor([0., .3, 0.]),
@@ -269,7 +269,7 @@ def _scene_of(ep, kind: str, path: str):
         with open(path) as f:
             for change in json.load(f):
                 if change["target"] == "variant":
-                    asked = _api_variant(scene, objects, change["field"], change["value"])
+                    asked = _api_variant(objects, change["field"], change["value"])
                     if change["field"] == "call":
                         call = asked
                     elif asked is not None:
