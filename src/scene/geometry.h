@@ -30,16 +30,19 @@ inline bool is_degenerate_triangle(const Vec3f& v0, const Vec3f& v1, const Vec3f
 // 3e-10 underflow it to 0.
 constexpr float kCrossLengthLow = 1e-18f, kCrossLengthHigh = 1e18f;
 
+// Whether a cross product's length l computed in float is exact enough (its square in range).
+inline bool cross_length_in_range(float l) { return l >= kCrossLengthLow && l <= kCrossLengthHigh; }
+
 inline float cross_length(const Vec3f& e1, const Vec3f& e2) {
     const float l = length(cross(e1, e2));
-    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return l;
+    if (cross_length_in_range(l)) return l;
     return float(length(cross(Vec3d(e1), Vec3d(e2))));
 }
 
 inline Vec3f cross_normal(const Vec3f& e1, const Vec3f& e2) {
     const Vec3f c = cross(e1, e2);
     const float l = length(c);
-    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return c / l;
+    if (cross_length_in_range(l)) return c / l;
     const Vec3d cd = cross(Vec3d(e1), Vec3d(e2));
     const double ld = length(cd);
     return ld > 0.0 ? Vec3f(cd / ld) : c;
@@ -53,7 +56,7 @@ template <class A>
 TVec3<A> d_cross_normal(const Vec3f& e1, const Vec3f& e2, const TVec3<A>& dn) {
     const Vec3f c = cross(e1, e2);
     const float l = length(c);
-    if (l >= kCrossLengthLow && l <= kCrossLengthHigh) return d_normalize(c, dn);
+    if (cross_length_in_range(l)) return d_normalize(c, dn);
     const Vec3d cd = cross(Vec3d(e1), Vec3d(e2));
     const double s = max_abs_component(cd);
     if (!(s > 0.0)) return TVec3<A>(A(0));

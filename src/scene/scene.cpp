@@ -616,7 +616,7 @@ void Scene::build_lights() {
         Vec3f lo, hi;  // the box of the triangles' vertices
         for (int64_t t = 0; t < m.num_triangles; ++t) {
             Vec3f a = m.vertex(m.indices[3 * t]), b = m.vertex(m.indices[3 * t + 1]), c = m.vertex(m.indices[3 * t + 2]);
-            float area = m.is_degenerate(t) ? 0.f : 0.5f * cross_length(b - a, c - a);
+            float area = m.is_degenerate(t) ? 0.f : m.triangle_area(t);
             total += area;
             if (t == 0) lo = hi = a;
             for (const Vec3f& v : {a, b, c}) {

@@ -112,13 +112,13 @@ struct Mesh {
         return Vec3f::load(colors + 3 * int64_t(t[0])) * (1.f - b1 - b2) + Vec3f::load(colors + 3 * int64_t(t[1])) * b1 +
                Vec3f::load(colors + 3 * int64_t(t[2])) * b2;
     }
-    // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
-    // Area of triangle f (as Scene::build_lights computes it).
+    // Area of triangle f (the lights' areas: Scene::build_lights).
     float triangle_area(int64_t f) const {
         const int32_t* t = indices + 3 * f;
         const Vec3f a = vertex(t[0]), b = vertex(t[1]), c = vertex(t[2]);
         return 0.5f * cross_length(b - a, c - a);
     }
+    // Too thin to have a normal (scene/geometry.h): skipped by the BVH, the lights and the edges.
     bool is_degenerate(int64_t f) const {
         const int32_t* t = indices + 3 * f;
         return is_degenerate_triangle(vertex(t[0]), vertex(t[1]), vertex(t[2]));

@@ -351,8 +351,7 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
         if kind != "api":
             for mesh in scene.meshes:
                 mesh.vertices.requires_grad_(True)
-        else:
-            before = _inputs_state(scene)
+        before = _inputs_state(scene) if kind == "api" else None
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             image = _api_call(ep, scene, call, bounces)
@@ -374,15 +373,17 @@ def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
             # and the gradients of such a scene may overflow float32: then the overflow must have
             # been warned of (render.py: _check_gradients). Elsewhere Inf or NaN is a bug.
             warned = [str(w.message) for w in caught if "float32 overflowed" in str(w.message)]
-            if bad and warned and bool(torch.isfinite(image).all()) and _scales_by_1e30(path):
+            image_finite = bool(torch.isfinite(image).all())
+            if bad and warned and image_finite and _scales_by_1e30(path):
                 return "ok", f"rendered; the gradients of {bad} overflowed, warned of: {warned[0][:200]}"
-            if not bool(torch.isfinite(image).all()) or bad:
-                return "nonfinite", f"image finite: {bool(torch.isfinite(image).all())}; gradients of {bad}"
+            if not image_finite or bad:
+                return "nonfinite", f"image finite: {image_finite}; gradients of {bad}"
         return "ok", f"rendered, sum {float(image.detach().sum()):.6g}"
     except (ValueError, OSError) as error:
         message = f"{stage}: {type(error).__name__}: {error}"
-        if kind == "api" and stage == "render" and _modified(before, scene):
-            return "modified", f"{message}; and changed the caller's {_modified(before, scene)}"
+        modified = _modified(before, scene) if stage == "render" and before is not None else []
+        if modified:
+            return "modified", f"{message}; and changed the caller's {modified}"
         named = _names_source(str(error), path) if stage == "load" else ":" in str(error)
         return ("error" if named else "unnamed"), message
     except Exception as error:  # noqa: BLE001  (classifying is the point)
