@@ -672,8 +672,10 @@ void EdgeHierarchy::coarse(const Query& q, const Node& n, Coarse& out) const {
     const float dc2 = length_squared(v), r2 = n.radius * n.radius;
     const Vec3f below = max(n.lo - q.p, Vec3f(0.f)), above = max(q.p - n.hi, Vec3f(0.f));
     // Distance to the box, no less than half the sphere's radius (the bound of 1/distance^2
-    // would be infinite for boxes that hold p).
-    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), 1e-12f);
+    // would be infinite for boxes that hold p), and positive (a zero radius: one point). No
+    // floor in the scene's units: one (1e-12) once scored every node of a scene 1e-6 units
+    // across alike.
+    const float d2 = std::max(std::max(length_squared(below + above), 0.25f * r2), std::numeric_limits<float>::min());
     const float d = std::sqrt(dc2);
     const Vec3f dir = d > 0.f ? v / d : Vec3f(0.f, 0.f, 1.f);  // (any direction at the centre: d 0)
     // Silhouettes possible? The signed distance of p to a face's plane is

@@ -631,7 +631,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             rtcIntersect16(pk.valid, rtc, &ctx, &pk.rh);
             Hit h;
             for (int i = 0; i < m; ++i)
-                if (lane_hit(pk.rh, i, h)) scene.prefetch(h);
+                if (lane_hit(scene, pk.rh, i, h)) scene.prefetch(h);
         }
         for (int p = 0; p * kLanes < nshadow; ++p) {
             RayPacket& pk = shadow[size_t(p)];
@@ -675,7 +675,7 @@ void PathBatch::Impl::trace(CameraSample* samples, int n, Vec3f* L, RayCounters&
             Vec3f Le;
             float w;
             Hit hit;
-            if (!lane_hit(pk.rh, lane, hit)) {
+            if (!lane_hit(scene, pk.rh, lane, hit)) {
                 if (escaped_light(scene, settings, dir, ps.pdf, ps.delta, Le, w)) {
                     Li += beta * Le * w;
                     if (rec) {

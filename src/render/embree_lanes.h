@@ -73,15 +73,18 @@ inline void clear_hits(RayHitN& rh) {
     }
 }
 
-// Whether lane i of a traced packet met a surface, and then (into h) what it met.
+// Whether lane i of a traced packet met a surface, and then (into h) what it met (its
+// barycentrics settled: Scene::settle_hit).
 template <class RayHitN>
-inline bool lane_hit(const RayHitN& rh, int i, Hit& h) {
+inline bool lane_hit(const Scene& scene, const RayHitN& rh, int i, Hit& h) {
     if (rh.hit.geomID[i] == RTC_INVALID_GEOMETRY_ID) return false;
     h.mesh = int(rh.hit.geomID[i]);
     h.prim = int64_t(rh.hit.primID[i]);
     h.b1 = rh.hit.u[i];
     h.b2 = rh.hit.v[i];
     h.t = rh.ray.tfar[i];
+    scene.settle_hit(Vec3f(rh.ray.org_x[i], rh.ray.org_y[i], rh.ray.org_z[i]),
+                     Vec3f(rh.ray.dir_x[i], rh.ray.dir_y[i], rh.ray.dir_z[i]), h);
     return true;
 }
 

@@ -19,7 +19,7 @@ void intersect_packet(const Scene& scene, Tracing tracing, const Ray* rays, int 
     for (int i = 0; i < n; ++i) {
         FirstHit& f = first[i];
         f.hit = Hit();
-        f.found = lane_hit(rh, i, f.hit);
+        f.found = lane_hit(scene, rh, i, f.hit);
     }
 }
 

@@ -109,6 +109,11 @@ struct PointLightDesc {
 // point, offset ray origin and squared distance stays finite as well. Radiance: emitted
 // radiance (times the environment's scale), so that a path's throughput times it stays finite.
 constexpr float kMaxCoordinate = 1e12f;
+// The least extent of a scene's vertices (the largest side of their bounding box; 0, every
+// vertex at one point, renders nothing and is allowed): below it float products of three
+// lengths (Embree's test, the re-solved hits) underflow: a scene 6e-14 units across had
+// gradients 16 to 37 times too small (its image was right).
+constexpr float kMinExtent = 1e-10f;
 constexpr float kMaxRadiance = 1e16f;
 // Roughness (GGX alpha): its square must stay finite (beyond about 1.8e19 the lobe's density is
 // infinity over infinity, a NaN image). Far beyond any lobe's use: above a few units the specular

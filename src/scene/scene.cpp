@@ -270,6 +270,21 @@ Scene::~Scene() { drop_bvhs(); }
 
 namespace {
 
+// The vertices' extent (their coordinates are finite and in range): 0 or at least kMinExtent.
+void check_extent(const SceneDesc& desc) {
+    Vec3f lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
+    for (const MeshDesc& m : desc.meshes)
+        for (int64_t i = 0; i < m.num_vertices; ++i) {
+            const Vec3f v = Vec3f::load(m.vertices + 3 * i);
+            lo = min(lo, v);
+            hi = max(hi, v);
+        }
+    const double extent = max_component(Vec3d(hi) - Vec3d(lo));
+    if (extent > 0.0 && extent < kMinExtent)
+        fail("meshes", "the vertices span " + str(extent) + " units (the largest side of their bounding box), less than " +
+                           str(kMinExtent) + ": float products of lengths would underflow; scale the scene up");
+}
+
 void validate(const SceneDesc& desc) {
     for (size_t i = 0; i < desc.point_lights.size(); ++i) {
         const PointLightDesc& l = desc.point_lights[i];
@@ -335,6 +350,7 @@ void validate(const SceneDesc& desc) {
                     fail("meshes[" + str(i) + "].colors", "on a nonlinear plastic, colours must be at most 1, got " +
                                                               str(m.colors[k]) + " at flat index " + str(k));
     }
+    check_extent(desc);
     if (desc.has_envmap) {
         check_texture(desc.envmap.values, 3, "envmap.values", true);
         check_finite(desc.envmap.to_world, 9, "envmap.to_world");
@@ -684,18 +700,35 @@ int Scene::may_meet_emitter(const float* const origin[3], const float* const dir
     return count;
 }
 
-namespace {
+void Scene::resolve_barycentrics(const Vec3f& origin, const Vec3f& dir, Hit& hit) const {
+    const Mesh& m = meshes[size_t(hit.mesh)];
+    const int32_t* tri = m.indices + 3 * hit.prim;
+    TriangleHit<double> h;
+    if (!intersect_triangle(Vec3d(origin), Vec3d(dir), Vec3d(m.vertex(tri[0])), Vec3d(m.vertex(tri[1])),
+                            Vec3d(m.vertex(tri[2])), h) ||
+        !std::isfinite(h.b1) || !std::isfinite(h.b2))
+        return;
+    double b1 = std::clamp(h.b1, 0.0, 1.0), b2 = std::clamp(h.b2, 0.0, 1.0);
+    if (b1 + b2 > 1.0) {
+        const double s = b1 + b2;
+        b1 /= s;
+        b2 /= s;
+    }
+    hit.b1 = float(b1);
+    hit.b2 = float(b2);
+}
+
 // The hit of an answered query, if any.
-bool hit_of(const RTCRayHit& rh, Hit& hit) {
+bool Scene::hit_of(const RTCRayHit& rh, Hit& hit) const {
     if (rh.hit.geomID == RTC_INVALID_GEOMETRY_ID) return false;
     hit.mesh = int(rh.hit.geomID);
     hit.prim = int64_t(rh.hit.primID);
     hit.b1 = rh.hit.u;
     hit.b2 = rh.hit.v;
     hit.t = rh.ray.tfar;
+    settle_hit(Vec3f(rh.ray.org_x, rh.ray.org_y, rh.ray.org_z), Vec3f(rh.ray.dir_x, rh.ray.dir_y, rh.ray.dir_z), hit);
     return true;
 }
-}  // namespace
 
 bool Scene::intersect(const Ray& ray, Hit& hit, Tracing tracing) const {
     RTCIntersectContext ctx;

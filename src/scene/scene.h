@@ -273,6 +273,15 @@ public:
     // past their hit cannot do (edges/sides.h: a floor through a wall's lower edge).
     bool intersect_excluding(const Ray& ray, int mesh, int64_t f0, int64_t f1, Hit& hit) const;
     bool occluded(const Ray& ray, Tracing tracing = Tracing::Exact) const;
+    // Embree's intersectors return barycentrics of 0 where twice the triangle's area seen
+    // across the ray (|U + V + W|, in the scene's units squared) is below 1e-18: edges below
+    // about 5e-10 units, or a triangle seen almost edge-on; the hit itself and its t are right.
+    // Every hit taken from Embree passes here: one with b1 = b2 = 0 has its barycentrics solved
+    // again in double (clamped into the triangle), so that a tiny scene's paths leave from
+    // where its rays meet it and not from a corner.
+    void settle_hit(const Vec3f& origin, const Vec3f& dir, Hit& hit) const {
+        if (hit.b1 == 0.f && hit.b2 == 0.f) resolve_barycentrics(origin, dir, hit);
+    }
 
     SurfacePoint surface_point(int mesh, int64_t prim, float b1, float b2) const;
     // What surface_point sets of every point, into sp: its triangle, barycentrics, point, the
@@ -402,6 +411,8 @@ private:
     std::shared_ptr<const EdgeHierarchy> kept_hierarchy(const std::function<bool(const EdgeHierarchy&)>& fits,
                                                         const std::vector<int32_t>* edges, size_t group) const;
     RTCScene prepare_bvh(Tracing tracing) const;
+    void resolve_barycentrics(const Vec3f& origin, const Vec3f& dir, Hit& hit) const;
+    bool hit_of(const RTCRayHit& rh, Hit& hit) const;
     void drop_bvhs();
     void build_lights();
     // The cone of directions from p of mesh m's bounding sphere: its axis (unit), and

@@ -16,6 +16,7 @@
 #include "edgepath.h"
 #include "math/ray.h"
 #include "math/simd4.h"
+#include "render/packet.h"
 #include "render/shade_kernel.h"
 #include "sampling/warp.h"
 #include "sampling/rng.h"
@@ -168,6 +169,14 @@ TEST(Robust, RangesAreCheckedWhenTheSceneIsBuilt) {
             << build_error(f.desc);
     }
     {
+        // A scene less than kMinExtent across (2e-11); one with every vertex at one point builds.
+        Fixture f({-1e-11f, -1e-11f, 0, 1e-11f, -1e-11f, 0, 0, 1e-11f, 0}, {0, 1, 2});
+        EXPECT_NE(build_error(f.desc).find("meshes: the vertices span 2e-11 units"), std::string::npos)
+            << build_error(f.desc);
+        Fixture point({1e-11f, 0, 0, 1e-11f, 0, 0, 1e-11f, 0, 0}, {0, 1, 2});
+        EXPECT_EQ(build_error(point.desc), "");
+    }
+    {
         Fixture f({-1, -1, 0, 1, -1, 0, 0, 1, 0}, {0, 1, 2}, Vec3f(0, 0, -2e18f));
         EXPECT_NE(build_error(f.desc).find("camera.position"), std::string::npos);
     }
@@ -297,6 +306,44 @@ TEST(Robust, TriangleGeometryOfHugeAndTinyTriangles) {
         EXPECT_NEAR(h.t / hd.t, 1.0, 1e-5) << s;
         EXPECT_NEAR(h.b1, hd.b1, 1e-5) << s;
         EXPECT_NEAR(h.b2, hd.b2, 1e-5) << s;
+    }
+}
+
+// Embree zeroes the barycentrics of hits where twice the triangle's area seen across the ray is
+// below 1e-18 (edges below about 5e-10 units): every hit, from single rays and from packets,
+// fast or exact, gets its own (a tiny scene's paths all left from a corner, and its gradients
+// were up to 3.7 times off).
+TEST(Robust, HitsOnTinyTrianglesKeepTheirBarycentrics) {
+    const Vec3d v0(-1, -1, 0), v1(1, -1, 0.2), v2(0, 1, -0.1), o(0.3, 0.2, -5);
+    const Vec3d aims[3] = {Vec3d(0.2, 0.1, 0), Vec3d(-0.4, -0.6, 0), Vec3d(0.5, -0.8, 0)};
+    for (double s : {6e-11, 2e-10, 1e-9, 1.0, 1e6}) {  // the least extent, 1e-10: 1.2e-10 across
+        std::vector<float> v;
+        for (const Vec3d& x : {v0, v1, v2})
+            for (int k = 0; k < 3; ++k) v.push_back(float(x[k] * s));
+        Fixture f(v, {0, 1, 2}, Vec3f(o * s), Vec3f(0.f));
+        auto scene = build_scene(f.desc);
+        Ray rays[3];
+        for (int i = 0; i < 3; ++i) {
+            rays[i].origin = Vec3f(o * s);
+            rays[i].dir = normalize(Vec3f(aims[i] - o));
+        }
+        for (Tracing tracing : {Tracing::Exact, Tracing::Fast}) {
+            FirstHit packet[3];
+            intersect_packet(*scene, tracing, rays, 3, packet);
+            for (int i = 0; i < 3; ++i) {
+                TriangleHit<double> want;
+                ASSERT_TRUE(intersect_triangle(Vec3d(rays[i].origin), Vec3d(rays[i].dir), Vec3d(Vec3f(v0 * s)),
+                                               Vec3d(Vec3f(v1 * s)), Vec3d(Vec3f(v2 * s)), want));
+                Hit single;
+                ASSERT_TRUE(scene->intersect(rays[i], single, tracing)) << s;
+                ASSERT_TRUE(packet[i].found) << s;
+                for (const Hit& h : {single, packet[i].hit}) {
+                    EXPECT_NEAR(h.b1, want.b1, 1e-5) << "scale " << s << " ray " << i;
+                    EXPECT_NEAR(h.b2, want.b2, 1e-5) << "scale " << s << " ray " << i;
+                    EXPECT_NEAR(h.t / want.t, 1.0, 1e-5) << "scale " << s << " ray " << i;
+                }
+            }
+        }
     }
 }
 

@@ -57,6 +57,9 @@ OUT_OF_RANGE = {
                            r"camera\.ortho_scale"),
     "vertex at 1e19": ("s = small_scene(); s.meshes[0].vertices[1, 0] = 1e19",
                        r"meshes\[0\]\.vertices: value 1e\+19 of vertex 1"),
+    # Products of three lengths would underflow: the scene's least extent is 1e-10
+    "scene 3.5e-11 across": ("s = small_scene()\nfor m in s.meshes: m.vertices = m.vertices * 5e-12",
+                           r"meshes: the vertices span 3\.5e-11 units"),
 }
 
 
@@ -520,7 +523,9 @@ def scaled_gradients(scale):
     return float(image.detach().double().sum()), [float(t.grad.double().abs().sum()) * scale for t in leaves]
 
 
-@pytest.mark.parametrize("scale", [1e-4, 1e11], ids=["scale 1e-4", "scale 1e11 (coordinates to 6e11)"])
+@pytest.mark.parametrize("scale", [2e-11, 1e-4, 1e11],
+                         ids=["scale 2e-11 (1.2e-10 across, the least extent)", "scale 1e-4",
+                              "scale 1e11 (coordinates to 6e11)"])
 def test_gradients_do_not_depend_on_the_scenes_scale(scale):
     """The same scene at another scale, up to the coordinate bound: the same image, and each
     gradient scaled by 1 / scale, within the noise of paths that round differently (about 5%
@@ -532,3 +537,33 @@ def test_gradients_do_not_depend_on_the_scenes_scale(scale):
     assert moved_sum == pytest.approx(base_sum, rel=1e-2)
     for k, (b, m) in enumerate(zip(base, moved)):
         assert b > 0 and m == pytest.approx(b, rel=0.12), f"leaf {k}: {m} against {b}"
+
+
+def tiny_triangle_gradient(scale, sampling):
+    """A triangle lit by a lamp, camera, all x scale: its image sum and its vertices' gradient
+    x scale, interior terms only (the same paths at any scale)."""
+    def place(rows):
+        return (torch.tensor(rows, dtype=torch.float64) * scale).float()
+    tri = ep.Mesh(place([[-1, -1, 0], [0, 1, 0], [1, -1, 0]]).requires_grad_(), torch.tensor([[0, 1, 2]]),
+                  material=ep.Material(diffuse=torch.tensor([.7, .7, .7])))
+    lamp = ep.Mesh(place([[-2, -2, -7], [2, -2, -7], [2, 2, -7], [-2, 2, -7]]), torch.tensor([[0, 1, 2], [0, 2, 3]]),
+                   emission=torch.tensor([8., 8., 8.]))
+    camera = ep.Camera(position=place([[0.3, 0.2, -5]])[0], look_at=torch.zeros(3), resolution=(16, 16))
+    image = ep.render(ep.Scene(camera, [tri, lamp]), spp=4, max_bounces=1, seed=1, sampling=sampling,
+                      primary_edges=False, secondary_edges=False)
+    image.sum().backward()
+    return float(image.detach().double().sum()), tri.vertices.grad.double() * scale
+
+
+@pytest.mark.parametrize("sampling", ["light", "bsdf", "mis"])
+def test_a_tiny_triangles_gradients_are_its_gradients_at_scale_one(sampling):
+    """Embree returns barycentrics of 0 on triangles whose edges are below about 5e-10 units:
+    the paths of a tiny scene once all left from a corner of the triangle they met, and its
+    interior gradients were 1.7 to 3.7 times off (its image, traced apart, was right). Now the
+    same as at scale 1, to rounding."""
+    base_sum, base = tiny_triangle_gradient(1.0, sampling)
+    assert base.abs().sum() > 0.5
+    for scale in (1e-10, 3e-11):
+        moved_sum, moved = tiny_triangle_gradient(scale, sampling)
+        assert moved_sum == pytest.approx(base_sum, rel=1e-5)
+        assert torch.allclose(moved, base, rtol=1e-3, atol=1e-4), f"{scale}: {moved} against {base}"
