@@ -11,6 +11,7 @@ looks from ``position`` towards ``look_at``, the image's right is normalize(cros
 
 from __future__ import annotations
 
+import math
 from typing import Optional, Sequence, Tuple, Union
 
 import torch
@@ -18,12 +19,25 @@ import torch
 Constant = Union[float, torch.Tensor]
 
 
+# The core's bound on coordinates (scene/desc.h, kMaxCoordinate).
+MAX_COORDINATE = 1e12
+
+
 def frame_from_to_world(to_world: torch.Tensor) -> Tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """(position, look_at, up) of a 4x4 camera-to-world matrix in Mitsuba's convention:
     columns are local x (towards the image's left), local y (up), local z (forward) and the
-    translation. Built from torch ops, so gradients flow back to the matrix."""
-    position = to_world[:3, 3]
-    return position, position + to_world[:3, 2], to_world[:3, 1]
+    translation. Built from torch ops, so gradients flow back to the matrix.
+
+    ``look_at`` lies along local z as far from ``position`` as the position is from the origin
+    (a power of two times the column, at least once it, within the coordinates' bound), so
+    that ``look_at - position`` keeps the direction to float precision wherever the camera is:
+    one step of a unit column is lost to rounding at 1e7 units and more."""
+    position, forward = to_world[:3, 3], to_world[:3, 2]
+    far = float(position.detach().abs().max())
+    step = float(forward.detach().abs().max())
+    reach = min(far, (MAX_COORDINATE - far) / step) if step > 0 else 1.0
+    scale = 2.0 ** math.floor(math.log2(reach)) if reach >= 2 else 1.0
+    return position, position + forward * scale, to_world[:3, 1]
 
 
 class Camera:

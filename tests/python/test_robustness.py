@@ -539,6 +539,26 @@ def test_gradients_do_not_depend_on_the_scenes_scale(scale):
         assert b > 0 and m == pytest.approx(b, rel=0.12), f"leaf {k}: {m} against {b}"
 
 
+@pytest.mark.parametrize("scale", [1e6, 1e10])
+def test_a_to_world_camera_far_from_the_origin_looks_along_its_z_column(scale):
+    """offset_scene at ``scale`` seen by its camera given as a to_world matrix renders the image
+    of its position/look_at camera. look_at was position + z: a unit step lost to rounding at
+    the position's magnitude, the direction off by up to a quarter at 6e6 units, and the camera
+    refused (look_at equal to position) at 6e10."""
+    s = offset_scene(scale=scale)
+    position, look_at, up = (t.double() for t in s.camera.frame())
+    z = torch.nn.functional.normalize(look_at - position, dim=0)
+    x = torch.nn.functional.normalize(torch.linalg.cross(up, z), dim=0)
+    matrix = torch.eye(4, dtype=torch.float64)
+    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = x, torch.linalg.cross(z, x), z, position
+    framed = offset_scene(scale=scale)
+    framed.camera = ep.Camera(to_world=matrix.float(), resolution=s.camera.resolution)
+    options = dict(spp=4, max_bounces=1, seed=1)
+    want, got = ep.render(s, **options).double(), ep.render(framed, **options).double()
+    assert want.sum() > 0
+    assert float((got - want).abs().mean()) < 1e-2 * float(want.mean())
+
+
 def tiny_triangle_gradient(scale, sampling):
     """A triangle lit by a lamp, camera, all x scale: its image sum and its vertices' gradient
     x scale, interior terms only (the same paths at any scale)."""
