@@ -10,7 +10,8 @@
 #   make bench     run bench/run.sh, if there is one (options: BENCH_ARGS="--runs 3")
 #   make fuzz      N mutated scene, mesh and image files through the loaders and a small render,
 #                  and mutated values and forms of a Python scene through ep.render (one view
-#                  or two), render_channels or derivative_image and their gradients,
+#                  or two), render_channels or derivative_image and their gradients, and
+#                  that scene moved elsewhere (the same image and gradients over the scale),
 #                  each in a child process with time and memory caps (N=1000 SEED=0; inputs
 #                  that crash are copied to build/fuzz/found, a line per case in build/fuzz/log.jsonl)
 #   make sanitize  C++ tests built with AddressSanitizer + UBSan (build/asan)

@@ -14,7 +14,7 @@ from typing import Callable, Dict, List, Tuple
 # The loaders the fuzzer exercises, in the order cases cycle through them; each maps to the
 # extension its files get.
 KINDS = {"obj": ".obj", "ply_ascii": ".ply", "ply_binary": ".ply", "xml": ".xml",
-         "png": ".png", "jpeg": ".jpg", "exr": ".exr", "api": ".json"}
+         "png": ".png", "jpeg": ".jpg", "exr": ".exr", "api": ".json", "placed": ".json"}
 
 # ---- seed files ------------------------------------------------------------------------------
 
@@ -167,6 +167,7 @@ def write_seeds(directory: str) -> Dict[str, List[str]]:
         "seed.jpg": jpeg(False), "seed_prog.jpg": jpeg(True),
     }
     files["seed_api.json"] = b"[]"  # the API's scene (fuzz.py: _api_scene) as it is
+    files["seed_placed.json"] = b"{}"  # and where it is (fuzz.py: _placed_case)
     for name, data in files.items():
         with open(os.path.join(directory, name), "wb") as f:
             f.write(data)
@@ -174,7 +175,8 @@ def write_seeds(directory: str) -> Dict[str, List[str]]:
     return {"obj": ["seed.obj"], "ply_ascii": ["seed.ply"],
             "ply_binary": ["seed_le.ply", "seed_be.ply"], "xml": ["seed.xml"],
             "png": ["seed.png", "seed_rgba.png", "seed_grey.png"],
-            "jpeg": ["seed.jpg", "seed_prog.jpg"], "exr": ["seed.exr"], "api": ["seed_api.json"]}
+            "jpeg": ["seed.jpg", "seed_prog.jpg"], "exr": ["seed.exr"], "api": ["seed_api.json"],
+            "placed": ["seed_placed.json"]}
 
 
 # ---- mutations -------------------------------------------------------------------------------
@@ -339,10 +341,42 @@ def mutate_api(data: bytes, rng: random.Random) -> Tuple[bytes, List[str]]:
     return json.dumps(changes).encode(), names
 
 
+# The valid forms of the API scene that the placed kind moves (a subset of API_VARIANTS; one
+# camera change at most: an orthographic camera's to_world columns would be lengths).
+PLACED_VARIANTS = {
+    "camera": [("camera_type", "orthographic"), ("camera_type", "thinlens"), ("camera_type", "fisheye"),
+               ("camera_type", "panorama"), ("to_world", "look_at"), ("to_world", "scaled")],
+    "pixel_filter": [("pixel_filter", "gaussian"), ("pixel_filter", "tent")],
+    "floor_kind": [("floor_kind", "plastic"), ("floor_kind", "conductor"), ("floor_kind", "dielectric"),
+                   ("two_sided", True), ("nonlinear", True)],
+    "box_kind": [("box_kind", "standard"), ("box_kind", "plastic"), ("box_kind", "conductor")],
+    "max_bounces": [("max_bounces", 1), ("max_bounces", 5)],
+}
+
+
+def place_api(rng: random.Random) -> Tuple[bytes, List[str]]:
+    """A placed case (fuzz.py: _placed_case): up to three of the API scene's valid forms, a
+    scale from 3e-10 to 3e10 (the scene spans 2 units: from its least extent, 1e-10, to
+    coordinates of 1e11, within their bound 1e12) and a shift of up to a thousand times the
+    scale (and 5e11) along each axis, or none."""
+    import json
+    forms = [rng.choice(PLACED_VARIANTS[group]) for group in rng.sample(sorted(PLACED_VARIANTS), rng.randrange(4))]
+    scale = 10.0 ** rng.uniform(-9.5, 10.5)
+    shift = [0.0, 0.0, 0.0] if rng.random() < 0.5 else \
+        [rng.choice([-1, 1]) * min(scale * 10.0 ** rng.uniform(-1, 3), 5e11) for _ in range(3)]
+    case = {"variants": forms, "scale": scale, "shift": shift}
+    names = [f"{field}={value}" for field, value in forms] + [f"scale={scale:.3g}"]
+    if any(shift):
+        names.append("shift=(" + ", ".join(f"{x:.3g}" for x in shift) + ")")
+    return json.dumps(case).encode(), names
+
+
 def mutate(kind: str, data: bytes, rng: random.Random) -> Tuple[bytes, List[str]]:
     """One to three mutations of ``data``; returns the bytes and the mutations' names."""
     if kind == "api":
         return mutate_api(data, rng)
+    if kind == "placed":
+        return place_api(rng)
     text = kind in ("obj", "ply_ascii", "xml")
     choices = (TEXT_MUTATIONS if text else BINARY_MUTATIONS) + EXTRA.get(kind, [])
     names = []

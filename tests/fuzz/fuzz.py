@@ -5,7 +5,9 @@ are changed (a JSON list of changes, corpus.mutate_api: NaN, Inf, huge and tiny 
 dtypes, shapes, devices, out-of-range indices, coplanar points), and may first be put in another
 form (corpus.API_VARIANTS: camera types, pixel filters, crop windows, resolutions, camera
 matrices, material kinds, bounce counts, the entry point), is rendered with a gradient of
-everything that can have one. Every outcome is classified:
+everything that can have one; and that scene, in up to three of its valid forms (kind
+``placed``), is moved to another scale and place, where its image and gradients must be what
+they were. Every outcome is classified:
 
   ok          loaded (and rendered, where the input makes a scene)
   error       a clean error: ValueError or OSError whose message names the file (loading)
@@ -21,6 +23,11 @@ everything that can have one. Every outcome is classified:
               scaled values by 1e30: every value in range, their product is not)
   modified    (api) the call, with or without an error, changed a tensor the caller gave it:
               its values, dtype, shape, version counter (an in-place operation) or requires_grad
+  inconsistent (placed) the API scene, in up to three of its valid forms, moved to another
+              scale (3e-10 to 3e10) and place, rendered another image sum (beyond 2%) or
+              gradients (beyond a factor of 1.25, each value's |gradient| summed, times the
+              scale to the power of its units) than where it was, with the same random numbers;
+              or was refused there
 
 Case ``i`` of ``--seed S`` is the same file on every run. The process that drives the cases
 imports edgepath once and forks children (it never renders itself, so no TBB or OpenMP
@@ -39,6 +46,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import random
 import resource
@@ -56,7 +64,7 @@ from typing import Dict, List, Optional, Tuple
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import corpus  # noqa: E402
 
-BAD = ("unexpected", "signal", "hang", "nonfinite", "modified")
+BAD = ("unexpected", "signal", "hang", "nonfinite", "modified", "inconsistent")
 OUTCOMES = ("ok", "error", "unnamed") + BAD
 
 # Per case: seconds of the child's CPU time (a case that computes that long hangs), bytes of
@@ -336,13 +344,145 @@ def _modified(before: Dict[str, tuple], scene) -> List[str]:
     return [name for name, state in before.items() if after.get(name) != state]
 
 
+# ---- the placed kind: the same scene elsewhere -------------------------------------------
+
+# The values that are lengths: placed at scale s, their gradients are 1 / s of what they were.
+# Point lights' intensities go with s^2 (their light falls off with the squared distance); the
+# rest (directions, angles, materials, the environment) stays as it is.
+_LENGTHS = ("vertices", "position", "look_at", "aperture_radius", "focus_distance", "ortho_scale")
+
+
+def _place(scene, scale: float, shift) -> None:
+    """Moves the API scene to x scale + shift (in double, then rounded to float): its points
+    (vertices, the camera's position and look_at or its matrix's translation, point lights),
+    scales its other lengths, and point lights' intensities by scale^2: the same image."""
+    import torch
+    offset = torch.tensor(shift, dtype=torch.float64)
+
+    def moved(value, power: int, point: bool = False):
+        if not isinstance(value, torch.Tensor):
+            return value if value is None else value * scale ** power
+        x = value.detach().double() * scale ** power + (offset if point else 0.0)
+        return x.float().requires_grad_(value.requires_grad)
+
+    for mesh in scene.meshes:
+        mesh.vertices = moved(mesh.vertices, 1, True)
+    camera = scene.camera
+    camera.position, camera.look_at = moved(camera.position, 1, True), moved(camera.look_at, 1, True)
+    for name in ("aperture_radius", "focus_distance", "ortho_scale"):
+        setattr(camera, name, moved(getattr(camera, name), 1))
+    if camera.to_world is not None:
+        matrix = camera.to_world.detach().double().clone()
+        matrix[:3, 3] = matrix[:3, 3] * scale + offset
+        camera.to_world = matrix.float().requires_grad_(True)
+    for light in scene.point_lights:
+        light.position, light.intensity = moved(light.position, 1, True), moved(light.intensity, 2)
+
+
+def _gradient_sums(scene, scale: float) -> Dict[str, float]:
+    """Each of the API scene's values with a gradient: its |gradient| summed, times scale to
+    the power of its units (_LENGTHS): what it was before _place(scene, scale, ...)."""
+    import torch
+    sums = {}
+    for k, obj in enumerate(_api_objects(scene)):
+        for name, value in vars(obj).items():
+            if not isinstance(value, torch.Tensor) or value.grad is None:
+                continue
+            g, label = value.grad.double().abs(), f"{type(obj).__name__}[{k}].{name}"
+            if name == "to_world" and obj is scene.camera:  # the translation is a point
+                sums[label + "[:3, :3]"] = float(g[:3, :3].sum())
+                sums[label + "[:3, 3]"] = float(g[:3, 3].sum()) * scale
+                continue
+            power = 1 if name in _LENGTHS else 2 if name == "intensity" else 0
+            sums[label] = float(g.sum()) * scale ** power
+    return sums
+
+
+def _inconsistencies(base: Tuple[float, Dict[str, float]], moved: Tuple[float, Dict[str, float]],
+                     others: List[Dict[str, float]]) -> List[str]:
+    """What differs between the (image sum, _gradient_sums) of a scene and of the same scene
+    placed elsewhere, with the same random numbers: the image sum beyond 2%; a gradient sum
+    beyond a tenth of itself plus four times its noise (its standard deviation over ``base``
+    and ``others``, the _gradient_sums of other seeds where the scene was), where that noise is
+    at most a fifth of its mean. Paths that round differently where the scene is placed draw
+    other samples there; a value whose noise is larger (a camera's one aperture radius, its up
+    vector) or one at a kink (an orthographic camera that sees a face edge-on: the derivative
+    from either side) is not compared."""
+    (base_sum, base_grads), (moved_sum, moved_grads) = base, moved
+    off = []
+    if abs(moved_sum - base_sum) > 0.02 * abs(base_sum):
+        off.append(f"image sum {moved_sum:.6g} against {base_sum:.6g}")
+    for name, b in sorted(base_grads.items()):
+        m = moved_grads.get(name, 0.0)
+        draws = [b] + [other.get(name, 0.0) for other in others]
+        mean = sum(draws) / len(draws)
+        sigma = math.sqrt(sum((x - mean) ** 2 for x in draws) / (len(draws) - 1))
+        if mean > 1e-6 and sigma <= 0.2 * mean and abs(m - b) > 0.1 * b + 4 * sigma:
+            off.append(f"{name}: {m:.4g} against {b:.4g} (other seeds: {', '.join(f'{x:.4g}' for x in draws[1:])})")
+    return off
+
+
+# Point lights' intensities placed at scale s are s^2 times theirs: within the radiance bound
+# (1e16) for scales up to 1e7, beyond which the placed kind leaves the point lights out.
+_POINT_LIGHT_SCALE = 1e7
+
+
+def _placed_case(ep, path: str) -> Tuple[str, str]:
+    """A placed case (corpus.place_api): the API scene in its forms rendered with a gradient of
+    everything where it is (seed 3, and 4 to 6 for the noise) and placed (seed 3); (outcome,
+    detail)."""
+    import torch
+    with open(path) as f:
+        case = json.load(f)
+    renders = []
+    here = [0.0, 0.0, 0.0]
+    for scale, shift, seed in ((1.0, here, 3), (1.0, here, 4), (1.0, here, 5), (1.0, here, 6),
+                               (case["scale"], case["shift"], 3)):
+        scene, objects = _api_scene(ep)
+        # Looking along no axis: an orthographic camera looking down the plane x = 0 sees the
+        # box's sides edge-on, where a vertex moving either way has a derivative of its own
+        # (the side turns towards or away from it), and rounding picks one.
+        camera = objects["camera"]
+        camera.look_at = (camera.look_at.detach() + torch.tensor([0.0173, 0.0, 0.0071])).requires_grad_(True)
+        bounces = 2
+        for field, value in case["variants"]:
+            asked = _api_variant(objects, field, value)
+            bounces = bounces if asked is None else asked
+        scene.camera.resolution = (12, 16)
+        if case["scale"] > _POINT_LIGHT_SCALE:
+            scene.point_lights = []
+        placed = scale != 1.0 or any(shift)
+        if placed:
+            _place(scene, scale, shift)
+        try:
+            image = ep.render(scene, spp=16, max_bounces=bounces, num_threads=1, seed=seed)
+        except ValueError as error:
+            if placed:
+                return "inconsistent", f"refused where placed: {error}"
+            raise
+        image.sum().backward()
+        sums = _gradient_sums(scene, scale)
+        if not bool(torch.isfinite(image).all()) or not all(math.isfinite(v) for v in sums.values()):
+            return "nonfinite", f"at scale {scale:g}: image finite: {bool(torch.isfinite(image).all())}"
+        renders.append((float(image.detach().double().sum()), sums))
+    base, *others, moved = renders
+    off = _inconsistencies(base, moved, [sums for _, sums in others])
+    if off:
+        return "inconsistent", "; ".join(off)
+    return "ok", f"the same image and gradients, sum {base[0]:.6g}"
+
+
 def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:
     """Runs one case in this process: (outcome, detail). Only ``run_batch``'s children call it;
     ``report`` gets a note before the render (the detail if the render kills the process)."""
     import edgepath as ep
     import edgepath.shapes  # noqa: F401  (ep.shapes)
-    stage = "load"
+    stage, before = "load", None
     try:
+        if kind == "placed":
+            stage = "render"
+            report("rendering")
+            return _placed_case(ep, path)
         scene, bounces, call = _scene_of(ep, kind, path)
         if scene is None:
             return "ok", "nothing to render"
@@ -576,15 +716,16 @@ def replay(directory: str, time_limit: float = TIME_LIMIT) -> Dict[str, Tuple[st
 
 
 def print_table(counts: Dict[str, Counter], out=sys.stdout) -> None:
-    print(f"{'loader':<11}" + "".join(f"{o:>11}" for o in OUTCOMES) + f"{'total':>8}", file=out)
+    width = max(len(o) for o in OUTCOMES) + 2
+    print(f"{'loader':<11}" + "".join(f"{o:>{width}}" for o in OUTCOMES) + f"{'total':>8}", file=out)
     total = Counter()
     for kind in corpus.KINDS:
         if kind in counts:
             c = counts[kind]
             total.update(c)
-            print(f"{kind:<11}" + "".join(f"{c[o]:>11}" for o in OUTCOMES) +
+            print(f"{kind:<11}" + "".join(f"{c[o]:>{width}}" for o in OUTCOMES) +
                   f"{sum(c.values()):>8}", file=out)
-    print(f"{'all':<11}" + "".join(f"{total[o]:>11}" for o in OUTCOMES) +
+    print(f"{'all':<11}" + "".join(f"{total[o]:>{width}}" for o in OUTCOMES) +
           f"{sum(total.values()):>8}", file=out)
 
 

@@ -95,14 +95,59 @@ def test_the_api_kind_tells_a_changed_input():
     assert fuzz._modified(before, scene) == ["Mesh[4].emission", "Material[6].roughness"]
 
 
+def _placed(tmp_path, variants, scale, shift=(0.0, 0.0, 0.0)):
+    path = tmp_path / "placed.json"
+    path.write_text(json.dumps({"variants": variants, "scale": scale, "shift": list(shift)}))
+    return fuzz.run_case("placed", str(path))
+
+
+@pytest.mark.parametrize("variants,scale,shift", [
+    ([], 3e-10, (0, 0, 0)), ([["camera_type", "orthographic"]], 2e-4, (0.05, -0.1, 0.2)),
+    ([["to_world", "scaled"], ["floor_kind", "plastic"]], 3e10, (5e11, -4e11, 1e11)),
+    ([["camera_type", "thinlens"], ["box_kind", "conductor"], ["max_bounces", 5]], 7e5, (0, 0, 0))],
+    ids=["3e-10", "orthographic", "to_world at 3e10", "thin lens"])
+def test_the_placed_kind_finds_the_same_image_and_gradients(tmp_path, variants, scale, shift):
+    """The API scene moved to another scale and place renders the same image and gradients
+    (over the scale) as where it is, at the ends of the range the placed kind draws from."""
+    outcome, detail = _placed(tmp_path, variants, scale, shift)
+    assert outcome == "ok", detail
+
+
+def test_the_placed_kind_tells_another_image_or_gradient(tmp_path, monkeypatch):
+    """The placed kind's comparison sees what it is for: point lights left as bright where the
+    scene is 1e-3 as large (an image 1e6 times brighter there), gradients not rescaled by the
+    scale (1e3 times the vertices'); and leaves alone a value whose noise is larger than a fifth
+    of itself."""
+    place = fuzz._place
+
+    def without_intensities(scene, scale, shift):
+        lights = [(light, light.intensity) for light in scene.point_lights]
+        place(scene, scale, shift)
+        for light, intensity in lights:
+            light.intensity = intensity
+    monkeypatch.setattr(fuzz, "_place", without_intensities)
+    outcome, detail = _placed(tmp_path, [], 1e-3)
+    assert outcome == "inconsistent" and "image sum" in detail, detail
+    monkeypatch.setattr(fuzz, "_place", place)
+    monkeypatch.setattr(fuzz, "_LENGTHS", ("position", "look_at"))
+    outcome, detail = _placed(tmp_path, [], 1e-3)
+    assert outcome == "inconsistent" and "Mesh[2].vertices" in detail, detail
+    image = (10.0, {"stable": 100.0, "noisy": 10.0})
+    others = [{"stable": 101.0, "noisy": 1.0}, {"stable": 99.0, "noisy": 30.0}]
+    assert fuzz._inconsistencies(image, (10.1, {"stable": 104.0, "noisy": 40.0}), others) == []
+    assert fuzz._inconsistencies(image, (10.3, {"stable": 70.0, "noisy": 10.0}), others) == [
+        "image sum 10.3 against 10", "stable: 70 against 100 (other seeds: 101, 99)"]
+
+
 @pytest.mark.slow
 def test_fuzz_slice(tmp_path):
-    """640 fresh cases (80 per loader and 80 of the Python API), about a minute on two cores."""
+    """639 fresh cases (71 per loader, 71 of the Python API and 71 of it placed elsewhere),
+    about a minute on two cores."""
     log = tmp_path / "log.jsonl"
-    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "640", "--seed", "20260101",
+    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "639", "--seed", "20260101",
                              "--log", str(log), "-q"], capture_output=True, text=True, timeout=900)
     cases = [json.loads(line) for line in log.read_text().splitlines()]
-    assert len(cases) == 640, result.stdout + result.stderr
+    assert len(cases) == 639, result.stdout + result.stderr
     counts = {}
     for case in cases:
         counts[case["outcome"]] = counts.get(case["outcome"], 0) + 1
