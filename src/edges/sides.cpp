@@ -1,5 +1,6 @@
 #include "edges/sides.h"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -162,6 +163,7 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
     const Vec3d d(ray.dir);
     const Vec3d up_dir = eye.parallel ? cross(d, Vec3d(p1 - p0)) : cross(Vec3d(p0 - eye.origin), Vec3d(p1 - eye.origin));
     int64_t near_face[2] = {-1, -1};  // upper, lower
+    Vec3f near_corner[2];             // their third vertices
     double nearness[2] = {0.0, 0.0};
     bool any = false;
     for (int64_t f : {e.f0, e.f1}) {
@@ -176,6 +178,7 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
         const double near = (k == 0 ? 1.0 : -1.0) * dot(n, up_dir) / nd;
         if (near_face[k] < 0 || near > nearness[k]) {
             near_face[k] = f;
+            near_corner[k] = c;
             nearness[k] = near;
         }
         any = true;
@@ -184,6 +187,9 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
     // Touching: what lies beyond passes through x, up to rounding.
     const bool touching = beyond.found && beyond.hit.t <= t_x + 4.f * rounding;
     const double up_len = length(up_dir);
+    // How far off the edge a side is evaluated where its surface touches the edge or is the
+    // edge's own face.
+    const double offset = double(eye.step) * (eye.parallel ? double(t_x) + max_abs_component(x) : double(t_x));
     EdgeSide* out[2] = {&upper, &lower};
     for (int k = 0; k < 2; ++k) {
         EdgeSide& side = *out[k];
@@ -192,6 +198,35 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
         if (near_face[k] >= 0) {
             side.found = true;
             side.hit = hit_at_edge(m, e.mesh, near_face[k], p0, p1, s, t_x);
+            // On the face a step off the edge (towards its third vertex c), not on the edge: a
+            // path leaving the edge itself can pass the edge's other face, by rounding, where
+            // the limit from inside the face meets it (a mirror box's top face reflecting into
+            // the box past its back face: which one happened changed as the scene was turned,
+            // and so did the box's gradients, by up to 60%). At least four times the rounding
+            // of the coordinates (far from the origin the step is below it: the same failure).
+            // Not where the face is narrower than twice the step.
+            const Vec3d c(near_corner[k]), along = Vec3d(p1) - Vec3d(p0);
+            const double h = length(cross(c - x_exact, along)) / length(along);
+            const double w = std::max(offset, 4.0 * double(rounding)) / h;
+            if (!(w > 0.0 && w < 0.5)) continue;
+            const Vec3d moved = x_exact * (1.0 - w) + c * w;
+            side.off_edge = true;
+            const Vec3d dx = moved - x_exact;
+            if (eye.parallel) {
+                side.ray.origin = Vec3f(Vec3d(ray.origin) + dx - d * dot(d, dx));
+                side.hit.t = float(double(t_x) + dot(d, dx));
+            } else {
+                side.ray.dir = Vec3f(normalize(moved - o_exact));
+                side.hit.t = float(length(moved - o_exact));
+            }
+            const int32_t* tri = m.indices + 3 * near_face[k];
+            float b[3] = {1.f - side.hit.b1 - side.hit.b2, side.hit.b1, side.hit.b2};
+            for (int j = 0; j < 3; ++j) {
+                const bool corner = same_position(m.vertex(tri[j]), near_corner[k]);
+                b[j] = corner ? float(w) : float(double(b[j]) * (1.0 - w));
+            }
+            side.hit.b1 = b[1];
+            side.hit.b2 = b[2];
             continue;
         }
         static_cast<FirstHit&>(side) = beyond;
@@ -200,7 +235,6 @@ bool edge_sides(const Scene& scene, const EdgeEye& eye, const Edge& e, const Ray
         // plane of the face it touches with (not traced: a step may leap over a thin face).
         if (!(up_len > 0.0)) return false;
         side.off_edge = true;
-        const double offset = double(eye.step) * (eye.parallel ? double(t_x) + max_abs_component(x) : double(t_x));
         const Vec3d shift = up_dir * ((k == 0 ? offset : -offset) / up_len);
         if (eye.parallel) {
             side.ray.origin = Vec3f(Vec3d(ray.origin) + shift);
