@@ -68,17 +68,18 @@ Ray ray_to_edge(float s, float& t_x) {
     return r;
 }
 
-// A side that sees one of the edge's own faces, evaluated on that face a step off the edge point
-// x (eye.step times the distance t_x from the edge's line), on the way to the face's third
-// vertex c, on its own ray: not on the edge itself, where a path leaving it can pass the edge's
-// other face by rounding.
-void expect_on_face_off_edge(const Scene& scene, const EdgeSide& side, const Vec3f& x, const Vec3f& c, float step) {
+// A side that sees one of the edge's own faces, evaluated on that face just off the edge point x
+// (four times the rounding bound, 1e-6 of the distance t_x plus the largest coordinate of x,
+// from the edge's line), on the way to the face's third vertex c, on its own ray: not on the
+// edge itself, where a path leaving it can pass the edge's other face by rounding.
+void expect_on_face_off_edge(const Scene& scene, const EdgeSide& side, const Vec3f& x, const Vec3f& c, float t_x) {
+    const float step = 4e-6f * (t_x + max_abs_component(x));
     EXPECT_TRUE(side.off_edge);
     const Vec3f p = scene.surface_point(side.hit).p;
     EXPECT_NEAR(length(cross(p - x, normalize(c - x))), 0.f, 1e-6f);  // between x and c
     EXPECT_GT(dot(p - x, c - x), 0.f);
     // The edge is the line x = 0, z = 2.
-    EXPECT_NEAR(std::hypot(p.x, p.z - 2.f) / step, 1.f, 1e-3f);
+    EXPECT_NEAR(std::hypot(p.x, p.z - 2.f) / step, 1.f, 0.05f);  // p is rounded to float
     EXPECT_NEAR(length(side.ray.origin + side.ray.dir * side.hit.t - p), 0.f, 1e-6f);
 }
 
@@ -96,7 +97,7 @@ TEST(EdgeSides, FoldSeesItsNearFaceAndWhatLiesJustBeyond) {
         ASSERT_TRUE(upper.found);
         EXPECT_EQ(upper.hit.mesh, 0);
         EXPECT_EQ(upper.hit.prim, 0);
-        expect_on_face_off_edge(*s.scene, upper, Vec3f(0.f, -0.4f, 2.f), Vec3f(-1.f, 0.f, 2.f), eye.step * t_x);
+        expect_on_face_off_edge(*s.scene, upper, Vec3f(0.f, -0.4f, 2.f), Vec3f(-1.f, 0.f, 2.f), t_x);
         // The far side: the sliver, 1e-6 rad wide (a step of 1e-5 rad leaps over it).
         ASSERT_TRUE(lower.found);
         EXPECT_EQ(lower.hit.mesh, 1);
@@ -126,7 +127,7 @@ TEST(EdgeSides, OuterSideTouchingTheEdgeIsEvaluatedOffIt) {
     EdgeSide upper, lower;
     ASSERT_TRUE(edge_sides(*s.scene, eye, s.edge(), ray, 0.4f, t_x, upper, lower));
     EXPECT_EQ(upper.hit.prim, 0);
-    expect_on_face_off_edge(*s.scene, upper, Vec3f(0.f, -0.2f, 2.f), Vec3f(-1.f, 0.f, 2.f), eye.step * t_x);
+    expect_on_face_off_edge(*s.scene, upper, Vec3f(0.f, -0.2f, 2.f), Vec3f(-1.f, 0.f, 2.f), t_x);
     ASSERT_TRUE(lower.found);
     EXPECT_EQ(lower.hit.mesh, 1);
     ASSERT_TRUE(lower.off_edge);
@@ -168,7 +169,7 @@ TEST(EdgeSides, CreaseSeesOneFaceOnEachSideWhateverTheWinding) {
         EXPECT_EQ(upper.hit.prim, 0);
         EXPECT_EQ(lower.hit.prim, 1);
         EXPECT_EQ(lower.hit.mesh, 0);
-        expect_on_face_off_edge(*s.scene, lower, Vec3f(0.f, 0.4f, 2.f), Vec3f(1.f, 0.f, 2.2f), eye.step * t_x);
+        expect_on_face_off_edge(*s.scene, lower, Vec3f(0.f, 0.4f, 2.f), Vec3f(1.f, 0.f, 2.2f), t_x);
         EXPECT_FALSE(is_fold(eye, s.scene->meshes[0], s.edge()));
         SidesScene f(true, 50.f, flip);
         EXPECT_TRUE(is_fold(eye, f.scene->meshes[0], f.edge()));
