@@ -356,18 +356,25 @@ PLACED_VARIANTS = {
 
 def place_api(rng: random.Random) -> Tuple[bytes, List[str]]:
     """A placed case (fuzz.py: _placed_case): up to three of the API scene's valid forms, a
-    scale from 3e-10 to 3e10 (the scene spans 2 units: from its least extent, 1e-10, to
-    coordinates of 1e11, within their bound 1e12) and a shift of up to a thousand times the
-    scale (and 5e11) along each axis, or none."""
+    rotation or none, a scale from 3e-10 to 3e10 (the scene spans 2 units: from its least
+    extent, 1e-10, to coordinates of 1e11, within their bound 1e12) and a shift of up to a
+    thousand times the scale (and 5e11) along each axis, or none."""
     import json
     forms = [rng.choice(PLACED_VARIANTS[group]) for group in rng.sample(sorted(PLACED_VARIANTS), rng.randrange(4))]
     scale = 10.0 ** rng.uniform(-9.5, 10.5)
     shift = [0.0, 0.0, 0.0] if rng.random() < 0.5 else \
         [rng.choice([-1, 1]) * min(scale * 10.0 ** rng.uniform(-1, 3), 5e11) for _ in range(3)]
-    case = {"variants": forms, "scale": scale, "shift": shift}
+    # A rotation (a unit quaternion, uniform over rotations) one time in two.
+    rotation = [1.0, 0.0, 0.0, 0.0]
+    if rng.random() < 0.5:
+        q = [rng.gauss(0.0, 1.0) for _ in range(4)]
+        rotation = [x / sum(y * y for y in q) ** 0.5 for x in q]
+    case = {"variants": forms, "scale": scale, "shift": shift, "rotation": rotation}
     names = [f"{field}={value}" for field, value in forms] + [f"scale={scale:.3g}"]
     if any(shift):
         names.append("shift=(" + ", ".join(f"{x:.3g}" for x in shift) + ")")
+    if rotation[0] != 1.0:
+        names.append("rotation=(" + ", ".join(f"{x:.3f}" for x in rotation) + ")")
     return json.dumps(case).encode(), names
 
 

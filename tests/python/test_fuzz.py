@@ -95,21 +95,24 @@ def test_the_api_kind_tells_a_changed_input():
     assert fuzz._modified(before, scene) == ["Mesh[4].emission", "Material[6].roughness"]
 
 
-def _placed(tmp_path, variants, scale, shift=(0.0, 0.0, 0.0)):
+def _placed(tmp_path, variants, scale, shift=(0.0, 0.0, 0.0), rotation=(1.0, 0.0, 0.0, 0.0)):
     path = tmp_path / "placed.json"
-    path.write_text(json.dumps({"variants": variants, "scale": scale, "shift": list(shift)}))
+    path.write_text(json.dumps({"variants": variants, "scale": scale, "shift": list(shift),
+                                "rotation": list(rotation)}))
     return fuzz.run_case("placed", str(path))
 
 
-@pytest.mark.parametrize("variants,scale,shift", [
-    ([], 3e-10, (0, 0, 0)), ([["camera_type", "orthographic"]], 2e-4, (0.05, -0.1, 0.2)),
-    ([["to_world", "scaled"], ["floor_kind", "plastic"]], 3e10, (5e11, -4e11, 1e11)),
-    ([["camera_type", "thinlens"], ["box_kind", "conductor"], ["max_bounces", 5]], 7e5, (0, 0, 0))],
-    ids=["3e-10", "orthographic", "to_world at 3e10", "thin lens"])
-def test_the_placed_kind_finds_the_same_image_and_gradients(tmp_path, variants, scale, shift):
-    """The API scene moved to another scale and place renders the same image and gradients
-    (over the scale) as where it is, at the ends of the range the placed kind draws from."""
-    outcome, detail = _placed(tmp_path, variants, scale, shift)
+@pytest.mark.parametrize("variants,scale,shift,rotation", [
+    ([], 3e-10, (0, 0, 0), (1, 0, 0, 0)),
+    ([["camera_type", "orthographic"]], 2e-4, (0.05, -0.1, 0.2), (0.5, 0.5, -0.5, 0.5)),
+    ([["to_world", "scaled"], ["floor_kind", "plastic"]], 3e10, (5e11, -4e11, 1e11), (0.8, 0.0, 0.6, 0.0)),
+    ([["camera_type", "thinlens"], ["box_kind", "conductor"], ["max_bounces", 5]], 7e5, (0, 0, 0), (0, 0, 0, 1))],
+    ids=["3e-10", "orthographic, turned", "to_world at 3e10, turned", "thin lens, upside down"])
+def test_the_placed_kind_finds_the_same_image_and_gradients(tmp_path, variants, scale, shift, rotation):
+    """The API scene moved to another scale, place and orientation renders the same image and
+    gradients (over the scale) as where it is, at the ends of the range the placed kind draws
+    from."""
+    outcome, detail = _placed(tmp_path, variants, scale, shift, rotation)
     assert outcome == "ok", detail
 
 
@@ -120,9 +123,9 @@ def test_the_placed_kind_tells_another_image_or_gradient(tmp_path, monkeypatch):
     of itself."""
     place = fuzz._place
 
-    def without_intensities(scene, scale, shift):
+    def without_intensities(scene, *placement):
         lights = [(light, light.intensity) for light in scene.point_lights]
-        place(scene, scale, shift)
+        place(scene, *placement)
         for light, intensity in lights:
             light.intensity = intensity
     monkeypatch.setattr(fuzz, "_place", without_intensities)
@@ -131,23 +134,26 @@ def test_the_placed_kind_tells_another_image_or_gradient(tmp_path, monkeypatch):
     monkeypatch.setattr(fuzz, "_place", place)
     monkeypatch.setattr(fuzz, "_LENGTHS", ("position", "look_at"))
     outcome, detail = _placed(tmp_path, [], 1e-3)
-    assert outcome == "inconsistent" and "Mesh[2].vertices" in detail, detail
+    assert outcome == "inconsistent" and ".vertices: " in detail, detail
     image = (10.0, {"stable": 100.0, "noisy": 10.0})
-    others = [{"stable": 101.0, "noisy": 1.0}, {"stable": 99.0, "noisy": 30.0}]
+    others = [(10.0, {"stable": 101.0, "noisy": 1.0}), (10.0, {"stable": 99.0, "noisy": 30.0})]
     assert fuzz._inconsistencies(image, (10.1, {"stable": 104.0, "noisy": 40.0}), others) == []
     assert fuzz._inconsistencies(image, (10.3, {"stable": 70.0, "noisy": 10.0}), others) == [
-        "image sum 10.3 against 10", "stable: 70 against 100 (other seeds: 101, 99)"]
+        "image sum 10.3 against 10 (other seeds: 10, 10)", "stable: 70 against 100 (other seeds: 101, 99)"]
 
 
 @pytest.mark.slow
 def test_fuzz_slice(tmp_path):
-    """639 fresh cases (71 per loader, 71 of the Python API and 71 of it placed elsewhere),
-    about a minute on two cores."""
+    """640 fresh cases (80 per loader and 80 of the Python API), about a minute on two cores.
+    Not of the placed kind, a statistical check (its false leads, one case in a thousand, would
+    make this one fail on a change that moves its samples); the tests above cover it."""
     log = tmp_path / "log.jsonl"
-    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "639", "--seed", "20260101",
-                             "--log", str(log), "-q"], capture_output=True, text=True, timeout=900)
+    kinds = ",".join(k for k in fuzz.corpus.KINDS if k != "placed")
+    result = subprocess.run([sys.executable, str(FUZZ), "--cases", "640", "--seed", "20260101",
+                             "--kinds", kinds, "--log", str(log), "-q"],
+                            capture_output=True, text=True, timeout=900)
     cases = [json.loads(line) for line in log.read_text().splitlines()]
-    assert len(cases) == 639, result.stdout + result.stderr
+    assert len(cases) == 640, result.stdout + result.stderr
     counts = {}
     for case in cases:
         counts[case["outcome"]] = counts.get(case["outcome"], 0) + 1
