@@ -1,6 +1,5 @@
 #include "edges/sides.h"
 
-#include <algorithm>
 #include <cmath>
 #include <limits>
 

@@ -2,6 +2,7 @@
 // adjoints. The gradient pass holds ray directions fixed, so a hit point moves with the ray
 // origin and with the triangle it lands on.
 #pragma once
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <type_traits>
@@ -62,6 +63,18 @@ TVec3<A> d_cross_normal(const Vec3f& e1, const Vec3f& e2, const TVec3<A>& dn) {
     if (!(s > 0.0)) return TVec3<A>(A(0));
     const TVec3<A> d = d_normalize(Vec3f(cd / s), dn);
     return d * float(1.0 / s);
+}
+
+// Barycentrics (b1, b2) moved into the triangle against rounding: each clamped to [0, 1], then
+// both scaled down where their sum passes 1.
+inline void clamp_into_triangle(double& b1, double& b2) {
+    b1 = std::clamp(b1, 0.0, 1.0);
+    b2 = std::clamp(b2, 0.0, 1.0);
+    if (b1 + b2 > 1.0) {
+        const double s = b1 + b2;
+        b1 /= s;
+        b2 /= s;
+    }
 }
 
 template <class T>

@@ -708,12 +708,8 @@ void Scene::resolve_barycentrics(const Vec3f& origin, const Vec3f& dir, Hit& hit
                             Vec3d(m.vertex(tri[2])), h) ||
         !std::isfinite(h.b1) || !std::isfinite(h.b2))
         return;
-    double b1 = std::clamp(h.b1, 0.0, 1.0), b2 = std::clamp(h.b2, 0.0, 1.0);
-    if (b1 + b2 > 1.0) {
-        const double s = b1 + b2;
-        b1 /= s;
-        b2 /= s;
-    }
+    double b1 = h.b1, b2 = h.b2;
+    clamp_into_triangle(b1, b2);
     hit.b1 = float(b1);
     hit.b2 = float(b2);
 }
@@ -1001,12 +997,8 @@ bool Scene::sample_light_triangle(int mesh, int64_t prim, const Vec3f& p, float 
             const Vec3d w = st.sample(u1, u2);
             TriangleHit<double> h;
             if (!intersect_triangle(pd, w, v0, v1, v2, h) || !(h.t > 0)) return false;
-            double b1 = std::clamp(h.b1, 0.0, 1.0), b2 = std::clamp(h.b2, 0.0, 1.0);
-            if (b1 + b2 > 1.0) {
-                const double s = b1 + b2;
-                b1 /= s;
-                b2 /= s;
-            }
+            double b1 = h.b1, b2 = h.b2;
+            clamp_into_triangle(b1, b2);
             SurfacePoint q = surface_point(mesh, prim, float(b1), float(b2));
             const Vec3f d(w);
             ls.radiance = emitted(q, -d);
