@@ -431,14 +431,14 @@ def _inconsistencies(base: Tuple[float, Dict[str, float]], moved: Tuple[float, D
                      others: List[Tuple[float, Dict[str, float]]]) -> List[str]:
     """What differs between the (image sum, _gradient_sums) of a scene and of the same scene
     placed elsewhere, with the same random numbers: the image sum beyond 2% plus five times its
-    noise, a gradient sum beyond a tenth of itself plus five times its noise (noise: the
-    standard deviation over ``base`` and ``others``, the same of other seeds where the scene
-    was: a turned scene's paths are other draws, and five bounces' noise has tails), where that
-    noise is at most a fifth of its mean. Tails still make about one case in a thousand a false
-    lead (a normal map's gradient twice its mean at 16 spp): rerun such a case with more seeds. Paths that round differently where the scene is placed draw
-    other samples there; a value whose noise is larger (a camera's one aperture radius, its up
-    vector) or one at a kink (an orthographic camera that sees a face edge-on: the derivative
-    from either side) is not compared."""
+    noise; a gradient sum beyond a tenth of itself plus five times its noise, where that noise
+    is at most a fifth of its mean. Noise: the standard deviation over ``base`` and ``others``
+    (the same of other seeds where the scene was). Paths that round differently where the scene
+    is placed, and a turned scene's paths, are other draws; a value whose noise is larger (a
+    camera's one aperture radius, its up vector) is not compared (kinks, where rounding picks
+    the derivative from one side, _placed_case keeps out of view). Tails still make
+    about one case in a thousand a false lead (a normal map's gradient twice its mean at 16
+    spp): rerun such a case with more seeds."""
     (base_sum, base_grads), (moved_sum, moved_grads) = base, moved
     others_sums = [sums for _, sums in others]
 
