@@ -441,10 +441,7 @@ def test_a_mirror_boxs_outline_gradient_does_not_depend_on_how_the_scene_is_turn
     gradients along the box's height were 6 and 13 times too small (-2.8 and -1.3 against -17.0
     and -16.5; finite differences of the whole image -15.4 and -16.5). Now each side is evaluated
     a step inside its face: the same gradients, turned, to 2% of the largest."""
-    angle = 0.3
-    axis = torch.nn.functional.normalize(torch.tensor([1., 2., 3.], dtype=torch.float64), dim=0)
-    k = torch.tensor([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
-    turn = torch.eye(3, dtype=torch.float64) + math.sin(angle) * k + (1 - math.cos(angle)) * k @ k
+    turn = C._rotation([1., 2., 3.], math.degrees(0.3))
     gradients = []
     for r in (torch.eye(3, dtype=torch.float64), turn):
         scene, box = _mirror_box_scene(r)

@@ -17,6 +17,7 @@ import torch
 
 import edgepath as ep
 from edgepath import shapes
+from test_api import to_world_look_at
 
 
 def small_scene(resolution=(16, 16), **camera_args):
@@ -546,11 +547,7 @@ def test_a_to_world_camera_far_from_the_origin_looks_along_its_z_column(scale):
     the position's magnitude, the direction off by up to a quarter at 6e6 units, and the camera
     refused (look_at equal to position) at 6e10."""
     s = offset_scene(scale=scale)
-    position, look_at, up = (t.double() for t in s.camera.frame())
-    z = torch.nn.functional.normalize(look_at - position, dim=0)
-    x = torch.nn.functional.normalize(torch.linalg.cross(up, z), dim=0)
-    matrix = torch.eye(4, dtype=torch.float64)
-    matrix[:3, 0], matrix[:3, 1], matrix[:3, 2], matrix[:3, 3] = x, torch.linalg.cross(z, x), z, position
+    matrix = to_world_look_at(*(t.double().tolist() for t in s.camera.frame()))
     framed = offset_scene(scale=scale)
     framed.camera = ep.Camera(to_world=matrix.float(), resolution=s.camera.resolution)
     options = dict(spp=4, max_bounces=1, seed=1)
