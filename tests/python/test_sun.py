@@ -115,20 +115,26 @@ def test_occluder_derivative_matches_finite_differences():
 def test_elevation_derivative_matches_finite_differences_in_sum():
     """The elevation moves the shadow through the sun's own outline (seen from the floor, in
     the penumbra) and shades the floor through its outline too (the sampled directions stay
-    fixed): one edge sampled of 32 around a bright disk, so per pixel the estimate is noisy
-    (two derivative images of other seeds differ by relative L1 1.07 at 1024 spp) and it is
-    compared in sum. Measured over 4 seeds at 256 spp: 2.28 +- 0.34 against the finite
-    difference's 2.22 +- 0.03."""
+    fixed): one edge sampled of 32 around a bright disk, whose opposite sides' terms nearly
+    cancel, so the estimate is noisy and it is compared in sum, with a sun 4 degrees across.
+    The noise of that sum falls with the disk's width: measured over 8-12 seeds, its standard
+    deviation is 0.49 at 0.5 degrees and 2048 spp (a mean of 2.25 against the finite
+    difference's 2.20-2.24: no bias, but any one seed may land 30% off), 0.16 at 2 degrees and
+    1024 spp, 0.078 at 4 degrees and 1024 spp (mean 2.23 against 2.19-2.20); here, 4 degrees
+    at 2048 spp, the bound below is some four standard deviations."""
     elevation = torch.tensor(60.0, dtype=torch.float64, requires_grad=True)
-    scene = sun_scene(elevation)
+
+    def make(x):
+        return sun_scene(x, diameter=4.0)
+    scene = make(elevation)
     d_sum = float(ep.derivative_image(scene, elevation, torch.ones_like(elevation), spp=2048,
                                       seed=1).sum())
     interior_sum = float(ep.derivative_image(scene, elevation, torch.ones_like(elevation),
                                              spp=256, seed=1, secondary_edges=False).sum())
-    fd_sum = float(finite_difference(sun_scene, 60.0, 1.0, 256, 2).sum())
+    fd_sum = float(finite_difference(make, 60.0, 1.0, 256, 2).sum())
     print(f"sums: derivative {d_sum:.3f}, finite difference {fd_sum:.3f}, interior term "
           f"{interior_sum:.3f}")
-    assert abs(d_sum - fd_sum) < 0.15 * abs(fd_sum)
+    assert abs(d_sum - fd_sum) < 0.1 * abs(fd_sum)
     assert abs(interior_sum - fd_sum) > 0.5 * abs(fd_sum)
 
 
