@@ -351,6 +351,8 @@ PLACED_VARIANTS = {
                    ("two_sided", True), ("nonlinear", True)],
     "box_kind": [("box_kind", "standard"), ("box_kind", "plastic"), ("box_kind", "conductor")],
     "max_bounces": [("max_bounces", 1), ("max_bounces", 5)],
+    # the entry point (fuzz.py: _placed_render): two views, output channels, a derivative image
+    "call": [("call", "views"), ("call", "channels"), ("call", "derivative")],
 }
 
 

@@ -365,12 +365,12 @@ def _rotation(q) -> "torch.Tensor":
                         dtype=torch.float64)
 
 
-def _place(scene, scale: float, shift, rotation) -> None:
+def _place(scene, scale: float, shift, rotation, cameras=()) -> None:
     """Moves the API scene to R x scale + shift (R: ``rotation``'s matrix; in double, then
-    rounded to float): its points (vertices, the camera's position and look_at or its matrix's
-    translation, point lights), rotates its directions (normals, the camera's up, its matrix's
-    axes, spots, the environment), scales its other lengths, and point lights' intensities by
-    scale^2: the same image."""
+    rounded to float): its points (vertices, the cameras' (the scene's and ``cameras``)
+    position and look_at or matrix's translation, point lights), rotates its directions
+    (normals, the cameras' up, their matrices' axes, spots, the environment), scales its other
+    lengths, and point lights' intensities by scale^2: the same image."""
     import torch
     offset, turn = torch.tensor(shift, dtype=torch.float64), _rotation(rotation)
 
@@ -386,16 +386,16 @@ def _place(scene, scale: float, shift, rotation) -> None:
     for mesh in scene.meshes:
         mesh.vertices = moved(mesh.vertices, 1, True, True)
         mesh.normals = moved(mesh.normals, vector=True)
-    camera = scene.camera
-    camera.position, camera.look_at = moved(camera.position, 1, True, True), moved(camera.look_at, 1, True, True)
-    camera.up = moved(camera.up, vector=True)
-    for name in ("aperture_radius", "focus_distance", "ortho_scale"):
-        setattr(camera, name, moved(getattr(camera, name), 1))
-    if camera.to_world is not None:
-        matrix = camera.to_world.detach().double().clone()
-        matrix[:3, :3] = turn @ matrix[:3, :3]
-        matrix[:3, 3] = turn @ matrix[:3, 3] * scale + offset
-        camera.to_world = matrix.float().requires_grad_(True)
+    for camera in [scene.camera, *cameras]:
+        camera.position, camera.look_at = moved(camera.position, 1, True, True), moved(camera.look_at, 1, True, True)
+        camera.up = moved(camera.up, vector=True)
+        for name in ("aperture_radius", "focus_distance", "ortho_scale"):
+            setattr(camera, name, moved(getattr(camera, name), 1))
+        if camera.to_world is not None:
+            matrix = camera.to_world.detach().double().clone()
+            matrix[:3, :3] = turn @ matrix[:3, :3]
+            matrix[:3, 3] = turn @ matrix[:3, 3] * scale + offset
+            camera.to_world = matrix.float().requires_grad_(True)
     envmap = scene.envmap
     envmap.to_world = (turn @ envmap.to_world.detach().double()[:3, :3]).float().requires_grad_(True)
     for light in scene.point_lights:
@@ -404,21 +404,21 @@ def _place(scene, scale: float, shift, rotation) -> None:
             light.spot.direction = moved(light.spot.direction, vector=True)
 
 
-def _gradient_sums(scene, scale: float) -> Dict[str, float]:
-    """Each of the API scene's values with a gradient: its gradient's size, times scale to the
-    power of its units (_LENGTHS): what it was before _place(scene, scale, ...). The size of a
-    vector's (_VECTORS) or a matrix column's gradient is its length, which a rotation keeps;
-    of anything else, its |gradient| summed."""
+def _gradient_sums(scene, scale: float, cameras=()) -> Dict[str, float]:
+    """Each of the API scene's values (and ``cameras``') with a gradient: its gradient's size,
+    times scale to the power of its units (_LENGTHS): what it was before _place(scene, scale,
+    ...). The size of a vector's (_VECTORS) or a matrix column's gradient is its length, which
+    a rotation keeps; of anything else, its |gradient| summed."""
     import torch
     sums = {}
-    for k, obj in enumerate(_api_objects(scene)):
+    for k, obj in enumerate(_api_objects(scene) + list(cameras)):
         for name, value in vars(obj).items():
             if not isinstance(value, torch.Tensor) or value.grad is None:
                 continue
             g, label = value.grad.double(), f"{type(obj).__name__}[{k}].{name}"
             if name == "to_world":  # columns: axes, and the camera's translation (a point)
                 sums[label + "[:3, :3]"] = float(g[:3, :3].norm(dim=0).sum())
-                if obj is scene.camera:
+                if obj is scene.camera or any(obj is c for c in cameras):
                     sums[label + "[:3, 3]"] = float(g[:3, 3].norm()) * scale
                 continue
             size = g.reshape(-1, 3).norm(dim=1).sum() if name in _VECTORS else g.abs().sum()
@@ -427,11 +427,14 @@ def _gradient_sums(scene, scale: float) -> Dict[str, float]:
     return sums
 
 
-def _inconsistencies(base: Tuple[float, Dict[str, float]], moved: Tuple[float, Dict[str, float]],
-                     others: List[Tuple[float, Dict[str, float]]]) -> List[str]:
-    """What differs between the (image sum, _gradient_sums) of a scene and of the same scene
-    placed elsewhere, with the same random numbers: the image sum beyond 2% plus five times its
-    noise; a gradient sum beyond a tenth of itself plus five times its noise, where that noise
+Sums = Tuple[Dict[str, float], Dict[str, float]]  # (named sums of what was rendered, _gradient_sums)
+
+
+def _inconsistencies(base: Sums, moved: Sums, others: List[Sums]) -> List[str]:
+    """What differs between the (image sums, _gradient_sums) of a scene and of the same scene
+    placed elsewhere, with the same random numbers: an image sum (_placed_render's: an image's,
+    a view's, a channel's, a derivative image's) beyond 2% plus five times its noise; a gradient
+    sum beyond a tenth of itself plus five times its noise, where that noise
     is at most a fifth of its mean. Noise: the standard deviation over ``base`` and ``others``
     (the same of other seeds where the scene was). Paths that round differently where the scene
     is placed, and a turned scene's paths, are other draws; a value whose noise is larger (a
@@ -439,7 +442,7 @@ def _inconsistencies(base: Tuple[float, Dict[str, float]], moved: Tuple[float, D
     the derivative from one side, _placed_case keeps out of view). Tails still make
     about one case in a thousand a false lead (a normal map's gradient twice its mean at 16
     spp): rerun such a case with more seeds."""
-    (base_sum, base_grads), (moved_sum, moved_grads) = base, moved
+    (base_sums, base_grads), (moved_sums, moved_grads) = base, moved
     others_sums = [sums for _, sums in others]
 
     def sigma(draws: List[float]) -> float:
@@ -447,10 +450,11 @@ def _inconsistencies(base: Tuple[float, Dict[str, float]], moved: Tuple[float, D
         return math.sqrt(sum((x - mean) ** 2 for x in draws) / (len(draws) - 1))
 
     off = []
-    image_draws = [base_sum] + [s for s, _ in others]
-    if abs(moved_sum - base_sum) > 0.02 * abs(base_sum) + 5 * sigma(image_draws):
-        off.append(f"image sum {moved_sum:.6g} against {base_sum:.6g} (other seeds: "
-                   f"{', '.join(f'{x:.6g}' for x in image_draws[1:])})")
+    for name, base_sum in base_sums.items():
+        moved_sum, image_draws = moved_sums[name], [base_sum] + [o[name] for o, _ in others]
+        if abs(moved_sum - base_sum) > 0.02 * abs(base_sum) + 5 * sigma(image_draws):
+            off.append(f"{name} sum {moved_sum:.6g} against {base_sum:.6g} (other seeds: "
+                       f"{', '.join(f'{x:.6g}' for x in image_draws[1:])})")
     for name, b in sorted(base_grads.items()):
         m = moved_grads.get(name, 0.0)
         draws = [b] + [other.get(name, 0.0) for other in others_sums]
@@ -470,10 +474,43 @@ _NOISE_SEEDS = 8
 _POINT_LIGHT_SCALE = 1e7
 
 
+def _placed_render(ep, scene, call: Optional[str], bounces: int, seed: int, scale: float,
+                   turn: "torch.Tensor", second) -> Tuple[Dict[str, float], Optional["torch.Tensor"]]:
+    """Renders the placed kind's ``scene`` (placed at ``scale``, turned by ``turn``) through
+    entry point ``call`` (corpus.PLACED_VARIANTS["call"]; None: ``ep.render``): the named sums
+    of what it returns, each what it was before the scene was placed, and the loss to take the
+    gradient of (None: a derivative image, which has none). Two views: the scene's camera and
+    ``second``. Channels: radiance, alpha, uv and albedo as they are, depth over the scale, the
+    shading normals along a fixed direction turned with the scene."""
+    import torch
+    options = dict(max_bounces=bounces, num_threads=1)
+    if call == "views":
+        images = ep.render(scene, spp=16, seed=[seed, seed + 100], cameras=[scene.camera, second], **options)
+        return {"view 0": float(images[0].detach().double().sum()),
+                "view 1": float(images[1].detach().double().sum())}, images.sum()
+    if call == "channels":
+        channels = ep.render_channels(scene, ["radiance", "alpha", "depth", "uv", "albedo", "shading_normal"],
+                                      spp=16, seed=seed, **options)
+        along = (turn @ torch.tensor([0.48, 0.6, 0.64], dtype=torch.float64)).float()
+        parts = {name: channels[name].sum() for name in ("radiance", "alpha", "uv", "albedo")}
+        parts["depth"] = channels["depth"].sum() / scale
+        parts["shading_normal"] = (channels["shading_normal"].reshape(-1, 3) @ along).sum()
+        return {name: float(v.detach()) for name, v in parts.items()}, sum(parts.values())
+    if call == "derivative":
+        # The box moving along a fixed direction (turned with the scene), per unit length.
+        vertices = scene.meshes[1].vertices
+        along = (turn @ torch.tensor([0.36, 0.48, 0.8], dtype=torch.float64)).float()
+        d_image = ep.derivative_image(scene, vertices, along.expand(vertices.shape), spp=16, seed=seed,
+                                      **options).double() * scale
+        return {"derivative": float(d_image.sum()), "|derivative|": float(d_image.abs().sum())}, None
+    image = ep.render(scene, spp=16, seed=seed, **options)
+    return {"image": float(image.detach().double().sum())}, image.sum()
+
+
 def _placed_case(ep, path: str) -> Tuple[str, str]:
-    """A placed case (corpus.place_api): the API scene in its forms rendered with a gradient of
-    everything where it is (seed 3, and the next for the noise: _NOISE_SEEDS in all) and placed
-    (seed 3); (outcome, detail)."""
+    """A placed case (corpus.place_api): the API scene in its forms rendered (_placed_render)
+    with a gradient of everything where it is (seed 3, and the next for the noise:
+    _NOISE_SEEDS in all) and placed (seed 3); (outcome, detail)."""
     import torch
     with open(path) as f:
         case = json.load(f)
@@ -488,32 +525,39 @@ def _placed_case(ep, path: str) -> Tuple[str, str]:
         # (the side turns towards or away from it), and rounding picks one.
         camera = objects["camera"]
         camera.look_at = (camera.look_at.detach() + torch.tensor([0.0173, 0.0, 0.0071])).requires_grad_(True)
-        bounces = 2
+        bounces, call = 2, None
         for field, value in case["variants"]:
+            if field == "call":
+                call = value
+                continue
             asked = _api_variant(objects, field, value)
             bounces = bounces if asked is None else asked
         scene.camera.resolution = (12, 16)
+        second = ep.Camera(position=torch.tensor([1., 1., 2.5]), look_at=torch.tensor([0.0173, .3, 0.0071]),
+                           up=torch.tensor([0., 1., 0.]), fov=50.0, resolution=(12, 16))
+        second.position.requires_grad_(True)
         if case["scale"] > _POINT_LIGHT_SCALE:
             scene.point_lights = []
         placed = (scale, shift, rotation) != here
         if placed:
-            _place(scene, scale, shift, rotation)
+            _place(scene, scale, shift, rotation, cameras=[second])
         try:
-            image = ep.render(scene, spp=16, max_bounces=bounces, num_threads=1, seed=seed)
+            image_sums, loss = _placed_render(ep, scene, call, bounces, seed, scale, _rotation(rotation), second)
         except ValueError as error:
             if placed:
                 return "inconsistent", f"refused where placed: {error}"
             raise
-        image.sum().backward()
-        sums = _gradient_sums(scene, scale)
-        if not bool(torch.isfinite(image).all()) or not all(math.isfinite(v) for v in sums.values()):
-            return "nonfinite", f"at scale {scale:g}: image finite: {bool(torch.isfinite(image).all())}"
-        renders.append((float(image.detach().double().sum()), sums))
+        if loss is not None:
+            loss.backward()
+        sums = _gradient_sums(scene, scale, [second] if call == "views" else [])
+        if not all(math.isfinite(v) for v in [*image_sums.values(), *sums.values()]):
+            return "nonfinite", f"at scale {scale:g}: sums {image_sums}, gradients {sums}"
+        renders.append((image_sums, sums))
     base, *others, moved = renders
     off = _inconsistencies(base, moved, others)
     if off:
         return "inconsistent", "; ".join(off)
-    return "ok", f"the same image and gradients, sum {base[0]:.6g}"
+    return "ok", "the same image and gradients, sums " + ", ".join(f"{k} {v:.6g}" for k, v in base[0].items())
 
 
 def run_case(kind: str, path: str, report=lambda note: None) -> Tuple[str, str]:

@@ -106,8 +106,12 @@ def _placed(tmp_path, variants, scale, shift=(0.0, 0.0, 0.0), rotation=(1.0, 0.0
     ([], 3e-10, (0, 0, 0), (1, 0, 0, 0)),
     ([["camera_type", "orthographic"]], 2e-4, (0.05, -0.1, 0.2), (0.5, 0.5, -0.5, 0.5)),
     ([["to_world", "scaled"], ["floor_kind", "plastic"]], 3e10, (5e11, -4e11, 1e11), (0.8, 0.0, 0.6, 0.0)),
-    ([["camera_type", "thinlens"], ["box_kind", "conductor"], ["max_bounces", 5]], 7e5, (0, 0, 0), (0, 0, 0, 1))],
-    ids=["3e-10", "orthographic, turned", "to_world at 3e10, turned", "thin lens, upside down"])
+    ([["camera_type", "thinlens"], ["box_kind", "conductor"], ["max_bounces", 5]], 7e5, (0, 0, 0), (0, 0, 0, 1)),
+    ([["call", "views"], ["camera_type", "thinlens"]], 1e-3, (0.05, -0.1, 0.2), (0.5, 0.5, -0.5, 0.5)),
+    ([["call", "channels"], ["floor_kind", "plastic"]], 3e7, (0, 0, 0), (0.8, 0.0, 0.6, 0.0)),
+    ([["call", "derivative"]], 2e-8, (1e-6, 0.0, 3e-6), (0.8, 0.0, 0.6, 0.0))],
+    ids=["3e-10", "orthographic, turned", "to_world at 3e10, turned", "thin lens, upside down",
+         "two views, turned", "channels at 3e7, turned", "derivative image at 2e-8, turned"])
 def test_the_placed_kind_finds_the_same_image_and_gradients(tmp_path, variants, scale, shift, rotation):
     """The API scene moved to another scale, place and orientation renders the same image and
     gradients (over the scale) as where it is, at the ends of the range the placed kind draws
@@ -118,28 +122,35 @@ def test_the_placed_kind_finds_the_same_image_and_gradients(tmp_path, variants, 
 
 def test_the_placed_kind_tells_another_image_or_gradient(tmp_path, monkeypatch):
     """The placed kind's comparison sees what it is for: point lights left as bright where the
-    scene is 1e-3 as large (an image 1e6 times brighter there), gradients not rescaled by the
-    scale (1e3 times the vertices'); and leaves alone a value whose noise is larger than a fifth
-    of itself."""
+    scene is 1e-3 as large (an image 1e6 times brighter there), a second view's camera left
+    where it was (that view alone differs), gradients not rescaled by the scale (1e3 times the
+    vertices'); and leaves alone a value whose noise is larger than a fifth of itself."""
     place = fuzz._place
 
-    def without_intensities(scene, *placement):
+    def without_intensities(scene, *placement, cameras=()):
         lights = [(light, light.intensity) for light in scene.point_lights]
-        place(scene, *placement)
+        place(scene, *placement, cameras=cameras)
         for light, intensity in lights:
             light.intensity = intensity
     monkeypatch.setattr(fuzz, "_place", without_intensities)
     outcome, detail = _placed(tmp_path, [], 1e-3)
     assert outcome == "inconsistent" and "image sum" in detail, detail
+    monkeypatch.setattr(fuzz, "_place", lambda scene, *placement, cameras=(): place(scene, *placement))
+    outcome, detail = _placed(tmp_path, [["call", "views"]], 1e-3)  # the second view's camera left behind
+    assert outcome == "inconsistent" and "view 1 sum" in detail and "view 0" not in detail, detail
     monkeypatch.setattr(fuzz, "_place", place)
     monkeypatch.setattr(fuzz, "_LENGTHS", ("position", "look_at"))
     outcome, detail = _placed(tmp_path, [], 1e-3)
     assert outcome == "inconsistent" and ".vertices: " in detail, detail
-    image = (10.0, {"stable": 100.0, "noisy": 10.0})
-    others = [(10.0, {"stable": 101.0, "noisy": 1.0}), (10.0, {"stable": 99.0, "noisy": 30.0})]
-    assert fuzz._inconsistencies(image, (10.1, {"stable": 104.0, "noisy": 40.0}), others) == []
-    assert fuzz._inconsistencies(image, (10.3, {"stable": 70.0, "noisy": 10.0}), others) == [
-        "image sum 10.3 against 10 (other seeds: 10, 10)", "stable: 70 against 100 (other seeds: 101, 99)"]
+    image = ({"image": 10.0, "alpha": 5.0}, {"stable": 100.0, "noisy": 10.0})
+    others = [({"image": 10.0, "alpha": 4.0}, {"stable": 101.0, "noisy": 1.0}),
+              ({"image": 10.0, "alpha": 6.0}, {"stable": 99.0, "noisy": 30.0})]
+    assert fuzz._inconsistencies(image, ({"image": 10.1, "alpha": 9.0}, {"stable": 104.0, "noisy": 40.0}),
+                                 others) == []
+    assert fuzz._inconsistencies(image, ({"image": 10.3, "alpha": 11.0}, {"stable": 70.0, "noisy": 10.0}),
+                                 others) == ["image sum 10.3 against 10 (other seeds: 10, 10)",
+                                             "alpha sum 11 against 5 (other seeds: 4, 6)",
+                                             "stable: 70 against 100 (other seeds: 101, 99)"]
 
 
 @pytest.mark.slow
