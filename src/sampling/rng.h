@@ -1,6 +1,11 @@
 // Random numbers: a PCG32 generator (O'Neill's permuted congruential generator, XSH-RR output).
 // Each camera sample gets its own stream, derived from (seed, pixel, sample index), so a sample
-// can be re-traced exactly and images do not depend on the thread count.
+// can be re-traced exactly and images do not depend on the thread count. Every stream starts
+// from a state of its own, hashed from all three: PCG streams that start from one state and
+// differ only in their increment are not independent (their states after n steps form an
+// arithmetic progression over the increment), which a pixel's samples once were: at 1024 spp
+// and more their estimates' variance came out 0.2 to 3.5 times that of independent samples,
+// depending on the integrand (a glass slab's transmission at 20,000 spp: 3.5 times).
 #pragma once
 #include <cstdint>
 
@@ -27,9 +32,10 @@ public:
         next_u32();
     }
 
-    // The stream of one camera sample.
+    // The stream of one camera sample (or of any item `pixel` with its own index `sample`).
     static Rng for_sample(uint64_t seed, uint64_t pixel, uint64_t sample) {
-        return Rng(mix64(seed * 0x2545f4914f6cdd1dull ^ mix64(pixel)), sample);
+        const uint64_t item = mix64(seed * 0x2545f4914f6cdd1dull ^ mix64(pixel));
+        return Rng(mix64(item ^ mix64(sample ^ 0x5a3d1e6b2c4f7089ull)), sample);
     }
 
     uint32_t next_u32() {

@@ -208,9 +208,24 @@ void check_param(bool smooth, const Param& p, double eps, bool geometric) {
     // With every direction after the camera held fixed, moving a shading point also moves the
     // outline of a nearby area light across the sampled directions: a boundary term (secondary
     // edges). An environment map has no such outline, so geometric parameters are tested under
-    // the environment alone.
+    // the environment alone. Nor may anything shade it: the lamp (black, but still in the sky)
+    // is taken out, and the sky is dark below 45 degrees of elevation (its bright patch moved
+    // up), so that no sampled direction grazes the wavy floor, which shades itself within 7.4
+    // degrees of the horizon. Otherwise a sample of the finite difference now and then jumps
+    // by its whole value over the step, while the derivative adds the boundary term smoothly:
+    // over 64 seeds the camera's fov had d - fd +0.07 to +0.18 (of 3.9) at 62 and -1.8 and
+    // -2.6 at two, and 16 seeds could miss both (a mean of 0.11 +- 0.006). Without the
+    // lamp and the low sky, 0.00003 +- 0.00006 (of 1.13). Where the camera sees the sky, its
+    // pixels carry the signal and the sky stays as it is.
     auto prepare = [&](FloorScene& s) {
-        if (geometric) s.le = {0.f, 0.f, 0.f};
+        if (!geometric) return;
+        s.le = {0.f, 0.f, 0.f};
+        if (std::string(p.name).find("sky") != std::string::npos) return;
+        s.desc.meshes.resize(1);
+        for (int k = 8; k < 32; ++k)
+            for (int c = 0; c < 3; ++c) s.env[size_t(3 * k + c)] = 0.f;
+        for (int k : {2, 3})
+            for (int c = 0; c < 3; ++c) s.env[size_t(3 * k + c)] += 6.f;
     };
     const int runs = geometric ? 16 : 10;
     double sd = 0, sd2 = 0, sf = 0, sf2 = 0;

@@ -258,6 +258,39 @@ TEST(Bsdf, OneSidedIsBlackFromBelowAndReciprocal) {
     for (int c = 0; c < 3; ++c) EXPECT_NEAR(fab[c], fba[c], 1e-5f * fab[c]);
 }
 
+// A pixel's samples are independent: the mean over a pixel's n samples of an event of their
+// first random numbers varies across pixels as a binomial proportion's does. Streams that
+// shared one starting state (only the increment told them apart) gave variances 0.23 to 0.63
+// times that at n = 4096, 0.28 times at 20,000, for the events below (and a glass slab's
+// transmission at 20,000 spp 3.5 times its binomial variance).
+TEST(Rng, APixelsSamplesAreIndependent) {
+    const int pixels = 300;
+    for (int n : {1024, 4096, 20000}) {
+        for (int event = 0; event < 3; ++event) {
+            std::vector<double> means;
+            double p = 0.0;
+            for (int px = 0; px < pixels; ++px) {
+                long hits = 0;
+                for (int s = 0; s < n; ++s) {
+                    Rng rng = Rng::for_sample(11, uint64_t(px), uint64_t(s));
+                    float u[4];
+                    for (float& x : u) x = rng.next_float();
+                    const bool hit = event == 0 ? u[0] < 0.1f : event == 1 ? u[3] < 0.5f : (u[1] < 0.3f && u[2] < 0.3f);
+                    hits += hit ? 1 : 0;
+                }
+                means.push_back(double(hits) / n);
+                p += double(hits) / n / pixels;
+            }
+            double var = 0.0;
+            for (double m : means) var += (m - p) * (m - p) / (pixels - 1);
+            // The ratio's own standard deviation is about sqrt(2 / 299) = 0.08.
+            const double ratio = var / (p * (1 - p) / n);
+            EXPECT_GT(ratio, 0.6) << "n " << n << ", event " << event;
+            EXPECT_LT(ratio, 1.5) << "n " << n << ", event " << event;
+        }
+    }
+}
+
 TEST(Distribution, SamplesFollowWeights) {
     Distribution1D d({1.0, 0.0, 3.0, 4.0});
     std::vector<int> count(4, 0);
