@@ -300,8 +300,10 @@ Vec3f SecondaryEdges::evaluate(int32_t edge, float t, float scale, const Surface
     rest.max_bounces = bounces_left;
     rest.hide_emitters = false;  // these paths start after a bounce
     RayCounters counters;
-    Rng rng_u = rng, rng_l = rng;
-    rng.next_u32();  // another stream for the next sample's paths
+    // Both sides' paths take the same numbers (their difference is what counts), from a stream
+    // of their own: a copy of `rng` would give the next edge sample's paths these numbers
+    // again, two places on.
+    Rng rng_u = rng.split(), rng_l = rng_u;
     const Vec3f F_u = is_black(f_u) ? Vec3f(0.f) : f_u * trace_path(scene_, rest, first_u.ray, rng_u, counters, nullptr, &first_u);
     const Vec3f F_l = is_black(f_l) ? Vec3f(0.f) : f_l * trace_path(scene_, rest, first_l.ray, rng_l, counters, nullptr, &first_l);
     const Vec3f delta = F_u - F_l;

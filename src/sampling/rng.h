@@ -38,6 +38,13 @@ public:
         return Rng(mix64(item ^ mix64(sample ^ 0x5a3d1e6b2c4f7089ull)), sample);
     }
 
+    // A stream of its own, seeded by this one's next two numbers (which it consumes): not this
+    // stream shifted, whose numbers a copy would reuse a few places on.
+    Rng split() {
+        const uint64_t hi = next_u32(), lo = next_u32();
+        return Rng(mix64((hi << 32) | lo), mix64(lo ^ 0x73706c6974ull));
+    }
+
     uint32_t next_u32() {
         uint64_t old = state_;
         state_ = old * 6364136223846793005ull + inc_;
