@@ -74,7 +74,10 @@ def test_material_envmap(tmp_path):
 
 
 def test_texture_recovery(tmp_path):
-    r = run("texture_recovery", tmp_path, "--iterations", "15", "--size", "24", "--spp", "4")
+    # At 4 spp the loss is mostly the renders' noise (0.0112-0.0129 at the start, within 3% of
+    # that after 15 steps, up or down by the seed, while the texel error falls from 0.317 to
+    # 0.18); at 16 spp it falls from 0.0044-0.0050 to 0.0025-0.0027.
+    r = run("texture_recovery", tmp_path, "--iterations", "15", "--size", "24", "--spp", "16")
     assert fell(r["loss"], 0.9)
     assert r["texel_error"][-1] < r["texel_error"][0]
     assert (tmp_path / "texture_true_vs_recovered.png").is_file()
