@@ -140,6 +140,24 @@ def assert_matches_reference_image(image: torch.Tensor, ref: torch.Tensor, label
     assert mean_err < mean_max and max_err < max_max
 
 
+def descend(param: torch.Tensor, loss, lr: float, steps: int) -> List[float]:
+    """Adam on ``loss(seed)`` (a fresh seed each step) for ``steps`` steps at ``lr``, a fifth of
+    it over the last 40%, with less momentum than the default (beta1 0.5): the parameter's
+    values after each step. Adam's default momentum at a constant rate swings the parameter
+    past the optimum and back over tens of steps, so where a fixed number of steps stops
+    depends on the noise; this settles it."""
+    optimizer = torch.optim.Adam([param], lr=lr, betas=(0.5, 0.999))
+    schedule = torch.optim.lr_scheduler.MultiStepLR(optimizer, [int(0.6 * steps)], 0.2)
+    history = []
+    for step in range(steps):
+        optimizer.zero_grad()
+        loss(step).backward()
+        optimizer.step()
+        schedule.step()
+        history.append(float(param.detach()))
+    return history
+
+
 def fit_roughness(render, target: torch.Tensor, start: float, steps: int, floor: float) -> float:
     """Inverse rendering of one roughness: Adam (learning rate 0.03, decayed by 0.95 a step, to
     settle in the noise) on the mean square difference between render(roughness, seed=step) and

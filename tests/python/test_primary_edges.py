@@ -209,6 +209,10 @@ CAMERA_CASES = {
 # corner pixels were off by up to 19%, at 0.1 px by 8%); hence small steps and many samples.
 CAMERA_FD_SPP, CAMERA_SPP = 16384, 1024
 FD_SPP_OVERRIDE = {"roll (up)": 65536}  # the smaller step needs more samples
+# Where the derivative's own noise reaches the bounds at 1024 spp (seeds 1-6): the roll's
+# block at a box corner (2x2 block max err 0.14-0.54, 0.07-0.11 at 4096 spp), the orthographic
+# translation's mean err (0.0111-0.0126, 0.0089-0.0094 at 4096 spp).
+CAMERA_SPP_OVERRIDE = {"roll (up)": 4096, "orthographic translate": 4096}
 
 
 @pytest.mark.parametrize("name", list(CAMERA_CASES))
@@ -217,7 +221,8 @@ def test_camera_derivative_images_match_finite_differences(name):
     scene = emitter_scene(camera_type=kind)
     param = getter(scene.camera)
     direction = torch.tensor(direction, dtype=torch.float32).expand_as(param).clone()
-    d_image = ep.derivative_image(scene, param, direction, spp=CAMERA_SPP, seed=1, max_bounces=0)
+    d_image = ep.derivative_image(scene, param, direction, spp=CAMERA_SPP_OVERRIDE.get(name, CAMERA_SPP), seed=1,
+                                  max_bounces=0)
     fd = ep.finite_difference_image(scene, param, direction, eps=eps, spp=FD_SPP_OVERRIDE.get(name, CAMERA_FD_SPP),
                                     seed=2, max_bounces=0)
     interior = ep.derivative_image(scene, param, direction, spp=CAMERA_SPP, seed=1, max_bounces=0,

@@ -69,7 +69,9 @@ def bunny_along_x(crop):
 @pytest.mark.slow
 def test_bunny_outline_derivative_matches_finite_differences():
     scene, vertices, along_x = bunny_along_x((20, 44, 12, 36))
-    assert_agrees(*outline_check(scene, vertices, along_x, seeds=8, spp=256, fd_spp=1024, eps=1e-3))
+    # 16 seeds: the derivative's samples have heavy tails (a seed's sum has a standard deviation
+    # of some 800, 4.7%), and with 8 the standard errors' bound of 2% failed now and then.
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=16, spp=256, fd_spp=1024, eps=1e-3))
 
 
 # The bunny's nose (x 16-28, y 44-56) and the body along its outline (x 28-36, y 44-80), where the
@@ -78,12 +80,13 @@ def test_bunny_outline_derivative_matches_finite_differences():
 # -39,494 +- 133):
 #   nose: 5,198 +- 77 against 5,181 +- 30; without the steps 5,603 +- 56 (+8%);
 #   body: -39,988 +- 179 against -39,771 +- 126; without them -38,597 +- 167 (-3%, 5 se).
-# The test: 8 seeds x 512 spp against FD 8 x 2048.
+# The test: 16 seeds x 512 spp against FD 16 x 2048 (with 8, the nose's standard error was
+# at its bound of 2%).
 @pytest.mark.slow
 @pytest.mark.parametrize("crop", [(16, 44, 12, 12), (28, 44, 8, 36)], ids=["nose", "body"])
 def test_bunny_smooth_shading_derivative_matches_finite_differences(crop):
     scene, vertices, along_x = bunny_along_x(crop)
-    assert_agrees(*outline_check(scene, vertices, along_x, seeds=8, spp=512, fd_spp=2048, eps=1e-3))
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=16, spp=512, fd_spp=2048, eps=1e-3))
 
 
 def rough_sphere(rings, segments, roughness, seed):

@@ -144,17 +144,13 @@ def test_recover_sun_elevation_from_its_shadow():
     from the floor (in the penumbra, where the square hides part of the disk)."""
     target = ep.render(sun_scene(60.0), spp=256, seed=100)
     elevation = torch.tensor(50.0, dtype=torch.float64, requires_grad=True)
-    optimizer = torch.optim.Adam([elevation], lr=1.0)
-    history = []
-    for step in range(40):
-        optimizer.zero_grad()
-        image = ep.render(sun_scene(elevation), spp=16, seed=step)
-        (image - target).square().mean().backward()
-        optimizer.step()
-        history.append(float(elevation.detach()))
+    history = C.descend(elevation, lambda seed: (ep.render(sun_scene(elevation), spp=64, seed=seed) - target)
+                        .square().mean(), lr=1.0, steps=60)
     estimate = sum(history[-10:]) / 10
     print(f"elevation 50 -> {estimate:.2f} (truth 60)")
-    assert abs(estimate - 60.0) < 1.5
+    # Over 8 other sets of seeds: 60 + 0.11 +- 0.15 (16 spp: +- 0.48; 40 steps of Adam at lr 1
+    # without the smaller steps: 61.0 +- 0.7, still swinging past the truth).
+    assert abs(estimate - 60.0) < 0.75
 
 
 @pytest.mark.parametrize("kwargs, message", [

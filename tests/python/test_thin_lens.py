@@ -159,15 +159,10 @@ def test_recover_focus_distance():
     truth, start = 4.0, 5.5
     target = ep.render(lens_scene(focus=truth), spp=256, seed=100)
     focus = torch.tensor(start, requires_grad=True)
-    optimizer = torch.optim.Adam([focus], lr=0.1)
-    history = []
-    for step in range(30):
-        optimizer.zero_grad()
-        image = ep.render(lens_scene(focus=focus), spp=8, seed=step)
-        loss = (image - target).square().mean()
-        loss.backward()
-        optimizer.step()
-        history.append(float(focus.detach()))
+    history = C.descend(focus, lambda seed: (ep.render(lens_scene(focus=focus), spp=8, seed=seed) - target)
+                        .square().mean(), lr=0.1, steps=50)
     estimate = sum(history[-10:]) / 10
     print(f"focus distance {start} -> {estimate:.3f} (truth {truth})")
+    # Over 8 other sets of seeds: 4.02 +- 0.035. (30 steps of Adam at lr 0.1 ended on the swing
+    # past the truth, at 3.79 +- 0.06.)
     assert abs(estimate - truth) < 0.1 * abs(start - truth)

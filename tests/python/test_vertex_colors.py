@@ -91,8 +91,12 @@ def test_material_channels_by_kind_and_material_ids_by_object():
         v = torch.tensor([[x0, -1.5, 0.0], [x1, -1.5, 0.0], [x1, 1.5, 0.0], [x0, 1.5, 0.0]])
         return ep.Mesh(v, torch.tensor([[0, 1, 2], [0, 2, 3]]), material=material)
 
-    meshes = [strip(-1.0, -0.66, shared), strip(-0.66, -0.34, mirror), strip(-0.34, 0.0, shared),
-              strip(0.0, 0.34, glass), strip(0.34, 0.66, None)]  # x > 0.66: nothing
+    # Each strip exactly one pixel column wide: with borders a hundredth of a unit inside
+    # (at +-0.66, +-0.34), some 4% of a column's samples fell on its neighbours' strips, and a
+    # seed now and then gave the mirror's column a roughness of 0.0625.
+    third = 1.0 / 3.0
+    meshes = [strip(-1.0, -2 * third, shared), strip(-2 * third, -third, mirror), strip(-third, 0.0, shared),
+              strip(0.0, third, glass), strip(third, 2 * third, None)]  # x > 2/3: nothing
     out = ep.render_channels(ep.Scene(ortho_camera(res), meshes),
                              ["material_id", "mesh_id", "roughness", "specular", "vertex_color"], spp=4)
     # Pixel columns 0..5 have centres at x = -5/6, -1/2, -1/6, 1/6, 1/2, 5/6.
