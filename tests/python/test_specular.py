@@ -37,26 +37,31 @@ def _camera(resolution=(12, 12), **kw):
 
 # ---- forward: closed forms ----------------------------------------------------------------
 
-@pytest.mark.parametrize("material,smooth", [(ep.Material(kind="dielectric", ior=1.5), True),
-                                             (ep.Material(kind="dielectric", ior=0.7), False),
-                                             (ep.Material(kind="conductor", specular=1.0), False)],
-                         ids=["glass", "glass of ior 0.7, faceted", "mirror, faceted"])
-def test_lossless_sphere_in_uniform_light_is_invisible(material, smooth):
+@pytest.mark.parametrize("material,shape", [(ep.Material(kind="dielectric", ior=1.5), "box"),
+                                            (ep.Material(kind="dielectric", ior=0.7), "faceted sphere"),
+                                            (ep.Material(kind="conductor", specular=1.0), "faceted sphere")],
+                         ids=["glass box", "faceted sphere of ior 0.7", "faceted mirror sphere"])
+def test_lossless_object_in_uniform_light_is_invisible(material, shape):
     """Glass and a perfect mirror neither absorb nor emit: in a uniform environment every
     path ends in it with weight one (radiance scaling in and out of glass cancels), so the
-    image is the environment's radiance everywhere, for every seed (checked at 8; 40-60
-    measured). Two things make that untrue, each on a few samples of the outline's pixels:
-    - interpolated normals at the outline: a mirror there reflects about a normal that sends
-      the ray into the sphere, whose inside is black (one-sided, as in Mitsuba), and glass of
-      ior 0.7 refracts about one into a direction that never crosses the faces, yet carries
-      the crossing's scale (0.49); at 16 spp, 15 and 7 of 40 seeds lost a sample somewhere.
-      So the mirror and that glass are faceted (no normals), which has neither;
-    - paths cut at max_bounces: a faceted ball of ior 1.5 traps grazing rays by total
-      internal reflection for hundreds of bounces (some pixel lost a sample at 39 of 40 seeds,
-      at 256 bounces), and the smooth one for a few dozen (2 of 40 seeds at 24 bounces,
-      none of 60 at 64)."""
-    mesh = _sphere_mesh(material)
-    if not smooth:
+    image is the environment's radiance everywhere, for every seed (checked at 8; 60 measured).
+    What would make that untrue, each on a few samples of the outline's pixels (16 spp):
+    - interpolated normals: at the outline the normal is bent towards the viewer, and a
+      reflection about it can point into the surface. A mirror sphere's ray then meets its
+      black inside (one-sided, as in Mitsuba): 15 of 40 seeds lost a sample. A smooth glass
+      ball's ray enters without refracting and, inside at a grazing angle, is reflected
+      totally for ever: 3 paths of 163,584 (seeds 0-199, 2,000 bounces). Glass of ior 0.7
+      refracts about one into a direction that stays outside yet carries the crossing's
+      scale (0.49): 7 of 40 seeds. So the spheres here are faceted (no normals);
+    - total internal reflection in a faceted ball of ior 1.5, which keeps grazing rays for
+      hundreds of bounces (39 of 40 seeds lost a sample at 256 bounces). So that glass is a
+      turned box, which sends every ray that entered out through the opposite face."""
+    if shape == "box":
+        v, i = shapes.box(half=(0.6, 0.6, 0.6))
+        mesh = ep.Mesh(vertices=(v.double() @ C._rotation([0.3, 0.8, 0.5], 40.0).T).float(), indices=i,
+                       material=material)
+    else:
+        mesh = _sphere_mesh(material)
         mesh.normals = None
     scene = ep.Scene(camera=_camera(), meshes=[mesh], envmap=_constant_env(0.7))
     for seed in range(8):
