@@ -94,6 +94,28 @@ def test_plastic_derivatives_match_finite_differences(name, value, eps, extra, s
     C.assert_matches_finite_difference(d_image, fd_image, f"{name} {extra}", 0.05, l1=0.12)
 
 
+@pytest.mark.parametrize("name, value, eps", [("ior", 1.5, 0.1), ("roughness", 0.2, 0.02)])
+def test_coating_derivatives_of_the_diffuse_lobe_match_finite_differences(name, value, eps):
+    """The base seen through the rough coating alone (no specular), lit by the panel only (one
+    bounce, light sampling): every sample is a smooth function of the coating's index and
+    roughness, so the derivative image and the finite difference of renders with the same
+    random numbers agree closely in sum. They go through the coating's internal reflectance R
+    and transmittance T and their tabulated derivatives: with those differenced over steps of
+    1e-4, which follow the quadratures' wiggles rather than their trend, the index's came out
+    1.036 times the finite difference (1.037 at a step of 0.02) and the roughness's 0.971."""
+    value = torch.tensor(value)
+    param = value.clone().requires_grad_(True)
+    options = dict(spp=256, seed=3, max_bounces=1, sampling="light")
+    scene = plastic_scene(**{name: param}, specular=torch.zeros(3))
+    d_sum = float(ep.derivative_image(scene, param, torch.ones_like(param), **options).sum())
+    with torch.no_grad():
+        plus, minus = (float(ep.render(plastic_scene(**{name: value + s * eps}, specular=torch.zeros(3)),
+                                       **options).sum()) for s in (0.5, -0.5))
+    ratio = d_sum / ((plus - minus) / eps)
+    print(f"{name}: derivative / finite difference {ratio:.4f}")
+    assert abs(ratio - 1) < 0.01
+
+
 def test_inverse_rendering_recovers_a_plastic_roughness():
     """From alpha 0.1, gradient descent on the image difference finds the roughness 0.35 of
     the plastic floor that rendered the target (the reflected stripes blur with it). Measured:
