@@ -84,13 +84,14 @@ def test_rough_glass_derivatives_match_finite_differences(name, value, eps):
     C.assert_matches_finite_difference(d_image, (plus - minus) / eps, name, 0.5)
 
 
-@pytest.mark.slow  # about 10 s: thousands of samples for finite differences
+@pytest.mark.slow  # about 10 s: tens of thousands of samples for finite differences
 def test_occluder_seen_through_rough_glass_matches_finite_differences():
     """A dark square moving sideways between the slab and the stripes: its outline is seen only
     through the rough glass, so the derivative is the boundary term of the edges sampled at the
-    glass's vertices (interior term alone: relative L1 1.0). Measured at 4096 spp: relative L1
-    0.19 (0.29 at 1024 spp: the noise of both estimators)."""
-    spp, eps = 4096, 0.02
+    glass's vertices (interior term alone: relative L1 1.0). The relative L1 distance is the
+    noise of both estimators: over seeds 1-6, 0.16-0.40 at 4096 spp (which the bound of 0.3
+    once took), 0.077-0.099 at 32,768."""
+    spp, eps = 32768, 0.02
     param = torch.zeros(3, requires_grad=True)
     direction = torch.tensor([1.0, 0.0, 0.0])
     scene = glass_slab_scene(occluder=param, size=(5, 5))
@@ -104,7 +105,7 @@ def test_occluder_seen_through_rough_glass_matches_finite_differences():
     error = C.relative_l1(d_image, fd_image)
     print(f"relative L1 {error:.4f}, interior alone {C.relative_l1(interior, fd_image):.4f}")
     assert float(fd_image.abs().mean()) > 0.5
-    assert error < 0.3
+    assert error < 0.15
     assert C.relative_l1(interior, fd_image) > 0.9
 
 

@@ -80,13 +80,13 @@ def test_bunny_outline_derivative_matches_finite_differences():
 # -39,494 +- 133):
 #   nose: 5,198 +- 77 against 5,181 +- 30; without the steps 5,603 +- 56 (+8%);
 #   body: -39,988 +- 179 against -39,771 +- 126; without them -38,597 +- 167 (-3%, 5 se).
-# The test: 16 seeds x 512 spp against FD 16 x 2048 (with 8, the nose's standard error was
-# at its bound of 2%).
+# The test: 24 seeds x 512 spp against FD 24 x 2048 (with 8, and then with 16 at other seeds,
+# the nose's standard error was at its bound of 2%).
 @pytest.mark.slow
 @pytest.mark.parametrize("crop", [(16, 44, 12, 12), (28, 44, 8, 36)], ids=["nose", "body"])
 def test_bunny_smooth_shading_derivative_matches_finite_differences(crop):
     scene, vertices, along_x = bunny_along_x(crop)
-    assert_agrees(*outline_check(scene, vertices, along_x, seeds=16, spp=512, fd_spp=2048, eps=1e-3))
+    assert_agrees(*outline_check(scene, vertices, along_x, seeds=24, spp=512, fd_spp=2048, eps=1e-3))
 
 
 def rough_sphere(rings, segments, roughness, seed):
@@ -196,7 +196,8 @@ def side_lit_sphere(albedo):
 
 # A smooth sphere of 224 triangles lit from the side by a quad, the crop on its terminator:
 # 4 seeds x 128 spp against FD 4 x 512, step 2e-3: -209.3 +- 0.3 against -207.3 +- 2.8; without
-# the steps -118.8 +- 0.6.
+# the steps -118.8 +- 0.6. The test takes 12 seeds: with 4, the finite difference's standard error
+# (a seed's sd about 6, heavy-tailed) crossed the bound of 2% at 2 of 3 other sets of seeds.
 def test_terminator_of_a_low_poly_smooth_sphere_matches_finite_differences():
     v, sphere, light = side_lit_sphere(0.7)
     camera = ep.Camera(position=torch.tensor([0.0, 0.0, 4.0]), look_at=torch.zeros(3), fov=40.0,
@@ -204,7 +205,7 @@ def test_terminator_of_a_low_poly_smooth_sphere_matches_finite_differences():
     scene = ep.Scene(camera=camera, meshes=[sphere, light])
     along_x = torch.zeros_like(v)
     along_x[:, 0] = 1.0
-    assert_agrees(*outline_check(scene, sphere.vertices, along_x, seeds=4, spp=128, fd_spp=512, eps=2e-3))
+    assert_agrees(*outline_check(scene, sphere.vertices, along_x, seeds=12, spp=128, fd_spp=512, eps=2e-3))
 
 
 # The same sphere's terminator seen in a floor of GGX alpha 0.02, nearly a mirror (two bounces):
