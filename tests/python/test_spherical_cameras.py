@@ -207,16 +207,17 @@ def surround_scene(camera_type, fov=200.0, resolution=(10, 20), pixel_filter="bo
 L1_TOLERANCE = 0.25
 
 
-def assert_derivative_matches(scene, param, direction, eps, spp=1024):
+def assert_derivative_matches(scene, param, direction, eps, spp=1024, fd_spp=None, tolerance=L1_TOLERANCE):
     d_image = ep.derivative_image(scene, param, direction, spp=spp, seed=1, max_bounces=1)
-    fd_image = ep.finite_difference_image(scene, param, direction, eps=eps, spp=spp, seed=2, max_bounces=1)
+    fd_image = ep.finite_difference_image(scene, param, direction, eps=eps, spp=fd_spp or spp, seed=2,
+                                          max_bounces=1)
     error = C.relative_l1(d_image, fd_image)
     interior = ep.derivative_image(scene, param, direction, spp=spp // 4, seed=1, max_bounces=1,
                                    primary_edges=False)
     interior_error = C.relative_l1(interior, fd_image)
-    print(f"relative L1 error {error:.3f} (<= {L1_TOLERANCE}); interior term alone {interior_error:.3f}")
+    print(f"relative L1 error {error:.3f} (<= {tolerance}); interior term alone {interior_error:.3f}")
     assert float(fd_image.abs().max()) > 0.05, "the finite difference vanishes, nothing is tested"
-    assert error <= L1_TOLERANCE
+    assert error <= tolerance
     assert interior_error > 2 * L1_TOLERANCE
 
 
@@ -237,7 +238,12 @@ def test_occluder_derivative_matches_finite_differences(camera_type, mesh, axis,
     vertices = scene.meshes[mesh].vertices
     direction = torch.zeros_like(vertices)
     direction[:, axis] = 1.0
-    assert_derivative_matches(scene, vertices, direction, eps=0.04)
+    # Near the fisheye's rim the film stretches: a step of 0.04 moves mesh 2's outline across
+    # pixel boundaries, and its finite difference is off by itself (relative L1 0.16 from the
+    # derivative at 16 x 1024 spp; 0.04 at a step of 0.01). With these steps and sample counts,
+    # the error is 0.02-0.10 over 16 pairs of seeds per case.
+    eps, fd_spp = (0.01, 32768) if (camera_type, mesh) == ("fisheye", 2) else (0.04, 8192)
+    assert_derivative_matches(scene, vertices, direction, eps=eps, fd_spp=fd_spp, tolerance=0.15)
 
 
 @pytest.mark.parametrize("camera_type", ["fisheye", "panorama"])
