@@ -102,8 +102,10 @@ def test_radiance_derivative_in_the_uvs_matches_finite_differences():
     d = ep.derivative_image(scene, uvs, direction, spp=64, seed=4, sampling="light")
     scale = float(fd.abs().max())
     mean_err, max_err = C.image_error(d / scale, fd / scale, C.GRADIENT_FLOOR)
-    print(f"uvs: mean err {mean_err:.4f}, max err {max_err:.4f}")
-    assert scale > 0.1 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
+    print(f"uvs: mean err {mean_err:.4f}, max err {max_err:.4f}, scale {scale:.4f}")
+    # scale: the finite difference's largest pixel, 0.09-0.17 over seeds (a pixel's noise):
+    # the derivative does not vanish
+    assert scale > 0.05 and mean_err <= ERROR_MEAN and max_err <= ERROR_MAX
 
 
 def test_radiance_derivative_in_the_vertices_matches_finite_differences():
