@@ -546,7 +546,11 @@ void sweep(const Scene& scene, const SceneGradients& slots, const PathRecord& re
                 const DeltaParams<float> dp = delta_params(bp);
                 if (delta_scatter(dp, ns, wo, r.next_refract, r.next_inv_pdf, dir, T)) {
                     A_k += T * A_next;
-                    delta_adjoint(dp, ns, wo, r.next_refract, r.next_inv_pdf, dd_next, r.beta * A_next, db, d_eta);
+                    // w_next = delta_side(dir, ng, side): mirrored across the face where it
+                    // left on the wrong side.
+                    TVec3<A> d_dir(A(0));
+                    d_delta_side(dir, sp.ng, delta_side_sign(wo, sp.ng, r.next_refract), dd_next, d_dir, ha.dng);
+                    delta_adjoint(dp, ns, wo, r.next_refract, r.next_inv_pdf, d_dir, r.beta * A_next, db, d_eta);
                 }
             } else {
                 Vec3f T = bsdf_eval_world(bp, ns, wo, r.next_dir) * r.next_inv_pdf;

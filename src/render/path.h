@@ -209,6 +209,14 @@ inline void point_light_samples(const Scene& scene, const SurfacePoint& sp, cons
     }
 }
 
+// The world direction of a BSDF sample `bs` (local to `frame`) at a point of geometric normal ng
+// reached along `dir`: a smooth lobe's kept on its side of the face (delta_side,
+// scene/specular.h).
+inline Vec3f continuation_dir(const Frame& frame, const Vec3f& ng, const Vec3f& dir, const BsdfSample& bs) {
+    const Vec3f w = frame.to_world(bs.wi);
+    return bs.delta ? delta_side(w, ng, delta_side_sign(-dir, ng, bs.refract)) : w;
+}
+
 // The scattering at a path's vertex sp, reached by a ray along `dir` with throughput `beta`, as
 // trace_path and PathBatch (render/batch.h) both do it: bends sp's shading normal, draws the
 // vertex's random numbers from `rng`, samples the BSDF and, if the path goes on, calls
@@ -240,7 +248,7 @@ inline bool shade_vertex(const Scene& scene, const PathSettings& ps, SurfacePoin
     if (bsdf_sample(bp, wo, ub0, ub1, ub2, bs)) next_beta = beta * (bs.delta ? bs.weight : bsdf_eval(bp, wo, bs.wi) / bs.pdf);
     if (!is_black(next_beta)) {
         ++counters.bounce;
-        on_next(spawn_ray(sp, frame.to_world(bs.wi)), bs, next_beta);
+        on_next(spawn_ray(sp, continuation_dir(frame, sp.ng, dir, bs)), bs, next_beta);
     }
 
     // A smooth material reflects light from one direction only: nothing to sample.

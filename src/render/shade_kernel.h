@@ -42,6 +42,16 @@ inline V bend_normal_lanes(const V& ns0, const V& ng, const V& wo_world) {
     return select(keep, ns0, normalize(ns0 + wo_world * (s * F(kMinShadingCosine) - d)));
 }
 
+// delta_side (scene/specular.h) of a smooth lobe's reflection w, where `mask`: mirrored across
+// the face (geometric normal ng) where it points to the other side of it than wo_world.
+template <class V, class M>
+inline V reflection_side_lanes(const V& w, const V& ng, const V& wo_world, M mask) {
+    using F = decltype(V::x);
+    const F zero(0.f), t = dot(w, ng), o = dot(wo_world, ng);
+    const M wrong = mask & (((o >= zero) & (t < zero)) | ((o < zero) & (t > zero)));
+    return select(wrong, w - ng * (F(2.f) * t), w);
+}
+
 // The tangents fs, ft of the frame about ns (math/frame.h).
 template <class V>
 inline void frame_lanes(const V& ns, V& fs, V& ft) {
@@ -431,7 +441,8 @@ inline void shade_lanes_kernel(ShadeLanes<N>& L, int n, bool mis) {
             goes_on.store(L.goes_on + k);
             store3(L.next_beta, k, nb);
             pdf.store(L.next_pdf + k);
-            const V w = fs * wi.x + ft * wi.y + ns * wi.z;
+            V w = fs * wi.x + ft * wi.y + ns * wi.z;
+            if constexpr (Plastic) w = reflection_side_lanes(w, ng, wo_world, M::load(L.next_delta + k));
             store3(L.next_dir, k, w);
             store3(L.next_origin, k, offset_ray_origin(p, p_error, ng, w));
         }
@@ -556,7 +567,7 @@ inline void shade_mirror_lanes_kernel(ShadeLanes<N>& L, int n) {
         goes_on.store(L.next_delta + k);
         store3(L.next_beta, k, nb);
         one.store(L.next_pdf + k);
-        const V w = fs * wi.x + ft * wi.y + ns * wi.z;
+        const V w = reflection_side_lanes(fs * wi.x + ft * wi.y + ns * wi.z, ng, wo_world, ok);
         store3(L.next_dir, k, w);
         store3(L.next_origin, k, offset_ray_origin(p, p_error, ng, w));
     }

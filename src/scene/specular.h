@@ -212,4 +212,44 @@ void d_delta_scatter(const DeltaParams<T>& p, const TVec3<T>& n, const TVec3<T>&
     d.wo += n * (f.s * dci);
 }
 
+// The side of the face a smooth lobe's direction must leave on. About an interpolated shading
+// normal, the mirror direction may point below the face (and a refraction back out of it); such
+// a ray used to go on into the mesh (black inside a mirror, trapped inside glass) or out,
+// unrefracted: a jump in the image where the direction crosses the face's plane, along curves
+// inside triangles that move with the normals and the vertices and lie on no edge, so no
+// boundary term could account for it. Mirrored across the face's plane instead (ng the unit
+// geometric normal, `side` +1 where dir must have dir . ng >= 0, -1 for the other side),
+// the direction is continuous there: the same as before where it was on its side, and
+// the reflection of a direction that just grazes the plane grazes it too.
+template <class T>
+TVec3<T> delta_side(const TVec3<T>& dir, const TVec3<T>& ng, T side) {
+    const T t = dot(dir, ng);
+    if (side * t >= 0) return dir;
+    return dir - ng * (2 * t);
+}
+
+// The delta lobe's side: a reflection leaves on wo's side of the face, a refraction on the other.
+template <class T>
+T delta_side_sign(const TVec3<T>& wo, const TVec3<T>& ng, bool refract) {
+    const bool front = dot(wo, ng) >= 0;
+    return front != refract ? T(1) : T(-1);
+}
+
+// Adds the adjoint of delta_side for the adjoint `dout` of its output to (ddir, dng) and
+// returns whether it mirrored dir.
+template <class T, class A>
+bool d_delta_side(const TVec3<T>& dir, const TVec3<T>& ng, T side, const TVec3<A>& dout, TVec3<A>& ddir,
+                  TVec3<A>& dng) {
+    const T t = dot(dir, ng);
+    if (side * t >= 0) {
+        ddir += dout;
+        return false;
+    }
+    // out = dir - 2 t ng, t = dir . ng
+    const A g = dot(dout, ng);
+    ddir += dout - (ng * g) * T(2);
+    dng -= dout * (2 * t) + (dir * g) * T(2);
+    return true;
+}
+
 }  // namespace edgepath

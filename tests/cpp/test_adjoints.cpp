@@ -321,6 +321,55 @@ TEST(Adjoint, BendNormal) {
     }
 }
 
+// A smooth lobe's direction kept on its side of the face (scene/specular.h): the adjoint in the
+// direction and the geometric normal (inputs dir, ng; ng normalised inside, as a face's is),
+// where it is kept and where it is mirrored; continuity across the face's plane; the side.
+TEST(Adjoint, DeltaSide) {
+    struct Case {
+        Vec3d dir, ng;
+        double side;
+        bool mirrored;
+    };
+    const Vec3d ng = normalize(Vec3d(0.1, -0.2, 1));
+    for (const Case& c : {Case{normalize(Vec3d(0.3, 0.2, 0.5)), ng, 1, false},
+                          Case{normalize(Vec3d(0.3, 0.2, -0.5)), ng, 1, true},
+                          Case{normalize(Vec3d(-0.7, 0.4, 0.3)), ng, -1, true},
+                          Case{normalize(Vec3d(-0.7, 0.4, -0.3)), ng, -1, false}}) {
+        const Vec3d out = delta_side(c.dir, c.ng, c.side);
+        EXPECT_EQ(c.mirrored, length(out - c.dir) > 1e-12);
+        EXPECT_GE(c.side * dot(out, c.ng), 0.0);
+        EXPECT_NEAR(length(out), 1.0, 1e-12);
+        Fn f = [&](const std::vector<double>& x) {
+            const Vec3d o = delta_side(v3(x, 0), normalize(v3(x, 3)), c.side);
+            return std::vector<double>{o.x, o.y, o.z};
+        };
+        auto adj = [&](const std::vector<double>& x, const std::vector<double>& ybar) {
+            Vec3d ddir(0.0), dng(0.0);
+            const bool mirrored = d_delta_side(v3(x, 0), normalize(v3(x, 3)), c.side, v3(ybar, 0), ddir, dng);
+            EXPECT_EQ(c.mirrored, mirrored);
+            std::vector<double> out(6);
+            put(out, 0, ddir);
+            put(out, 3, d_normalize(v3(x, 3), dng));
+            return out;
+        };
+        check_adjoint(f, adj, {c.dir.x, c.dir.y, c.dir.z, c.ng.x, c.ng.y, c.ng.z}, "delta_side");
+    }
+    // Continuous where the direction crosses the plane: a direction just above it and its mirror
+    // image just below give the same output.
+    const Vec3d t = normalize(cross(ng, Vec3d(1, 0, 0)));
+    for (double e : {1e-3, 1e-6}) {
+        const Vec3d above = normalize(t + ng * e), below = normalize(t - ng * e);
+        EXPECT_LT(length(delta_side(above, ng, 1.0) - delta_side(below, ng, 1.0)), 1e-9);
+        EXPECT_LT(length(delta_side(above, ng, -1.0) - delta_side(below, ng, -1.0)), 1e-9);
+    }
+    // The side: a reflection leaves on wo's side, a refraction on the other.
+    const Vec3d front = normalize(Vec3d(0.2, 0.3, 1)), back = -front;
+    EXPECT_EQ(delta_side_sign(front, ng, false), 1.0);
+    EXPECT_EQ(delta_side_sign(front, ng, true), -1.0);
+    EXPECT_EQ(delta_side_sign(back, ng, false), -1.0);
+    EXPECT_EQ(delta_side_sign(back, ng, true), 1.0);
+}
+
 // The side function of an edge, g = dot(cross(e0 - o, e1 - o), d): inputs e0, e1, o, d.
 TEST(Adjoint, EdgeSideFunction) {
     std::vector<double> x = {0.3, -0.2, 2.0, -0.4, 0.5, 2.5, 0.1, 0.2, -1.0, 0.05, 0.1, 1.0};

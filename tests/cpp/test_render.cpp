@@ -1826,7 +1826,7 @@ TEST(Render, ShadePlasticLanesWidthsAgree) {
                     unlike += lane_set(a.goes_on, k) != on;
                     if (on) {
                         unlike += lane_set(a.next_delta, k) != bs.delta;
-                        bits3(a.next_dir, k, frame.to_world(bs.wi));
+                        bits3(a.next_dir, k, continuation_dir(frame, get(i.ng, k), dir, bs));
                         bits3(a.next_beta, k, nb);
                         bits(a.next_pdf, k, bs.pdf);
                         ++goes_on;
@@ -1919,9 +1919,9 @@ TEST(Render, ShadeMirrorLanesWidthsAgree) {
                 behind += !sampled;
                 if (on) {
                     unlike += !bs.delta;
-                    bits3(a.next_dir, k, frame.to_world(bs.wi));
-                    bits3(a.next_origin, k,
-                          offset_ray_origin(get(i.p, k), get(i.p_error, k), get(i.ng, k), frame.to_world(bs.wi)));
+                    const Vec3f w = continuation_dir(frame, get(i.ng, k), dir, bs);
+                    bits3(a.next_dir, k, w);
+                    bits3(a.next_origin, k, offset_ray_origin(get(i.p, k), get(i.p_error, k), get(i.ng, k), w));
                     bits3(a.next_beta, k, nb);
                     bits(a.next_pdf, k, bs.pdf);
                     ++goes_on;

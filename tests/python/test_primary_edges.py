@@ -441,8 +441,9 @@ def _mirror_box_scene(turn):
 
 
 def test_a_mirror_boxs_outline_gradient_does_not_depend_on_how_the_scene_is_turned():
-    """The mirror box's top face reflects into the box near its back edge (its corner normals
-    tilt the reflection below the face). The side of the outline's edge samples on that face was
+    """The mirror box's top face reflected into the box near its back edge (its corner normals
+    tilt the reflection below the face; such directions are now mirrored back out of it,
+    scene/specular.h, delta_side). The side of the outline's edge samples on that face was
     evaluated on the edge itself, where the reflected ray passed above the back face or met it
     by rounding: which one changed as the scene was turned, and turned, the back corners'
     gradients along the box's height were 6 and 13 times too small (-2.8 and -1.3 against -17.0
@@ -455,5 +456,8 @@ def test_a_mirror_boxs_outline_gradient_does_not_depend_on_how_the_scene_is_turn
         ep.render(scene, spp=256, max_bounces=1, seed=3, secondary_edges=False).sum().backward()
         gradients.append(box.vertices.grad.double() @ r)  # turned back
     still, turned = gradients
-    assert still.norm(dim=1).max() > 10
+    # The largest gradient is a back corner's: 17.5-17.7 over seeds 3-5 while the reflection met
+    # the box's black inside, 6.1-6.2 now that it is mirrored out (the jump at the back edge is
+    # between the sky and its reflection, no longer black); turned, within 0.7-1.1% of it.
+    assert still.norm(dim=1).max() > 4
     assert torch.allclose(turned, still, atol=0.02 * float(still.norm(dim=1).max())), (still, turned)
