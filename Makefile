@@ -14,6 +14,9 @@
 #                  that scene moved elsewhere (the same image and gradients over the scale),
 #                  each in a child process with time and memory caps (N=1000 SEED=0; inputs
 #                  that crash are copied to build/fuzz/found, a line per case in build/fuzz/log.jsonl)
+#   make truth     N random forms of that scene, a random parameter each: derivative images
+#                  against finite differences over seeds (N=1000 SEED=0; a line per case in
+#                  build/fuzz/truth.jsonl, the cases whose estimates disagree printed)
 #   make sanitize  C++ tests built with AddressSanitizer + UBSan (build/asan)
 #   make lint      byte-compile the Python sources; ruff if the venv has it
 #   make clean     remove build outputs (distclean: also the venv)
@@ -45,7 +48,7 @@ APT_STAMP := build/apt.stamp
 DEPS_STAMP := $(VENV)/edgepath-deps.stamp
 INSTALL_STAMP := build/py/edgepath-install.stamp
 
-.PHONY: setup build test demo bench fuzz sanitize lint clean distclean FORCE
+.PHONY: setup build test demo bench fuzz truth sanitize lint clean distclean FORCE
 
 setup: $(INSTALL_STAMP)
 build: setup
@@ -99,6 +102,10 @@ fuzz: setup
 	@mkdir -p build/fuzz
 	$(VPY) tests/fuzz/fuzz.py --cases $(N) --seed $(SEED) --save build/fuzz/found \
 	  --log build/fuzz/log.jsonl
+
+truth: setup
+	@mkdir -p build/fuzz
+	$(VPY) tests/fuzz/truth.py --cases $(N) --seed $(SEED) --log build/fuzz/truth.jsonl
 
 sanitize: | $(APT_STAMP)
 	cmake -S . -B build/asan $(CMAKE_GENERATOR_FLAG) -DCMAKE_BUILD_TYPE=RelWithDebInfo \
