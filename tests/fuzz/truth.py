@@ -83,6 +83,8 @@ def run_case(ep, case, seeds=12, spp=128, fd_spp=512):
         return None
     gen = torch.Generator().manual_seed(case["seed"])
     direction = torch.rand(param.shape, generator=gen) * 2 - 1
+    if field == "to_world":
+        direction[3] = 0.0  # the matrix's bottom row stays (0, 0, 0, 1)
     d = torch.stack([ep.derivative_image(scene, param, direction, spp=spp, seed=k, max_bounces=bounces).double()
                      for k in range(seeds)])
     f = torch.stack([ep.finite_difference_image(scene, param, direction, eps=STEPS[(target, field)], spp=fd_spp,
@@ -116,19 +118,23 @@ def main(argv=None):
     cases = [json.loads(args.replay)] if args.replay else [draw_case(random.Random(args.seed * 100003 + i))
                                                             for i in range(args.cases)]
     log = open(args.log, "a") if args.log else None
-    counts = {"ok": 0, "off": 0, "none": 0}
+    counts = {"ok": 0, "off": 0, "none": 0, "error": 0}
     for case in cases:
         start = time.time()
-        result = run_case(ep, case, args.seeds, args.spp, 4 * args.spp)
-        outcome = "none" if result is None else "off" if result["off"] else "ok"
+        try:
+            result = run_case(ep, case, args.seeds, args.spp, 4 * args.spp)
+            outcome = "none" if result is None else "off" if result["off"] else "ok"
+        except Exception as error:  # a valid scene moved along a valid direction: a finding too
+            result, outcome = {"error": f"{type(error).__name__}: {error}"}, "error"
         counts[outcome] += 1
         line = {"case": case, "outcome": outcome, "seconds": round(time.time() - start, 2), **(result or {})}
         if log:
             print(json.dumps(line), file=log, flush=True)
-        if outcome == "off" or args.replay:
+        if outcome in ("off", "error") or args.replay:
             print(json.dumps(line), flush=True)
-    print(f"{counts['ok']} agree, {counts['off']} off, {counts['none']} without the parameter")
-    return 1 if counts["off"] else 0
+    print(f"{counts['ok']} agree, {counts['off']} off, {counts['error']} raised, "
+          f"{counts['none']} without the parameter")
+    return 1 if counts["off"] or counts["error"] else 0
 
 
 if __name__ == "__main__":
