@@ -84,7 +84,11 @@ def run_case(ep, case, seeds=12, spp=128, fd_spp=512):
     gen = torch.Generator().manual_seed(case["seed"])
     direction = torch.rand(param.shape, generator=gen) * 2 - 1
     if field == "to_world":
-        direction[3] = 0.0  # the matrix's bottom row stays (0, 0, 0, 1)
+        # Stays a camera matrix to first order: the axes turned (a skew-symmetric W times
+        # them), the position moved, the bottom row (0, 0, 0, 1).
+        w = direction[:3, :3] - direction[:3, :3].T
+        direction[:3, :3] = w @ param[:3, :3]
+        direction[3] = 0.0
     d = torch.stack([ep.derivative_image(scene, param, direction, spp=spp, seed=k, max_bounces=bounces).double()
                      for k in range(seeds)])
     f = torch.stack([ep.finite_difference_image(scene, param, direction, eps=STEPS[(target, field)], spp=fd_spp,
