@@ -2,15 +2,16 @@
 forms (corpus.PLACED_VARIANTS: camera types, pixel filters, material kinds, bounce counts), a
 random continuous parameter of it and a random direction in that parameter's space; the
 derivative image (forward mode, every term on) against central finite differences, over
-several seeds each, projected on three weightings of the image (its sum, random signs per value,
-the signs of the finite difference). A case is off where a projection's two means differ by
+several seeds each, projected on three weightings of the image (its sum, random weights in
+[-1, 1] per value, the signs of an independent derivative image). A case is off where a projection's two means differ by
 more than 4.5 standard errors plus 3% of the finite difference (and a thousandth of its L1
 norm): a lead to check with more samples (--replay, with --seeds and --spp).
 
 What it cannot tell from a bug, by design of the estimators (docs/gradients.md): the point
 lights' hard shadows have no boundary term (the scene keeps none here), and the edges seen
 through a mirror or glass from the camera (their outlines in a reflection) are missing; a case
-that moves geometry seen in a smooth material may be off for that reason. Heavy-tailed
+that moves geometry seen in a smooth material may be off for that reason (reported apart, as
+"limited"). Heavy-tailed
 derivatives (glass at grazing angles) make a case look off now and then: more seeds settle it.
 
     python tests/fuzz/truth.py --cases 200 --seed 1 [--log FILE]
@@ -41,6 +42,14 @@ PARAMS = [("floor", "vertices", 0.01), ("box", "vertices", 0.01), ("lamp", "vert
           ("box_material", "diffuse", 0.01), ("box_material", "roughness", 0.01), ("box_material", "ior", 0.01),
           ("lamp", "emission", 0.05), ("envmap", "values", 0.01), ("envmap", "scale", 0.01)]
 STEPS = {(target, field): eps for target, field, eps in PARAMS}
+# The forms that make a surface a smooth mirror or glass, and the values that are not geometry
+# or the camera: a case with the former that moves the latter may see an outline move in a
+# reflection or through glass, whose term is left out by design. Such a case that is off is
+# reported as "limited" (in the log, counted, not printed): look at them when nothing else is off.
+SMOOTH_FORMS = {("floor_kind", "conductor"), ("floor_kind", "dielectric"), ("box_kind", "conductor")}
+NOT_GEOMETRY = {"floor_material.diffuse", "floor_material.specular", "floor_material.roughness",
+                "box_material.diffuse", "box_material.roughness", "box_material.ior", "lamp.emission",
+                "envmap.values", "envmap.scale", "box.colors"}
 
 
 def build(ep, forms):
@@ -94,9 +103,12 @@ def run_case(ep, case, seeds=12, spp=128, fd_spp=512):
     f = torch.stack([ep.finite_difference_image(scene, param, direction, eps=STEPS[(target, field)], spp=fd_spp,
                                                 seed=1000 + k, max_bounces=bounces).double() for k in range(seeds)])
     mean_f = f.mean(0)
+    # The signs of an independent derivative image (those of the finite differences' own mean
+    # would favour their noise: sign(x) x is |x|).
+    signs = torch.sign(ep.derivative_image(scene, param, direction, spp=spp, seed=10_000, max_bounces=bounces).double())
     weights = {"sum": torch.ones_like(mean_f),
                "signed": torch.rand(mean_f.shape, generator=gen, dtype=torch.float64) * 2 - 1,
-               "sign": torch.sign(mean_f)}
+               "sign": signs}
     floor = 1e-3 * float(mean_f.abs().sum())
     out, off = {}, []
     for name, w in weights.items():
@@ -122,12 +134,15 @@ def main(argv=None):
     cases = [json.loads(args.replay)] if args.replay else [draw_case(random.Random(args.seed * 100003 + i))
                                                             for i in range(args.cases)]
     log = open(args.log, "a") if args.log else None
-    counts = {"ok": 0, "off": 0, "none": 0, "error": 0}
+    counts = {"ok": 0, "off": 0, "limited": 0, "none": 0, "error": 0}
     for case in cases:
         start = time.time()
         try:
             result = run_case(ep, case, args.seeds, args.spp, 4 * args.spp)
             outcome = "none" if result is None else "off" if result["off"] else "ok"
+            if outcome == "off" and case["param"] not in NOT_GEOMETRY and \
+                    any(tuple(form) in SMOOTH_FORMS for form in case["forms"]):
+                outcome = "limited"
         except Exception as error:  # a valid scene moved along a valid direction: a finding too
             result, outcome = {"error": f"{type(error).__name__}: {error}"}, "error"
         counts[outcome] += 1
@@ -136,8 +151,8 @@ def main(argv=None):
             print(json.dumps(line), file=log, flush=True)
         if outcome in ("off", "error") or args.replay:
             print(json.dumps(line), flush=True)
-    print(f"{counts['ok']} agree, {counts['off']} off, {counts['error']} raised, "
-          f"{counts['none']} without the parameter")
+    print(f"{counts['ok']} agree, {counts['off']} off, {counts['limited']} off where a smooth surface may show a "
+          f"moving outline, {counts['error']} raised, {counts['none']} without the parameter")
     return 1 if counts["off"] or counts["error"] else 0
 
 
