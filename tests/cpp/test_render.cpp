@@ -1879,7 +1879,7 @@ TEST(Render, ShadePlasticLanesWidthsAgree) {
 TEST(Render, ShadeMirrorLanesWidthsAgree) {
     const bool avx2 = shade_width_available(ShadeWidth::Avx2);
     Rng rng(3, 8);
-    int goes_on = 0, behind = 0, compared = 0;
+    int goes_on = 0, behind = 0, compared = 0, mirrored = 0;
     auto get = [](const float (&x)[3][kShadeBatch], int k) { return Vec3f(x[0][k], x[1][k], x[2][k]); };
     for (int round = 0; round < 20; ++round)
         for (int n : {kShadeBatch, 13}) {
@@ -1920,6 +1920,7 @@ TEST(Render, ShadeMirrorLanesWidthsAgree) {
                 if (on) {
                     unlike += !bs.delta;
                     const Vec3f w = continuation_dir(frame, get(i.ng, k), dir, bs);
+                    mirrored += length(w - frame.to_world(bs.wi)) > 0.f;
                     bits3(a.next_dir, k, w);
                     bits3(a.next_origin, k, offset_ray_origin(get(i.p, k), get(i.p_error, k), get(i.ng, k), w));
                     bits3(a.next_beta, k, nb);
@@ -1935,6 +1936,7 @@ TEST(Render, ShadeMirrorLanesWidthsAgree) {
     const int paths = 20 * (kShadeBatch + 13);
     EXPECT_GT(goes_on, paths / 3);
     EXPECT_GT(behind, paths / 20);
+    EXPECT_GT(mirrored, 0);  // directions kept on their side of the face are among them
 }
 
 // A sphere light sampled by solid angle: every sample lands on the side it shows, its density
