@@ -88,12 +88,18 @@ BACKWARD_GEOMETRY = ["translate_rectangle_emitter_on_black", "translate_sphere_e
                      "scale_sphere_emitter_on_black", "translate_diffuse_rectangle_constant", "translate_camera"]
 
 
+# crop_window's mean over seeds is 0.075% below the reference's; at 128 spp its error's
+# standard deviation is about 0.1% (0.000-0.0019 over 12 seeds, 0.0022 at one more against the
+# threshold 0.002), at 2048 spp a quarter of that.
+BWD_SPP_OVERRIDE = {"crop_window": 2048}
+
+
 @pytest.mark.parametrize("name", CONTINUOUS + BACKWARD_GEOMETRY)
 def test_backward_matches_mitsuba(name):
     thresholds = C.thresholds(name)
     theta = torch.zeros((), dtype=torch.float64, requires_grad=True)
     scene, param = C.build(name, theta)
-    image = ep.render(scene, spp=BWD_SPP, max_bounces=param.max_bounces, seed=SEED)
+    image = ep.render(scene, spp=BWD_SPP_OVERRIDE.get(name, BWD_SPP), max_bounces=param.max_bounces, seed=SEED)
     (image * 0.001).sum().backward()
     m = float(theta.grad) / (0.001 * image.numel())
     m_ref = float(C.load_ref(name, "fwd").double().mean())

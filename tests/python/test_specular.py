@@ -303,7 +303,9 @@ def test_smooth_shaded_reflection_moved_matches_finite_differences(material):
     d_mean, fd_mean = float(d.mean()), float(fd.mean())
     se = math.sqrt(float(d.var() + fd.var()) / 8)
     print(f"derivative {d_mean:.2f}, finite difference {fd_mean:.2f}, standard error {se:.2f}")
-    assert se < 0.12 * abs(fd_mean)  # the check can fail: the old bias was 1.4-2.4 times the value
+    # The check can fail: the old bias was 1.2-1.6 times the value, beyond the bound's 4 se + 3%
+    # for any se within this one (the smooth plastic's is 0.07-0.13 of the value over seeds).
+    assert se < 0.2 * abs(fd_mean)
     assert abs(d_mean - fd_mean) < 4 * se + 0.03 * abs(fd_mean)
 
 
