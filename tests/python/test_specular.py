@@ -286,8 +286,8 @@ def smooth_sphere_in_sky(material):
 # -89.7 +- 6.7 against -85.0 +- 5.3. When a reflection about the interpolated normal could
 # point into the sphere, -240.7 +- 3.5 against -101.9 +- 11.1 and -206.6 +- 7.3 against
 # -99.9 +- 8.7: inside the outline, the rays that met the sphere's black inside made a band
-# whose inner boundary, a curve across triangles, moved with the sphere, a jump no edge
-# accounts for (the image changed with the normals' derivative, the film did not).
+# whose inner boundary, a curve across triangles, moved with the sphere: a jump on no edge,
+# whose motion no boundary term accounted for.
 @pytest.mark.slow  # 5-10 s each
 @pytest.mark.parametrize("material", [ep.Material(kind="conductor", specular=torch.tensor([0.9, 0.9, 0.9])),
                                       ep.Material(kind="plastic", roughness=0.0, diffuse=torch.tensor([0.2, 0.3, 0.5]))],
