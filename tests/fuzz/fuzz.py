@@ -507,6 +507,28 @@ def _placed_render(ep, scene, call: Optional[str], bounces: int, seed: int, scal
     return {"image": float(image.detach().double().sum())}, image.sum()
 
 
+def api_scene_in_forms(ep, forms):
+    """The API scene (_api_scene) in its valid forms `forms` (corpus.PLACED_VARIANTS' pairs), at
+    12 x 16, looking along no axis: (scene, objects, max_bounces, entry point or None). Also
+    tests/fuzz/truth.py's scene."""
+    import torch
+    scene, objects = _api_scene(ep)
+    # Looking along no axis: an orthographic camera looking down the plane x = 0 sees the
+    # box's sides edge-on, where a vertex moving either way has a derivative of its own
+    # (the side turns towards or away from it), and rounding picks one.
+    camera = objects["camera"]
+    camera.look_at = (camera.look_at.detach() + torch.tensor([0.0173, 0.0, 0.0071])).requires_grad_(True)
+    bounces, call = 2, None
+    for field, value in forms:
+        if field == "call":
+            call = value
+            continue
+        asked = _api_variant(objects, field, value)
+        bounces = bounces if asked is None else asked
+    camera.resolution = (12, 16)
+    return scene, objects, bounces, call
+
+
 def _placed_case(ep, path: str) -> Tuple[str, str]:
     """A placed case (corpus.place_api): the API scene in its forms rendered (_placed_render)
     with a gradient of everything where it is (seed 3, and the next for the noise:
@@ -518,21 +540,8 @@ def _placed_case(ep, path: str) -> Tuple[str, str]:
     here = (1.0, [0.0, 0.0, 0.0], [1.0, 0.0, 0.0, 0.0])
     there = (case["scale"], case["shift"], case.get("rotation", here[2]))
     for (scale, shift, rotation), seed in [(here, seed) for seed in range(3, 3 + _NOISE_SEEDS)] + [(there, 3)]:
-        scene, objects = _api_scene(ep)
+        scene, objects, bounces, call = api_scene_in_forms(ep, case["variants"])
         scene.envmap.to_world = torch.eye(3).requires_grad_(True)  # rotated with the scene
-        # Looking along no axis: an orthographic camera looking down the plane x = 0 sees the
-        # box's sides edge-on, where a vertex moving either way has a derivative of its own
-        # (the side turns towards or away from it), and rounding picks one.
-        camera = objects["camera"]
-        camera.look_at = (camera.look_at.detach() + torch.tensor([0.0173, 0.0, 0.0071])).requires_grad_(True)
-        bounces, call = 2, None
-        for field, value in case["variants"]:
-            if field == "call":
-                call = value
-                continue
-            asked = _api_variant(objects, field, value)
-            bounces = bounces if asked is None else asked
-        scene.camera.resolution = (12, 16)
         second = ep.Camera(position=torch.tensor([1., 1., 2.5]), look_at=torch.tensor([0.0173, .3, 0.0071]),
                            up=torch.tensor([0., 1., 0.]), fov=50.0, resolution=(12, 16))
         second.position.requires_grad_(True)

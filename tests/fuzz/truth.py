@@ -53,18 +53,12 @@ NOT_GEOMETRY = {"floor_material.diffuse", "floor_material.specular", "floor_mate
 
 
 def build(ep, forms):
-    """The API scene in `forms`, without point lights, at 12 x 16; its values as plain tensors
-    (fov one too). Returns (scene, objects, max_bounces)."""
+    """The API scene in `forms` (fuzz.api_scene_in_forms), without point lights; its values as
+    plain tensors (fov one too). Returns (scene, objects, max_bounces)."""
     import torch
-    scene, objects = fuzz._api_scene(ep)
+    scene, objects, bounces, _ = fuzz.api_scene_in_forms(ep, forms)
     scene.point_lights = []
     camera = objects["camera"]
-    camera.look_at = camera.look_at.detach() + torch.tensor([0.0173, 0.0, 0.0071])  # no axis-aligned view
-    bounces = 2
-    for field, value in forms:
-        asked = fuzz._api_variant(objects, field, value)
-        bounces = bounces if asked is None else asked
-    camera.resolution = (12, 16)
     if not isinstance(camera.fov, torch.Tensor):
         camera.fov = torch.tensor(float(camera.fov))
     for obj in objects.values():
