@@ -1,7 +1,9 @@
 #include "edges/primary.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
+#include <map>
 #include <memory>
 #include <stdexcept>
 #include <string>
@@ -11,6 +13,7 @@
 #include "render/batch.h"
 #include "render/path.h"
 #include "render/tiles.h"
+#include "scene/bsdf.h"
 
 namespace edgepath {
 
@@ -25,6 +28,7 @@ struct FilmEdge {
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
+    int plane = -1;       // seen in this mirror plane (Mirrors::planes), or directly (-1)
 };
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
@@ -286,6 +290,139 @@ struct LightBoxes {
     }
 };
 
+// The mirror image of point p across the plane (q, n).
+inline Vec3f mirrored(const Vec3f& p, const Vec3f& q, const Vec3f& n) { return p - n * (2.f * dot(p - q, n)); }
+
+// Planar mirrors: the faces of a mesh whose material reflects a smooth lobe (a mirror, smooth
+// glass, a smooth plastic's coating) and whose shading normal is its geometric normal (no
+// vertex normals, no normal map), grouped by the plane they lie in. What the camera sees in
+// such a face is the scene mirrored across its plane: an edge seen there is the virtual edge
+// (its mirror image), projected onto the film like any other, but seen only through the faces
+// of that plane, and its step is the reflected lobe's weight times the step of the radiance
+// arriving at the mirror. The faces' plane moves with their vertices, so their gradients get
+// a share of the virtual edge's.
+struct MirrorPlane {
+    int mesh = -1;
+    Vec3f q, n;              // a point of the plane and its unit normal, turned towards the camera
+    float tol = 0.f;         // distances from the plane below this count as in it
+    EdgeEye eye;             // the camera's position mirrored: the eye that sees the virtual edges
+    double x0, y0, x1, y1;   // the film window its faces cover, within the pass's
+};
+
+// At most this many planes, and at most kMirrorSetups edge set-ups over all of them (each plane
+// sets up every edge of the scene): those whose faces cover the most film.
+constexpr size_t kMaxMirrorPlanes = 64;
+constexpr double kMirrorSetups = double(1 << 24);
+
+struct Mirrors {
+    std::vector<MirrorPlane> planes;
+    std::vector<std::vector<int32_t>> plane_of;  // per mesh, per triangle: its plane's index, or -1
+
+    Mirrors() = default;
+    Mirrors(const Scene& scene, const Camera& cam, double wx0, double wy0, double wx1, double wy1) {
+        plane_of.resize(scene.meshes.size());
+        std::vector<double> areas;
+        const size_t num_edges = scene.edges().size();
+        const bool parallel = cam.type == CameraType::Orthographic;
+        for (size_t i = 0; i < scene.meshes.size(); ++i) {
+            const Mesh& m = scene.meshes[i];
+            const Material& mat = scene.materials[size_t(m.material)];
+            if (mat.kind == MaterialKind::Standard || m.normals || !mat.normal_map.empty()) continue;
+            if (mat.kind != MaterialKind::Conductor) {
+                // Glass and plastic are smooth where their roughness is 0.
+                const Texture& r = mat.roughness;
+                const int64_t texels = int64_t(r.width) * r.height * r.channels;
+                if (!r.empty() && !(*std::min_element(r.data, r.data + texels) <= 0.f)) continue;
+            }
+            float size = 0.f;
+            for (int64_t v = 0; v < m.num_vertices; ++v) size = std::max(size, max_abs_component(m.vertex(v)));
+            const float quantum = 1e-4f * size;
+            if (!(quantum > 0.f)) continue;
+            // A one-sided mirror or coating reflects only on the front of its faces.
+            const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
+            std::map<std::array<int64_t, 4>, int32_t> by_plane;
+            std::vector<int32_t>& of = plane_of[i];
+            of.assign(size_t(m.num_triangles), -1);
+            for (int64_t f = 0; f < m.num_triangles; ++f) {
+                if (m.is_degenerate(f)) continue;
+                const int32_t* t = m.indices + 3 * f;
+                Vec3f n = m.unit_face_normal(f);
+                const Vec3f a = m.vertex(t[0]);
+                // (How far in front of the face the camera is, or for parallel rays how steeply.)
+                float side = parallel ? -dot(n, cam.forward) : dot(n, cam.position - a);
+                if (front_only && !(side > 0.f)) continue;
+                if (side < 0.f) n = -n, side = -side;
+                if (!(side > 0.f)) continue;  // the camera in the plane: it sees the face edge-on
+                const std::array<int64_t, 4> key = {std::llround(n.x * 1e4f), std::llround(n.y * 1e4f),
+                                                    std::llround(n.z * 1e4f), std::llround(dot(n, a) / quantum)};
+                auto [it, added] = by_plane.emplace(key, int32_t(planes.size()));
+                if (added) {
+                    MirrorPlane mp;
+                    mp.mesh = int(i);
+                    mp.q = a;
+                    mp.n = n;
+                    mp.tol = 0.1f * quantum;
+                    mp.eye.origin = mirrored(cam.position, a, n);
+                    mp.eye.parallel = parallel;
+                    mp.eye.dir = cam.forward - n * (2.f * dot(cam.forward, n));
+                    mp.x0 = mp.y0 = std::numeric_limits<double>::infinity();
+                    mp.x1 = mp.y1 = -std::numeric_limits<double>::infinity();
+                    planes.push_back(mp);
+                    areas.push_back(0.0);
+                }
+                of[size_t(f)] = it->second;
+                MirrorPlane& mp = planes[size_t(it->second)];
+                for (int c = 0; c < 3; ++c) {
+                    const Vec3d qc = camera_axes(cam, m.vertex(t[c]) - cam.position);
+                    if (!parallel && !(qc.z > 1e-6 * length(qc))) {
+                        // Reaches behind the camera: the whole window.
+                        mp.x0 = wx0, mp.y0 = wy0, mp.x1 = wx1, mp.y1 = wy1;
+                        continue;
+                    }
+                    const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z), y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
+                    mp.x0 = std::min(mp.x0, x), mp.x1 = std::max(mp.x1, x);
+                    mp.y0 = std::min(mp.y0, y), mp.y1 = std::max(mp.y1, y);
+                }
+            }
+        }
+        // The windows within the pass's (a pixel wider, against rounding), their areas; the
+        // planes kept.
+        std::vector<size_t> order;
+        for (size_t k = 0; k < planes.size(); ++k) {
+            MirrorPlane& mp = planes[k];
+            mp.x0 = std::max(mp.x0 - 1.0, wx0), mp.y0 = std::max(mp.y0 - 1.0, wy0);
+            mp.x1 = std::min(mp.x1 + 1.0, wx1), mp.y1 = std::min(mp.y1 + 1.0, wy1);
+            if (mp.x0 < mp.x1 && mp.y0 < mp.y1) {
+                areas[k] = (mp.x1 - mp.x0) * (mp.y1 - mp.y0);
+                order.push_back(k);
+            }
+        }
+        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return areas[a] > areas[b]; });
+        size_t keep = std::min(order.size(), kMaxMirrorPlanes);
+        if (num_edges > 0) keep = std::min(keep, std::max<size_t>(1, size_t(kMirrorSetups / double(num_edges))));
+        std::vector<int32_t> index(planes.size(), -1);
+        std::vector<MirrorPlane> kept;
+        for (size_t r = 0; r < keep; ++r) {
+            index[order[r]] = int32_t(kept.size());
+            kept.push_back(planes[order[r]]);
+        }
+        planes = std::move(kept);
+        for (std::vector<int32_t>& of : plane_of)
+            for (int32_t& p : of)
+                if (p >= 0) p = index[size_t(p)];
+    }
+};
+
+// Adds to the adjoints of p, q and n (dp, dq, dn) that of mirrored(p, q, n) for its adjoint a.
+inline void d_mirrored(const Vec3f& p, const Vec3f& q, const Vec3f& n, const Vec3f& a, Vec3f& dp, Vec3f& dq,
+                       Vec3f& dn) {
+    // m = p - 2 s n, s = (p - q) . n
+    const float na = dot(n, a), s = dot(p - q, n);
+    dp += a - n * (2.f * na);
+    dq += n * (2.f * na);
+    dn += a * (-2.f * s) - (p - q) * (2.f * na);
+}
+
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
     return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
 }
@@ -368,17 +505,54 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return (dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) ||
                (by_lights && e.kind == EdgeKind::Smooth && !light_boxes.between(m, e));
     };
+    // Edges seen in planar mirrors (Mirrors, above): by a pinhole or orthographic camera, where
+    // the radiance is differentiated and paths reflect at least once.
+    const bool mirrors_seen = radiance && !uniform && opt.max_bounces >= 1 &&
+                              (cam.type == CameraType::Perspective || cam.type == CameraType::Orthographic);
+    const Mirrors mirrors = mirrors_seen ? Mirrors(scene, cam, wx0, wy0, wx1, wy1) : Mirrors();
+    // The virtual edge of edge e of mesh m in mirror plane mp: its part on the camera's side of
+    // the plane, mirrored, on the film within the plane's window.
+    auto mirrored_film_edge = [&](const MirrorPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, mp.mesh)) return false;
+        Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
+        const float s0 = dot(p0 - mp.q, mp.n), s1 = dot(p1 - mp.q, mp.n);
+        if (!(s0 > mp.tol || s1 > mp.tol)) return false;  // behind the mirror, or in its plane
+        if (s0 < 0.f) p0 = p0 + (p1 - p0) * (s0 / (s0 - s1));
+        if (s1 < 0.f) p1 = p1 + (p0 - p1) * (s1 / (s1 - s0));
+        if (!project_edge(cam, mirrored(p0, mp.q, mp.n), mirrored(p1, mp.q, mp.n), mp.x0, mp.y0, mp.x1, mp.y1, fe))
+            return false;
+        if (!is_fold(mp.eye, m, e) && e.kind == EdgeKind::Smooth) {
+            fe.weight = smooth_weights[size_t(index)];
+            if (!(fe.weight > 0.0)) return false;
+        }
+        const double dx = fe.bx - fe.ax, dy = fe.by - fe.ay;
+        fe.len = std::sqrt(dx * dx + dy * dy) * fe.weight;
+        return fe.len > 0.0;
+    };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
-    std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_edges + kSetupChunk - 1) / kSetupChunk));
-    for_each_chunk(opt, num_edges, kSetupChunk, [&](int64_t begin, int64_t end) {
+    // Each edge directly, then in each mirror plane.
+    const int64_t num_setups = num_edges * int64_t(1 + mirrors.planes.size());
+    std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_setups + kSetupChunk - 1) / kSetupChunk));
+    for_each_chunk(opt, num_setups, kSetupChunk, [&](int64_t begin, int64_t end) {
         // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
         // two threads adding to neighbours would share their cache line at every addition.
         std::vector<FilmEdge> film_edges;
         film_edges.reserve(size_t(end - begin));
-        for (int64_t index = begin; index < end; ++index) {
+        for (int64_t setup = begin; setup < end; ++setup) {
+            const int64_t index = setup % num_edges, plane = setup / num_edges - 1;
             const Edge& e = all_edges[size_t(index)];
-            if (e.flat || (!camera_wanted && !vertices_wanted(slots, e.mesh))) continue;
+            if (e.flat) continue;
+            if (plane >= 0) {
+                FilmEdge fe;
+                const MirrorPlane& mp = mirrors.planes[size_t(plane)];
+                if (!mirrored_film_edge(mp, scene.meshes[size_t(e.mesh)], e, index, fe)) continue;
+                fe.edge = size_t(index);
+                fe.plane = int(plane);
+                film_edges.push_back(fe);
+                continue;
+            }
+            if (!camera_wanted && !vertices_wanted(slots, e.mesh)) continue;
             const Mesh& m = scene.meshes[size_t(e.mesh)];
             FilmEdge fe;
             double len;
@@ -475,7 +649,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         EdgeSideGradient g;
         float weight;  // the film length the sample stands for over the film gradient's norm
         float value_u[kMaxChannelValues], value_l[kMaxChannelValues];
+        // Seen in a mirror: the mirror's face (its mesh, vertex indices and vertices); g is the
+        // side function of the virtual edge.
+        int mirror_mesh = -1;
+        int32_t mirror_tri[3] = {-1, -1, -1};
+        Vec3f mirror_v[3];
     };
+    // The side paths of edges seen in mirrors: from the mirror's point, a bounce fewer, emitters seen.
+    RenderOptions reflected_opt = opt;
+    reflected_opt.max_bounces = opt.max_bounces - 1;
+    reflected_opt.hide_emitters = false;
     constexpr int64_t kSampleChunk = 4096;
     for_each_chunk(opt, n, kSampleChunk, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
@@ -491,6 +674,32 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             sides.resize(size_t(2 * batch));
             side_L.resize(size_t(2 * batch));
         }
+        // Adds s * dg/d(vertices) of a sample seen in a mirror: g is the side function of the
+        // virtual edge, whose ends are the edge's mirrored across the plane of the mirror's face.
+        auto add_mirrored_gradient = [&](const Pending& pd, float s) {
+            const Edge& edge = *pd.edge;
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f ta = pd.mirror_v[0], u = pd.mirror_v[1] - ta, v = pd.mirror_v[2] - ta;
+            const Vec3f n = cross_normal(u, v);
+            Vec3f dp0(0.f), dp1(0.f), dq(0.f), dn(0.f);
+            d_mirrored(m.vertex(edge.v0), ta, n, pd.g.d_e0 * s, dp0, dq, dn);
+            d_mirrored(m.vertex(edge.v1), ta, n, pd.g.d_e1 * s, dp1, dq, dn);
+            if (vertices_wanted(slots, edge.mesh)) {
+                const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
+                sink.add3(vs, edge.v0, dp0.x, dp0.y, dp0.z);
+                sink.add3(vs, edge.v1, dp1.x, dp1.y, dp1.z);
+            }
+            if (vertices_wanted(slots, pd.mirror_mesh)) {
+                // q = the face's first vertex, n = cross_normal(u, v): the cross product's adjoint
+                // dc, and that of c = cross(u, v).
+                const Vec3f dc = d_cross_normal(u, v, dn);
+                const Vec3f du = cross(v, dc), dv = cross(dc, u), da = dq - du - dv;
+                const GradSlot& ms = slots.meshes[size_t(pd.mirror_mesh)].vertices;
+                sink.add3(ms, pd.mirror_tri[0], da.x, da.y, da.z);
+                sink.add3(ms, pd.mirror_tri[1], du.x, du.y, du.z);
+                sink.add3(ms, pd.mirror_tri[2], dv.x, dv.y, dv.z);
+            }
+        };
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
         auto finish = [&](Pending& pd, const Vec3f& L) {
             float* value_u = pd.value_u;
@@ -524,7 +733,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             };
             // Adds s * dg/d(parameter) to the sink.
             auto add_side_gradient = [&](float s) {
-                if (vertices_wanted(slots, edge.mesh)) {
+                if (pd.mirror_mesh >= 0) {
+                    add_mirrored_gradient(pd, s);
+                } else if (vertices_wanted(slots, edge.mesh)) {
                     const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
                     sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
                     sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
@@ -562,6 +773,25 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 finish(pending[size_t(k)], radiance ? side_L[size_t(2 * k)] - side_L[size_t(2 * k + 1)] : Vec3f(0.f));
             npending = 0;
         };
+        // The film gradient (gx, gy) of side function g at film point (x, y), whose ray from `eye`
+        // has direction d: a pinhole's, a thin lens's or parallel rays'.
+        auto film_gradient = [&](float x, float y, const Eye& eye, const Vec3f& d, const EdgeSideGradient& g,
+                                 double& gx, double& gy) {
+            if (!has_eye(cam.type)) {
+                gx = dot(g.d_o, cam.right) * px_scale;
+                gy = -dot(g.d_o, cam.up) * px_scale;
+                return;
+            }
+            // d = normalize(D), D = focus w - a (a pinhole: focus 1, a = 0), w = forward + sx right
+            // + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
+            const Vec2f sc = cam.screen(x, y);
+            const float focus = thin_lens ? cam.focus : 1.f;
+            const Vec3f D = (cam.forward + cam.right * sc.x + cam.up * sc.y) * focus - (eye.position - cam.position);
+            const double scale = focus / length(D);
+            const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
+            gx = dot(g.d_d, dr) * px_scale * scale;
+            gy = -dot(g.d_d, du) * px_scale * scale;
+        };
         // The boundary term of edge `edge` at film point (x, y): the side function's film gradient,
         // the two sides and the splat of the jump through the pixel filter. `point_weight`: the
         // film length the sample stands for (fisheye and panorama: per unit of the edge point's
@@ -592,19 +822,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const Vec3d w = to / dist;
                 point_weight *= spherical_jacobian(tx, ty, (u - w * dot(w, u)) / dist);
                 if (!(point_weight > 0.0)) return;
-            } else if (has_eye(cam.type)) {
-                // d = normalize(D), D = focus w - a (a pinhole: focus 1, a = 0), w = forward + sx right
-                // + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
-                const Vec2f sc = cam.screen(x, y);
-                const float focus = thin_lens ? cam.focus : 1.f;
-                const Vec3f D = (cam.forward + cam.right * sc.x + cam.up * sc.y) * focus - (eye.position - cam.position);
-                const double scale = focus / length(D);
-                const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
-                gx = dot(g.d_d, dr) * px_scale * scale;
-                gy = -dot(g.d_d, du) * px_scale * scale;
             } else {
-                gx = dot(g.d_o, cam.right) * px_scale;
-                gy = -dot(g.d_o, cam.up) * px_scale;
+                film_gradient(x, y, eye, d, g, gx, gy);
             }
             const double glen = std::hypot(gx, gy);
             if (!(glen > 0.0) || !std::isfinite(glen)) return;
@@ -645,6 +864,75 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 }
             }
             if (++npending == batch) flush();
+        };
+        // The boundary term of the virtual edge of `edge` in mirror plane `plane` at film point
+        // (x, y) (Mirrors, above): where the camera ray meets a face of that plane
+        // and is reflected past the edge, the two sides are found from the mirror's point (as
+        // from an eye there), and their paths traced from there; the step is the reflected lobe's
+        // weight times the step between them. Traced at once, after the pending samples (the
+        // sink gets its additions in the samples' order).
+        auto splat_mirrored = [&](int64_t i, const Edge& edge, int plane, float x, float y, double point_weight) {
+            Vec3f o, d;
+            camera_ray(scene.camera_params, x, y, kLensCentre, kLensCentre, o, d);
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
+            if (!at.found || mirrors.plane_of[size_t(at.hit.mesh)].empty() ||
+                mirrors.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
+                return;
+            const SurfacePoint sp = scene.surface_point(at.hit);
+            const BsdfParams bp = scene.bsdf_params(sp);
+            if (bp.kind == MaterialKind::Standard || bp.rough) return;
+            // Seen this near edge-on, its shading normal is bent (bend_normal): no plane's mirror.
+            if (!(std::abs(dot(d, sp.ng)) >= kMinShadingCosine)) return;
+            Vec3f reflected, lobe;
+            if (!delta_scatter(delta_params(bp), sp.ng, -d, false, 1.f, reflected, lobe)) return;
+            // The virtual edge across the plane of the face met (the plane's faces may differ from
+            // it by rounding).
+            Pending pd;
+            const Mesh& mm = scene.meshes[size_t(at.hit.mesh)];
+            pd.mirror_mesh = at.hit.mesh;
+            for (int c = 0; c < 3; ++c) {
+                pd.mirror_tri[c] = mm.indices[3 * at.hit.prim + c];
+                pd.mirror_v[c] = mm.vertex(pd.mirror_tri[c]);
+            }
+            const Vec3f n = cross_normal(pd.mirror_v[1] - pd.mirror_v[0], pd.mirror_v[2] - pd.mirror_v[0]);
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            const Vec3f v0 = mirrored(p0, pd.mirror_v[0], n), v1 = mirrored(p1, pd.mirror_v[0], n);
+            const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
+            double gx, gy;
+            film_gradient(x, y, centre, d, g, gx, gy);
+            const double glen = std::hypot(gx, gy);
+            if (!(glen > 0.0) || !std::isfinite(glen)) return;
+            // The edge's point the reflected ray passes, and the ray from the mirror's point to it.
+            const float s = closest_on_segment(v0, v1, o, d);
+            const Vec3f target = p0 + (p1 - p0) * s;
+            Ray out = spawn_ray(sp, normalize(target - sp.p));
+            out.dir = normalize(target - out.origin);
+            // (Off the reflection by more than rounding: the plane's faces disagree.)
+            if (!(dot(out.dir, reflected) > 0.9999f)) return;
+            EdgeEye mirror_eye;
+            mirror_eye.origin = out.origin;
+            EdgeSide real_u, real_l;
+            if (!edge_sides(scene, mirror_eye, edge, out, s, dot(target - out.origin, out.dir), real_u, real_l)) return;
+            flush();
+            // A reflection turns the side function's sign: the virtual edge's upper side is the
+            // edge's lower one, seen from the mirror.
+            const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
+            Rng ru = stream, rl = stream;
+            const Vec3f Lu = trace_path(scene, reflected_opt, real_l.ray, ru, counters, nullptr, &real_l);
+            const Vec3f Ll = trace_path(scene, reflected_opt, real_u.ray, rl, counters, nullptr, &real_u);
+            pd.edge = &edge;
+            pd.x = x;
+            pd.y = y;
+            pd.lu = pd.lv = kLensCentre;
+            pd.g = g;
+            pd.weight = float(point_weight / glen);
+            std::fill(pd.value_u, pd.value_u + nv, 0.f);
+            std::fill(pd.value_l, pd.value_l + nv, 0.f);
+            finish(pd, lobe * (Lu - Ll));
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
@@ -712,6 +1000,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     y = float(fy);
                     point_weight *= j_lens / j_centre;
                 }
+            }
+            if (fe.plane >= 0) {
+                splat_mirrored(i, edge, fe.plane, x, y, point_weight);
+                continue;
             }
             splat(i, eye, edge, p0, p1, x, y, point_weight, nullptr);
         }

@@ -1,0 +1,152 @@
+"""Edges seen in planar mirrors: the boundary term of the outlines the camera sees reflected in
+flat smooth faces (edges/primary.cpp, Mirrors).
+
+Closed form: a perfect mirror (a conductor of reflectance 1) under a constant sky shows the
+scene mirrored across its plane. Seen only through the mirror, the scene above it renders the
+same image as its mirror image seen directly, with no mirror: and so must every derivative
+image, whatever the parameter (the objects' positions, the mirror's height, which moves the
+mirror image twice as far, and the camera). The direct one comes from the primary edges,
+checked against closed forms in test_primary_edges.py; the mirrored one from the new term
+alone, since the objects are black and the sky constant (no interior term).
+"""
+
+import math
+
+import pytest
+import torch
+
+import edgepath as ep
+from edgepath import shapes
+
+BLACK = ep.Material(diffuse=0.0)
+KW = dict(spp=64, max_bounces=1, seed=1)
+
+
+def _mirror_floor(height, material):
+    v = torch.tensor([[-50., 0., -50.], [50., 0., -50.], [50., 0., 50.], [-50., 0., 50.]])
+    v = v + torch.stack([torch.zeros(()), height, torch.zeros(())])
+    return ep.Mesh(v, torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32), material=material)
+
+
+def _scenes(material=None, camera_type="perspective", glowing=False):
+    """A mirror floor at y = height seen from above (the camera sees nothing else), two black
+    boxes above it under a white sky: one out of the camera's view but seen in the mirror, one
+    in view that hides part of the mirror and shows in it. Returns the scene, the same without the
+    mirror and with the boxes' mirror images added (the boxes' vertices mirrored across y = height),
+    and the parameters: the boxes' offsets, the height and the camera's offset. The orthographic
+    camera looks down at a slant: it sees the boxes and their images side by side. `glowing`:
+    the far box emits (on both sides: the mirror image's faces point inwards)."""
+    height = torch.zeros((), requires_grad=True)
+    offsets = [torch.zeros(3, requires_grad=True) for _ in range(2)]
+    camera_t = torch.zeros((), requires_grad=True)
+    boxes = [shapes.box((1.0, 1.5, 0.1), (.2, .2, .2)), shapes.box((-.2, .4, -.1), (.15, .1, .12))]
+    placed = [(v + o, i) for (v, i), o in zip(boxes, offsets)]
+
+    def camera():
+        move = camera_t * torch.tensor([1., 0., .3])
+        if camera_type == "orthographic":
+            return ep.Camera(position=torch.tensor([-1.5, 3., .7]) + move, look_at=torch.tensor([.5, 0., 0.]),
+                             up=torch.tensor([0., 0., -1.]), resolution=(24, 24), camera_type="orthographic",
+                             ortho_scale=1.6)
+        return ep.Camera(position=torch.tensor([0., 3., 0.]) + move, look_at=torch.tensor([.1, 0., 0.]),
+                         up=torch.tensor([0., 0., -1.]), resolution=(24, 24), fov=40.0)
+
+    def sky():
+        return ep.EnvironmentMap(torch.full((1, 1, 3), 1.))
+
+    mirror = _mirror_floor(height, material or ep.Material(kind="conductor", specular=1.0))
+    def mesh(v, i, k):
+        if glowing and k == 0:
+            return ep.Mesh(v, i, material=BLACK, emission=torch.tensor([2., 3., 1.]), two_sided_emission=True)
+        return ep.Mesh(v, i, material=BLACK)
+
+    seen = ep.Scene(camera(), [mirror] + [mesh(v, i, k) for k, (v, i) in enumerate(placed)], envmap=sky())
+    flip = torch.tensor([1., -1., 1.])
+    lift = torch.stack([torch.zeros(()), 2 * height, torch.zeros(())])
+    direct = ep.Scene(camera(), [mesh(v, i, k) for k, (v, i) in enumerate(placed)] +
+                      [mesh(v * flip + lift, i, k) for k, (v, i) in enumerate(placed)], envmap=sky())
+    return seen, direct, offsets, height, camera_t
+
+
+@pytest.mark.parametrize("camera_type,glowing", [("perspective", False), ("orthographic", False),
+                                                 ("perspective", True)])
+def test_the_mirror_shows_the_mirror_image(camera_type, glowing):
+    seen, direct, *_ = _scenes(camera_type=camera_type, glowing=glowing)
+    a = ep.render(seen, spp=64, max_bounces=1)
+    b = ep.render(direct, spp=64, max_bounces=1)
+    assert torch.allclose(a, b, atol=1e-6)
+    assert (a < .5).any() and (a > .5).any()  # both boxes' images and the sky
+
+
+@pytest.mark.parametrize("camera_type", ["perspective", "orthographic", "perspective, glowing"])
+@pytest.mark.parametrize("param", ["box x", "box y", "box z", "near box y", "mirror height", "camera"])
+def test_derivative_images_equal_the_mirror_images(param, camera_type):
+    """Per pixel, to 1% of the image's L1 norm (measured: 0.05%; before this term the mirrored
+    derivative images held only the near box's own outline: for the far box, nothing at all)."""
+    seen, direct, offsets, height, camera_t = _scenes(camera_type=camera_type.split(",")[0],
+                                                      glowing=camera_type.endswith("glowing"))
+    unit = torch.eye(3)
+    p, d = {"box x": (offsets[0], unit[0]), "box y": (offsets[0], unit[1]), "box z": (offsets[0], unit[2]),
+            "near box y": (offsets[1], unit[1]), "mirror height": (height, torch.tensor(1.)),
+            "camera": (camera_t, torch.tensor(1.))}[param]
+    a = ep.derivative_image(seen, p, d, **KW)
+    b = ep.derivative_image(direct, p, d, **KW)
+    norm = b.abs().sum()
+    assert norm > 1.0, norm
+    assert (a - b).abs().sum() < 0.01 * norm, ((a - b).abs().sum() / norm, a.sum(), b.sum())
+
+
+def test_gradients_equal_the_mirror_images():
+    """The gradient pass (every parameter at once, an adjoint image) against the same of the
+    mirror images: the offsets, the height and the camera."""
+    grads = []
+    for scene_index in range(2):
+        scenes = _scenes()
+        scene, (offsets, height, camera_t) = scenes[scene_index], scenes[2:]
+        g = torch.Generator().manual_seed(4)
+        adjoint = torch.rand(24, 24, 3, generator=g) - .5
+        (ep.render(scene, **KW) * adjoint).sum().backward()
+        grads.append(torch.cat([offsets[0].grad, offsets[1].grad, height.grad[None], camera_t.grad[None]]))
+    seen, direct = grads
+    assert direct.abs().max() > 1.0
+    assert torch.allclose(seen, direct, rtol=0.01, atol=0.01 * float(direct.abs().max())), (seen, direct)
+
+
+@pytest.mark.parametrize("kind", ["conductor", "dielectric", "plastic"])
+def test_the_step_is_the_reflected_lobes_weight(kind):
+    """Another reflectance scales the step in the mirror by the lobe's weight: Schlick's with 0.5
+    at normal incidence, the dielectric's Fresnel reflectance, a smooth plastic's coating (its
+    Fresnel reflectance too, over a black base). The camera sees the far box's image at about
+    13 degrees from the normal, where those are 0.5 (to 1e-6), 0.0401 and 0.0401."""
+    material = {"conductor": ep.Material(kind="conductor", specular=0.5),
+                "dielectric": ep.Material(kind="dielectric", ior=1.5),
+                "plastic": ep.Material(kind="plastic", diffuse=0.0, specular=1.0, roughness=0.0, ior=1.5)}[kind]
+    seen, _, offsets, _, _ = _scenes(material)
+    unit_mirror, _, offsets1, _, _ = _scenes()
+    a = ep.derivative_image(seen, offsets[0], torch.tensor([1., 0., 0.]), **KW).sum()
+    b = ep.derivative_image(unit_mirror, offsets1[0], torch.tensor([1., 0., 0.]), **KW).sum()
+    # The far box's image is seen from the camera through the mirror at cos ~ 0.976.
+    ci, eta = 0.976, 1.5
+    ct = math.sqrt(1 - (1 - ci * ci) / eta ** 2)
+    fresnel = ((ci - eta * ct) ** 2 / (ci + eta * ct) ** 2 + (eta * ci - ct) ** 2 / (eta * ci + ct) ** 2) / 2
+    expected = 0.5 if kind == "conductor" else fresnel
+    assert abs(b) > 1.0
+    assert abs(float(a / b) - expected) < 0.03 * expected, (float(a / b), expected)
+
+
+def test_a_one_sided_mirror_seen_from_behind_shows_nothing():
+    """Seen from below, a one-sided mirror is black, and its plane has no mirrored edges: only
+    the boxes' own outlines against it remain, the same as with a black floor."""
+    def scene(material):
+        camera = ep.Camera(position=torch.tensor([0., -3., 0.]), look_at=torch.tensor([.1, 0., 0.]),
+                           up=torch.tensor([0., 0., -1.]), resolution=(16, 16), fov=40.0)
+        v, i = shapes.box((0., -1., 0.), (.3, .3, .3))
+        box = ep.Mesh(v.clone().requires_grad_(), i, material=ep.Material(diffuse=0.5))
+        floor = _mirror_floor(torch.zeros(()), material)
+        return ep.Scene(camera, [floor, box], envmap=ep.EnvironmentMap(torch.full((1, 1, 3), 1.))), box
+    grads = []
+    for material in (ep.Material(kind="conductor", specular=1.0), BLACK):
+        s, box = scene(material)
+        grads.append(ep.derivative_image(s, box.vertices, torch.ones(8, 3), **KW))
+    assert grads[1].abs().sum() > 1.0
+    assert torch.equal(grads[0], grads[1])
