@@ -334,9 +334,16 @@ struct Mirrors {
                 const int64_t texels = int64_t(r.width) * r.height * r.channels;
                 if (!r.empty() && !(*std::min_element(r.data, r.data + texels) <= 0.f)) continue;
             }
-            float size = 0.f;
-            for (int64_t v = 0; v < m.num_vertices; ++v) size = std::max(size, max_abs_component(m.vertex(v)));
-            const float quantum = 1e-4f * size;
+            // Planes a ten-thousandth of the mesh's size apart are one (and the faces of one plane
+            // further apart than rounding, as far from the origin as they may lie, several: that
+            // costs samples only, since each face is seen only through its own plane's samples).
+            Vec3f lo(std::numeric_limits<float>::infinity()), hi(-std::numeric_limits<float>::infinity());
+            for (int64_t v = 0; v < m.num_vertices; ++v) {
+                const Vec3f p = m.vertex(v);
+                lo = Vec3f(std::min(lo.x, p.x), std::min(lo.y, p.y), std::min(lo.z, p.z));
+                hi = Vec3f(std::max(hi.x, p.x), std::max(hi.y, p.y), std::max(hi.z, p.z));
+            }
+            const float quantum = 1e-4f * length(hi - lo);
             if (!(quantum > 0.f)) continue;
             // A one-sided mirror or coating reflects only on the front of its faces.
             const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
