@@ -306,6 +306,7 @@ struct MirrorPlane {
     Vec3f q, n;              // a point of the plane and its unit normal, turned towards the camera
     float tol = 0.f;         // distances from the plane below this count as in it
     EdgeEye eye;             // the camera's position mirrored: the eye that sees the virtual edges
+    Camera lens;             // a thin lens mirrored (its position and axis), for lens_may_fold
     double x0, y0, x1, y1;   // the film window its faces cover, within the pass's
 };
 
@@ -324,6 +325,8 @@ struct Mirrors {
         std::vector<double> areas;
         const size_t num_edges = scene.edges().size();
         const bool parallel = cam.type == CameraType::Orthographic;
+        // A thin lens's points see the faces shifted on the film: the whole window.
+        const bool lens = cam.type == CameraType::ThinLens;
         for (size_t i = 0; i < scene.meshes.size(); ++i) {
             const Mesh& m = scene.meshes[i];
             const Material& mat = scene.materials[size_t(m.material)];
@@ -372,6 +375,9 @@ struct Mirrors {
                     mp.eye.origin = mirrored(cam.position, a, n);
                     mp.eye.parallel = parallel;
                     mp.eye.dir = cam.forward - n * (2.f * dot(cam.forward, n));
+                    mp.lens = cam;
+                    mp.lens.position = mp.eye.origin;
+                    mp.lens.forward = mp.eye.dir;
                     mp.x0 = mp.y0 = std::numeric_limits<double>::infinity();
                     mp.x1 = mp.y1 = -std::numeric_limits<double>::infinity();
                     planes.push_back(mp);
@@ -381,8 +387,8 @@ struct Mirrors {
                 MirrorPlane& mp = planes[size_t(it->second)];
                 for (int c = 0; c < 3; ++c) {
                     const Vec3d qc = camera_axes(cam, m.vertex(t[c]) - cam.position);
-                    if (!parallel && !(qc.z > 1e-6 * length(qc))) {
-                        // Reaches behind the camera: the whole window.
+                    if (lens || (!parallel && !(qc.z > 1e-6 * length(qc)))) {
+                        // Reaches behind the camera, or a thin lens: the whole window.
                         mp.x0 = wx0, mp.y0 = wy0, mp.x1 = wx1, mp.y1 = wy1;
                         continue;
                     }
@@ -512,10 +518,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return (dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) ||
                (by_lights && e.kind == EdgeKind::Smooth && !light_boxes.between(m, e));
     };
-    // Edges seen in planar mirrors (Mirrors, above): by a pinhole or orthographic camera, where
-    // the radiance is differentiated and paths reflect at least once.
-    const bool mirrors_seen = radiance && !uniform && opt.max_bounces >= 1 &&
-                              (cam.type == CameraType::Perspective || cam.type == CameraType::Orthographic);
+    // Edges seen in planar mirrors (Mirrors, above): by a pinhole, thin lens or orthographic
+    // camera, where the radiance is differentiated and paths reflect at least once.
+    const bool mirrors_seen = radiance && !uniform && opt.max_bounces >= 1 && !spherical;
     const Mirrors mirrors = mirrors_seen ? Mirrors(scene, cam, wx0, wy0, wx1, wy1) : Mirrors();
     // The virtual edge of edge e of mesh m in mirror plane mp: its part on the camera's side of
     // the plane, mirrored, on the film within the plane's window.
@@ -528,7 +533,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (s1 < 0.f) p1 = p1 + (p0 - p1) * (s1 / (s1 - s0));
         if (!project_edge(cam, mirrored(p0, mp.q, mp.n), mirrored(p1, mp.q, mp.n), mp.x0, mp.y0, mp.x1, mp.y1, fe))
             return false;
-        if (!is_fold(mp.eye, m, e) && e.kind == EdgeKind::Smooth) {
+        const bool fold = cam.type == CameraType::ThinLens ? lens_may_fold(mp.lens, m, e) : is_fold(mp.eye, m, e);
+        if (!fold && e.kind == EdgeKind::Smooth) {
             fe.weight = smooth_weights[size_t(index)];
             if (!(fe.weight > 0.0)) return false;
         }
@@ -878,9 +884,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // from an eye there), and their paths traced from there; the step is the reflected lobe's
         // weight times the step between them. Traced at once, after the pending samples (the
         // sink gets its additions in the samples' order).
-        auto splat_mirrored = [&](int64_t i, const Edge& edge, int plane, float x, float y, double point_weight) {
+        auto splat_mirrored = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
+                                  double point_weight) {
             Vec3f o, d;
-            camera_ray(scene.camera_params, x, y, kLensCentre, kLensCentre, o, d);
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             Ray ray;
             ray.origin = o;
             ray.dir = d;
@@ -910,7 +917,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Vec3f v0 = mirrored(p0, pd.mirror_v[0], n), v1 = mirrored(p1, pd.mirror_v[0], n);
             const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
             double gx, gy;
-            film_gradient(x, y, centre, d, g, gx, gy);
+            film_gradient(x, y, eye, d, g, gx, gy);
             const double glen = std::hypot(gx, gy);
             if (!(glen > 0.0) || !std::isfinite(glen)) return;
             // The edge's point the reflected ray passes, and the ray from the mirror's point to it.
@@ -934,7 +941,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             pd.edge = &edge;
             pd.x = x;
             pd.y = y;
-            pd.lu = pd.lv = kLensCentre;
+            pd.lu = eye.lu;
+            pd.lv = eye.lv;
             pd.g = g;
             pd.weight = float(point_weight / glen);
             std::fill(pd.value_u, pd.value_u + nv, 0.f);
@@ -994,10 +1002,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     // The edge point the camera's position sees there, seen from the lens point:
                     // drawn with density 1 / total per unit film length from the position, it
                     // has density (jacobian_centre / jacobian_lens) / total per unit film length
-                    // from the lens point.
+                    // from the lens point. (Seen in a mirror: the virtual edge's.)
+                    Vec3f e0 = p0, e1 = p1;
+                    if (fe.plane >= 0) {
+                        const MirrorPlane& mp = mirrors.planes[size_t(fe.plane)];
+                        e0 = mirrored(p0, mp.q, mp.n);
+                        e1 = mirrored(p1, mp.q, mp.n);
+                    }
                     const Vec2f sc = cam.screen(x, y);
-                    const Vec3f dir = normalize(p1 - p0);
-                    const Vec3f p = p0 + (p1 - p0) * closest_on_segment(p0, p1, cam.position,
+                    const Vec3f dir = normalize(e1 - e0);
+                    const Vec3f p = e0 + (e1 - e0) * closest_on_segment(e0, e1, cam.position,
                                                                         normalize(cam.forward + cam.right * sc.x + cam.up * sc.y));
                     double fx, fy, j_lens, cx, cy, j_centre;
                     if (!film_point(cam, eye, p, dir, fx, fy, j_lens) || !film_point(cam, centre, p, dir, cx, cy, j_centre))
@@ -1009,7 +1023,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 }
             }
             if (fe.plane >= 0) {
-                splat_mirrored(i, edge, fe.plane, x, y, point_weight);
+                splat_mirrored(i, eye, edge, fe.plane, x, y, point_weight);
                 continue;
             }
             splat(i, eye, edge, p0, p1, x, y, point_weight, nullptr);

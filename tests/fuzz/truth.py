@@ -12,8 +12,8 @@ lights' hard shadows have no boundary term (the scene keeps none here), and the 
 through glass or in a curved mirror from the camera (their outlines there) are missing, and
 so are those seen in a mirror from a later vertex; a case that moves geometry seen in a
 smooth material may be off for that reason (reported apart, as "limited"), unless the only
-smooth surface is the floor made a flat mirror, at one bounce, seen by a pinhole or
-orthographic camera (its outlines have their term). Heavy-tailed
+smooth surface is the floor made a flat mirror, at one bounce, seen by a pinhole, thin lens
+or orthographic camera (its outlines have their term). Heavy-tailed
 derivatives (glass at grazing angles) make a case look off now and then: more seeds settle it.
 
     python tests/fuzz/truth.py --cases 200 --seed 1 [--log FILE]
@@ -51,10 +51,10 @@ STEPS = {(target, field): eps for target, field, eps in PARAMS}
 SMOOTH_FORMS = {("floor_kind", "conductor"), ("floor_kind", "dielectric"), ("box_kind", "conductor")}
 # The forms drawn: the placed kind's, and the floor without its normal map (flat: a planar
 # mirror, where it is one). A flat mirror floor's outlines have their term where the camera is
-# a pinhole or orthographic and paths have one bounce (the camera's reflection only).
+# not a fisheye or panorama and paths have one bounce (the camera's reflection only).
 FORMS = dict(corpus.PLACED_VARIANTS, floor_shading=[("floor_normal_map", None)])
 PLANAR_MIRROR = {("floor_kind", "conductor"), ("floor_normal_map", None), ("max_bounces", 1)}
-NOT_PLANAR_CAMERAS = {("camera_type", "thinlens"), ("camera_type", "fisheye"), ("camera_type", "panorama")}
+NOT_PLANAR_CAMERAS = {("camera_type", "fisheye"), ("camera_type", "panorama")}
 NOT_GEOMETRY = {"floor_material.diffuse", "floor_material.specular", "floor_material.roughness",
                 "box_material.diffuse", "box_material.roughness", "box_material.ior", "lamp.emission",
                 "envmap.values", "envmap.scale", "box.colors"}

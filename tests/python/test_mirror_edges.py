@@ -34,7 +34,8 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
     in view that hides part of the mirror and shows in it. Returns the scene, the same without the
     mirror and with the boxes' mirror images added (the boxes' vertices mirrored across y = height),
     and the parameters: the boxes' offsets, the height and the camera's offset. The orthographic
-    camera looks down at a slant: it sees the boxes and their images side by side. `glowing`:
+    camera looks down at a slant: it sees the boxes and their images side by side; the thin lens
+    keeps the pinhole's place, out of focus. `glowing`:
     the far box emits (on both sides: the mirror image's faces point inwards). `far_offset`: the
     far box's offset's value."""
     height = torch.zeros((), requires_grad=True)
@@ -49,8 +50,10 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
             return ep.Camera(position=torch.tensor([-1.5, 3., .7]) + move, look_at=torch.tensor([.5, 0., 0.]),
                              up=torch.tensor([0., 0., -1.]), resolution=(24, 24), camera_type="orthographic",
                              ortho_scale=1.6)
+        lens = dict(camera_type="thinlens", aperture_radius=0.08, focus_distance=4.0) \
+            if camera_type == "thinlens" else {}
         return ep.Camera(position=torch.tensor([0., 3., 0.]) + move, look_at=torch.tensor([.1, 0., 0.]),
-                         up=torch.tensor([0., 0., -1.]), resolution=(24, 24), fov=40.0)
+                         up=torch.tensor([0., 0., -1.]), resolution=(24, 24), fov=40.0, **lens)
 
     def sky():
         return ep.EnvironmentMap(torch.full((1, 1, 3), 1.))
@@ -70,7 +73,7 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
 
 
 @pytest.mark.parametrize("camera_type,glowing", [("perspective", False), ("orthographic", False),
-                                                 ("perspective", True)])
+                                                 ("thinlens", False), ("perspective", True)])
 def test_the_mirror_shows_the_mirror_image(camera_type, glowing):
     seen, direct, *_ = _scenes(camera_type=camera_type, glowing=glowing)
     a = ep.render(seen, spp=64, max_bounces=1)
@@ -82,7 +85,7 @@ def test_the_mirror_shows_the_mirror_image(camera_type, glowing):
     assert (a < .5).any() and (a > .5).any()  # both boxes' images and the sky
 
 
-@pytest.mark.parametrize("camera_type", ["perspective", "orthographic", "perspective, glowing"])
+@pytest.mark.parametrize("camera_type", ["perspective", "orthographic", "thinlens", "perspective, glowing"])
 @pytest.mark.parametrize("param", ["box x", "box y", "box z", "near box y", "mirror height", "camera"])
 def test_derivative_images_equal_the_mirror_images(param, camera_type):
     """Per pixel, to 1% of the image's L1 norm (measured: 0.05%; before this term the mirrored
