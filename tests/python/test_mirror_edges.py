@@ -5,7 +5,7 @@ Closed form: a perfect mirror (a conductor of reflectance 1) under a constant sk
 scene mirrored across its plane. Seen only through the mirror, the scene above it renders the
 same image as its mirror image seen directly, with no mirror: and so must every derivative
 image, whatever the parameter (the objects' positions, the mirror's height, which moves the
-mirror image twice as far, and the camera). The direct one comes from the primary edges,
+mirror image twice as far, its tilt, and the camera). The direct one comes from the primary edges,
 checked against closed forms in test_primary_edges.py; the mirrored one from the new term
 alone, since the objects are black and the sky constant (no interior term).
 """
@@ -22,23 +22,32 @@ BLACK = ep.Material(diffuse=0.0)
 KW = dict(spp=64, max_bounces=1, seed=1)
 
 
-def _mirror_floor(height, material):
+def _mirror_frame(placement):
+    """The mirror's rotation about the z axis by placement[1] (radians), and its point at the
+    height placement[0] above the origin."""
+    c, s, zero, one = torch.cos(placement[1]), torch.sin(placement[1]), torch.zeros(()), torch.ones(())
+    turn = torch.stack([torch.stack([c, -s, zero]), torch.stack([s, c, zero]), torch.stack([zero, zero, one])])
+    return turn, torch.stack([zero, placement[0], zero])
+
+
+def _mirror_floor(placement, material):
+    """A large square mirror (facing +y at no tilt) placed by _mirror_frame(placement)."""
     v = torch.tensor([[-50., 0., -50.], [50., 0., -50.], [50., 0., 50.], [-50., 0., 50.]])
-    v = v + torch.stack([torch.zeros(()), height, torch.zeros(())])
-    return ep.Mesh(v, torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32), material=material)
+    turn, point = _mirror_frame(placement)
+    return ep.Mesh(v @ turn.T + point, torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32), material=material)
 
 
 def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=(0., 0., 0.)):
-    """A mirror floor at y = height seen from above (the camera sees nothing else), two black
-    boxes above it under a white sky: one out of the camera's view but seen in the mirror, one
-    in view that hides part of the mirror and shows in it. Returns the scene, the same without the
-    mirror and with the boxes' mirror images added (the boxes' vertices mirrored across y = height),
-    and the parameters: the boxes' offsets, the height and the camera's offset. The orthographic
-    camera looks down at a slant: it sees the boxes and their images side by side; the thin lens
-    keeps the pinhole's place, out of focus. `glowing`:
-    the far box emits (on both sides: the mirror image's faces point inwards). `far_offset`: the
-    far box's offset's value."""
-    height = torch.zeros((), requires_grad=True)
+    """A mirror floor (placed by a height and a tilt, both 0) seen from above (the camera sees
+    nothing else), two black boxes above it under a white sky: one out of the camera's view but
+    seen in the mirror, one in view that hides part of the mirror and shows in it. Returns the
+    scene, the same without the mirror and with the boxes' mirror images added (the boxes'
+    vertices mirrored across its plane), and the parameters: the boxes' offsets, the mirror's
+    placement and the camera's offset. The orthographic camera looks down at a slant: it sees
+    the boxes and their images side by side; the thin lens keeps the pinhole's place, out of
+    focus. `glowing`: the far box emits (on both sides: the mirror image's faces point
+    inwards). `far_offset`: the far box's offset's value."""
+    placement = torch.zeros(2, requires_grad=True)
     offsets = [torch.tensor(far_offset, requires_grad=True), torch.zeros(3, requires_grad=True)]
     camera_t = torch.zeros((), requires_grad=True)
     boxes = [shapes.box((1.0, 1.5, 0.1), (.2, .2, .2)), shapes.box((-.2, .4, -.1), (.15, .1, .12))]
@@ -58,18 +67,22 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
     def sky():
         return ep.EnvironmentMap(torch.full((1, 1, 3), 1.))
 
-    mirror = _mirror_floor(height, material or ep.Material(kind="conductor", specular=1.0))
+    mirror = _mirror_floor(placement, material or ep.Material(kind="conductor", specular=1.0))
     def mesh(v, i, k):
         if glowing and k == 0:
             return ep.Mesh(v, i, material=BLACK, emission=torch.tensor([2., 3., 1.]), two_sided_emission=True)
         return ep.Mesh(v, i, material=BLACK)
 
     seen = ep.Scene(camera(), [mirror] + [mesh(v, i, k) for k, (v, i) in enumerate(placed)], envmap=sky())
-    flip = torch.tensor([1., -1., 1.])
-    lift = torch.stack([torch.zeros(()), 2 * height, torch.zeros(())])
+    turn, point = _mirror_frame(placement)
+    normal = turn[:, 1]
+
+    def image(v):
+        return v - 2 * ((v - point) @ normal)[:, None] * normal
+
     direct = ep.Scene(camera(), [mesh(v, i, k) for k, (v, i) in enumerate(placed)] +
-                      [mesh(v * flip + lift, i, k) for k, (v, i) in enumerate(placed)], envmap=sky())
-    return seen, direct, offsets, height, camera_t
+                      [mesh(image(v), i, k) for k, (v, i) in enumerate(placed)], envmap=sky())
+    return seen, direct, offsets, placement, camera_t
 
 
 @pytest.mark.parametrize("camera_type,glowing", [("perspective", False), ("orthographic", False),
@@ -86,15 +99,17 @@ def test_the_mirror_shows_the_mirror_image(camera_type, glowing):
 
 
 @pytest.mark.parametrize("camera_type", ["perspective", "orthographic", "thinlens", "perspective, glowing"])
-@pytest.mark.parametrize("param", ["box x", "box y", "box z", "near box y", "mirror height", "camera"])
+@pytest.mark.parametrize("param", ["box x", "box y", "box z", "near box y", "mirror height", "mirror tilt",
+                                   "camera"])
 def test_derivative_images_equal_the_mirror_images(param, camera_type):
     """Per pixel, to 1% of the image's L1 norm (measured: 0.05%; before this term the mirrored
     derivative images held only the near box's own outline: for the far box, nothing at all)."""
-    seen, direct, offsets, height, camera_t = _scenes(camera_type=camera_type.split(",")[0],
+    seen, direct, offsets, placement, camera_t = _scenes(camera_type=camera_type.split(",")[0],
                                                       glowing=camera_type.endswith("glowing"))
     unit = torch.eye(3)
     p, d = {"box x": (offsets[0], unit[0]), "box y": (offsets[0], unit[1]), "box z": (offsets[0], unit[2]),
-            "near box y": (offsets[1], unit[1]), "mirror height": (height, torch.tensor(1.)),
+            "near box y": (offsets[1], unit[1]), "mirror height": (placement, torch.tensor([1., 0.])),
+            "mirror tilt": (placement, torch.tensor([0., 1.])),
             "camera": (camera_t, torch.tensor(1.))}[param]
     a = ep.derivative_image(seen, p, d, **KW)
     b = ep.derivative_image(direct, p, d, **KW)
@@ -105,15 +120,15 @@ def test_derivative_images_equal_the_mirror_images(param, camera_type):
 
 def test_gradients_equal_the_mirror_images():
     """The gradient pass (every parameter at once, an adjoint image) against the same of the
-    mirror images: the offsets, the height and the camera."""
+    mirror images: the offsets, the mirror's height and tilt, and the camera."""
     grads = []
     for scene_index in range(2):
         scenes = _scenes()
-        scene, (offsets, height, camera_t) = scenes[scene_index], scenes[2:]
+        scene, (offsets, placement, camera_t) = scenes[scene_index], scenes[2:]
         g = torch.Generator().manual_seed(4)
         adjoint = torch.rand(24, 24, 3, generator=g) - .5
         (ep.render(scene, **KW) * adjoint).sum().backward()
-        grads.append(torch.cat([offsets[0].grad, offsets[1].grad, height.grad[None], camera_t.grad[None]]))
+        grads.append(torch.cat([offsets[0].grad, offsets[1].grad, placement.grad, camera_t.grad[None]]))
     seen, direct = grads
     assert direct.abs().max() > 1.0
     assert torch.allclose(seen, direct, rtol=0.01, atol=0.01 * float(direct.abs().max())), (seen, direct)
@@ -149,7 +164,7 @@ def test_a_one_sided_mirror_seen_from_behind_shows_nothing():
                            up=torch.tensor([0., 0., -1.]), resolution=(16, 16), fov=40.0)
         v, i = shapes.box((0., -1., 0.), (.3, .3, .3))
         box = ep.Mesh(v.clone().requires_grad_(), i, material=ep.Material(diffuse=0.5))
-        floor = _mirror_floor(torch.zeros(()), material)
+        floor = _mirror_floor(torch.zeros(2), material)
         return ep.Scene(camera, [floor, box], envmap=ep.EnvironmentMap(torch.full((1, 1, 3), 1.))), box
     grads = []
     for material in (ep.Material(kind="conductor", specular=1.0), BLACK):
