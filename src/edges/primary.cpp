@@ -28,7 +28,9 @@ struct FilmEdge {
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
-    int plane = -1;       // seen in this mirror plane (Mirrors::planes), or directly (-1)
+    int plane = -1;       // seen in this plane of smooth faces (Mirrors::planes), or directly (-1)
+    bool refracted = false;  // through the plane (else reflected in it)
+    double u0 = 0.0, u1 = 1.0;  // refracted: the part of the edge sampled (its ends' parameters)
 };
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
@@ -308,12 +310,16 @@ struct MirrorPlane {
     EdgeEye eye;             // the camera's position mirrored: the eye that sees the virtual edges
     Camera lens;             // a thin lens mirrored (its position and axis), for lens_may_fold
     double x0, y0, x1, y1;   // the film window its faces cover, within the pass's
+    // Smooth glass of one index (a constant texture) refracts too: the camera sees the far side
+    // through its faces, the edges there bent (Refraction, below).
+    bool refracts = false;
+    double eta = 1.0;        // the far side's index over the camera's side's
+    int material = -1;
 };
 
-// At most this many planes, and at most kMirrorSetups edge set-ups over all of them (each plane
-// sets up every edge of the scene): those whose faces cover the most film.
-constexpr size_t kMaxMirrorPlanes = 64;
-constexpr double kMirrorSetups = double(1 << 24);
+// At most kMirrorSetups edge set-ups over all planes (each plane sets up every edge of the
+// scene, twice for glass): the planes whose faces cover the most film.
+constexpr double kMirrorSetups = double(1 << 23);
 
 struct Mirrors {
     std::vector<MirrorPlane> planes;
@@ -350,7 +356,11 @@ struct Mirrors {
             if (!(quantum > 0.f)) continue;
             // A one-sided mirror or coating reflects only on the front of its faces.
             const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
-            std::map<std::array<int64_t, 4>, int32_t> by_plane;
+            std::map<std::array<int64_t, 5>, int32_t> by_plane;
+            // Glass of one index refracts: the far side's index over the near side's is the index
+            // seen from outside, its inverse from inside.
+            const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
+            const double ior = refracts ? double(mat.ior.data[0]) : 1.0;
             std::vector<int32_t>& of = plane_of[i];
             of.assign(size_t(m.num_triangles), -1);
             for (int64_t f = 0; f < m.num_triangles; ++f) {
@@ -361,10 +371,12 @@ struct Mirrors {
                 // (How far in front of the face the camera is, or for parallel rays how steeply.)
                 float side = parallel ? -dot(n, cam.forward) : dot(n, cam.position - a);
                 if (front_only && !(side > 0.f)) continue;
-                if (side < 0.f) n = -n, side = -side;
+                const bool behind = side < 0.f;  // the camera inside (behind the faces)
+                if (behind) n = -n, side = -side;
                 if (!(side > 0.f)) continue;  // the camera in the plane: it sees the face edge-on
-                const std::array<int64_t, 4> key = {std::llround(n.x * 1e4f), std::llround(n.y * 1e4f),
-                                                    std::llround(n.z * 1e4f), std::llround(dot(n, a) / quantum)};
+                const std::array<int64_t, 5> key = {std::llround(n.x * 1e4f), std::llround(n.y * 1e4f),
+                                                    std::llround(n.z * 1e4f), std::llround(dot(n, a) / quantum),
+                                                    behind};
                 auto [it, added] = by_plane.emplace(key, int32_t(planes.size()));
                 if (added) {
                     MirrorPlane mp;
@@ -378,6 +390,9 @@ struct Mirrors {
                     mp.lens = cam;
                     mp.lens.position = mp.eye.origin;
                     mp.lens.forward = mp.eye.dir;
+                    mp.refracts = refracts;
+                    mp.eta = behind ? 1.0 / ior : ior;
+                    mp.material = m.material;
                     mp.x0 = mp.y0 = std::numeric_limits<double>::infinity();
                     mp.x1 = mp.y1 = -std::numeric_limits<double>::infinity();
                     planes.push_back(mp);
@@ -411,7 +426,7 @@ struct Mirrors {
             }
         }
         std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return areas[a] > areas[b]; });
-        size_t keep = std::min(order.size(), kMaxMirrorPlanes);
+        size_t keep = order.size();
         if (num_edges > 0) keep = std::min(keep, std::max<size_t>(1, size_t(kMirrorSetups / double(num_edges))));
         std::vector<int32_t> index(planes.size(), -1);
         std::vector<MirrorPlane> kept;
@@ -436,6 +451,49 @@ inline void d_mirrored(const Vec3f& p, const Vec3f& q, const Vec3f& n, const Vec
     dn += a * (-2.f * s) - (p - q) * (2.f * na);
 }
 
+// Refraction. Seen through a flat face of smooth glass, a point e on the far side of its plane
+// (q, n: unit, towards the eye) is where the ray from the eye bends towards it: at the point x
+// of the plane where Snell's law holds, sin(i) = eta sin(t) (eta: the far side's index over the
+// near side's), in the plane of incidence (the eye, e and the normal). With h1 the eye's height
+// over the plane, h2 e's depth, d the distance between their feet and a x's distance from the
+// eye's, f(a) = a / |(a, h1)| - eta (d - a) / |(d - a, h2)| rises from f(0) <= 0 to f(d) >= 0:
+// one root, found by Newton's steps kept inside a bisection's bracket. An edge seen there is a
+// curve on the film, no longer a segment: sampled along the edge, each point weighted by the
+// film length per unit of the edge's parameter (a difference quotient of this map).
+bool refraction_point(const Vec3d& eye, const Vec3d& e, const Vec3d& q, const Vec3d& n, double eta, Vec3d& x) {
+    const double h1 = dot(eye - q, n), h2 = -dot(e - q, n);
+    if (!(h1 > 0.0 && h2 >= 0.0)) return false;
+    const Vec3d foot1 = eye - n * h1, u = (e + n * h2) - foot1;
+    const double d = length(u);
+    if (!(d > 0.0)) {
+        x = foot1;
+        return true;
+    }
+    double lo = 0.0, hi = d, a = d * h1 / (h1 + h2);  // the straight line's crossing
+    for (int k = 0; k < 64; ++k) {
+        const double b = d - a, r1 = std::sqrt(a * a + h1 * h1), r2 = std::sqrt(b * b + h2 * h2);
+        const double f = a / r1 - (r2 > 0.0 ? eta * b / r2 : eta);
+        (f > 0.0 ? hi : lo) = a;
+        const double df = h1 * h1 / (r1 * r1 * r1) + (r2 > 0.0 ? eta * h2 * h2 / (r2 * r2 * r2) : 0.0);
+        double next = a - f / df;
+        if (!(next > lo && next < hi)) next = 0.5 * (lo + hi);
+        const bool done = std::abs(next - a) <= 1e-14 * d;
+        a = next;
+        if (done) break;
+    }
+    x = foot1 + u * (a / d);
+    return std::isfinite(x.x) && std::isfinite(x.y) && std::isfinite(x.z);
+}
+
+// The direction parallel rays w (unit, towards the plane) take past the plane (normal n towards
+// them; eta as above). False under total internal reflection.
+bool refracted_direction(const Vec3d& w, const Vec3d& n, double eta, Vec3d& r) {
+    const double c1 = -dot(w, n), q = (1.0 - c1 * c1) / (eta * eta);
+    if (!(c1 > 0.0) || q >= 1.0) return false;
+    r = w / eta + n * (c1 / eta - std::sqrt(1.0 - q));
+    return true;
+}
+
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
     return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
 }
@@ -447,6 +505,9 @@ bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const Sc
     if (slots.camera.wanted()) return true;
     for (size_t i = 0; i < scene.meshes.size(); ++i)
         if (vertices_wanted(slots, int(i))) return true;
+    // Glass's index bends the edges seen through it (Refraction).
+    for (const SceneGradients::MaterialSlots& m : slots.materials)
+        if (m.ior.wanted()) return true;
     return false;
 }
 
@@ -522,6 +583,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // camera, where the radiance is differentiated and paths reflect at least once.
     const bool mirrors_seen = radiance && !uniform && opt.max_bounces >= 1 && !spherical;
     const Mirrors mirrors = mirrors_seen ? Mirrors(scene, cam, wx0, wy0, wx1, wy1) : Mirrors();
+    Eye centre;
+    centre.position = cam.position;
     // The virtual edge of edge e of mesh m in mirror plane mp: its part on the camera's side of
     // the plane, mirrored, on the film within the plane's window.
     auto mirrored_film_edge = [&](const MirrorPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
@@ -542,10 +605,71 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         fe.len = std::sqrt(dx * dx + dy * dy) * fe.weight;
         return fe.len > 0.0;
     };
+    auto ior_wanted = [&](int material) {
+        return size_t(material) < slots.materials.size() && slots.materials[size_t(material)].ior.wanted();
+    };
+    // The film point (fx, fy) that `eye` sees point e (on the far side of refracting plane mp)
+    // at: through the plane's refraction point (a pinhole, a lens point), or for parallel rays
+    // along their refracted direction.
+    auto refracted_film = [&](const MirrorPlane& mp, const Eye& eye, const Vec3d& e, double& fx, double& fy) {
+        const Vec3d q(mp.q), n(mp.n);
+        Vec3d x;
+        if (!has_eye(cam.type)) {
+            Vec3d r;
+            if (!refracted_direction(Vec3d(cam.forward), n, mp.eta, r)) return false;
+            x = e - r * (dot(e - q, n) / dot(r, n));
+            const Vec3d qc = camera_axes(cam, Vec3f(x) - cam.position);
+            fx = film_x(cam, qc.x);
+            fy = film_y(cam, qc.y);
+            return std::isfinite(fx) && std::isfinite(fy);
+        }
+        if (!refraction_point(Vec3d(eye.position), e, q, n, mp.eta, x)) return false;
+        double jacobian;
+        return film_point(cam, eye, Vec3f(x), mp.n, fx, fy, jacobian);
+    };
+    // The refracted edge of edge e of mesh m seen through plane mp: its part on the far side of
+    // the plane (the parameters u0, u1 of its ends), sampled by the film length of the chord
+    // between their film points (any length would do: the samples are weighted by the curve's).
+    auto refracted_film_edge = [&](const MirrorPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+        if (!mp.refracts) return false;
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, mp.mesh) &&
+            !ior_wanted(mp.material))
+            return false;
+        const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1)), q(mp.q), n(mp.n);
+        const double s0 = dot(p0 - q, n), s1 = dot(p1 - q, n);
+        if (!(s0 < -mp.tol || s1 < -mp.tol)) return false;  // in front of the plane, or in it
+        fe.u0 = s0 > 0.0 ? s0 / (s0 - s1) : 0.0;
+        fe.u1 = s1 > 0.0 ? s0 / (s0 - s1) : 1.0;
+        if (!refracted_film(mp, centre, p0 + (p1 - p0) * fe.u0, fe.ax, fe.ay) ||
+            !refracted_film(mp, centre, p0 + (p1 - p0) * fe.u1, fe.bx, fe.by))
+            return false;
+        // Whether it folds, as seen from the refraction point of its middle.
+        EdgeEye middle;
+        Vec3d x;
+        if (has_eye(cam.type)) {
+            if (!refraction_point(Vec3d(cam.position), p0 + (p1 - p0) * (0.5 * (fe.u0 + fe.u1)), q, n, mp.eta, x))
+                return false;
+            middle.origin = Vec3f(x);
+        } else {
+            Vec3d r;
+            if (!refracted_direction(Vec3d(cam.forward), n, mp.eta, r)) return false;
+            middle.parallel = true;
+            middle.dir = Vec3f(r);
+        }
+        if (!is_fold(middle, m, e) && e.kind == EdgeKind::Smooth) {
+            fe.weight = smooth_weights[size_t(index)];
+            if (!(fe.weight > 0.0)) return false;
+        }
+        const double dx = fe.bx - fe.ax, dy = fe.by - fe.ay;
+        fe.len = std::sqrt(dx * dx + dy * dy) * fe.weight;
+        fe.refracted = true;
+        return fe.len > 0.0;
+    };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
-    // Each edge directly, then in each mirror plane.
-    const int64_t num_setups = num_edges * int64_t(1 + mirrors.planes.size());
+    // Each edge directly, then reflected in each plane of smooth faces, then refracted by each.
+    const int64_t num_planes = int64_t(mirrors.planes.size());
+    const int64_t num_setups = num_edges * (1 + 2 * num_planes);
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_setups + kSetupChunk - 1) / kSetupChunk));
     for_each_chunk(opt, num_setups, kSetupChunk, [&](int64_t begin, int64_t end) {
         // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
@@ -553,13 +677,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         std::vector<FilmEdge> film_edges;
         film_edges.reserve(size_t(end - begin));
         for (int64_t setup = begin; setup < end; ++setup) {
-            const int64_t index = setup % num_edges, plane = setup / num_edges - 1;
+            const int64_t index = setup % num_edges, slot = setup / num_edges - 1;
             const Edge& e = all_edges[size_t(index)];
             if (e.flat) continue;
-            if (plane >= 0) {
+            if (slot >= 0) {
                 FilmEdge fe;
+                const int64_t plane = slot % num_planes;
                 const MirrorPlane& mp = mirrors.planes[size_t(plane)];
-                if (!mirrored_film_edge(mp, scene.meshes[size_t(e.mesh)], e, index, fe)) continue;
+                const Mesh& m = scene.meshes[size_t(e.mesh)];
+                if (!(slot < num_planes ? mirrored_film_edge(mp, m, e, index, fe) : refracted_film_edge(mp, m, e, index, fe)))
+                    continue;
                 fe.edge = size_t(index);
                 fe.plane = int(plane);
                 film_edges.push_back(fe);
@@ -644,8 +771,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
 
     const float radius = scene.filter.radius();
     const bool thin_lens = cam.type == CameraType::ThinLens;
-    Eye centre;
-    centre.position = cam.position;
     const uint64_t seed = mix64(opt.seed ^ 0x70726d6564676573ull);
     // Each chunk's additions (the gradients' or the derivative image's) in the chunks' order: the
     // same sums, bit for bit, whatever the thread count.
@@ -667,6 +792,13 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         int mirror_mesh = -1;
         int32_t mirror_tri[3] = {-1, -1, -1};
         Vec3f mirror_v[3];
+        // Seen through glass: the glass's face (its mesh, vertex indices, material) and the
+        // adjoints of g, the refracted ray's side function, for its vertices and its index (g's
+        // camera part is the camera ray's, its edge part the edge's).
+        int refract_mesh = -1, refract_material = -1;
+        int32_t refract_tri[3] = {-1, -1, -1};
+        Vec3f refract_dv[3];
+        float refract_deta = 0.f;
     };
     // The side paths of edges seen in mirrors: from the mirror's point, a bounce fewer, emitters seen.
     RenderOptions reflected_opt = opt;
@@ -713,6 +845,18 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 sink.add3(ms, pd.mirror_tri[2], dv.x, dv.y, dv.z);
             }
         };
+        // Adds s * dg/d(the glass's vertices and index) of a sample seen through glass.
+        auto add_refracted_gradient = [&](const Pending& pd, float s) {
+            if (vertices_wanted(slots, pd.refract_mesh)) {
+                const GradSlot& gs = slots.meshes[size_t(pd.refract_mesh)].vertices;
+                for (int c = 0; c < 3; ++c) {
+                    const Vec3f a = pd.refract_dv[c] * s;
+                    sink.add3(gs, pd.refract_tri[c], a.x, a.y, a.z);
+                }
+            }
+            if (ior_wanted(pd.refract_material))
+                sink.add(slots.materials[size_t(pd.refract_material)].ior, 0, s * pd.refract_deta);
+        };
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
         auto finish = [&](Pending& pd, const Vec3f& L) {
             float* value_u = pd.value_u;
@@ -753,6 +897,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
                     sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
                 }
+                if (pd.refract_mesh >= 0) add_refracted_gradient(pd, s);
                 if (camera_wanted) {
                     float cg[kCameraParams] = {};
                     d_camera_ray(scene.camera_params, x, y, pd.lu, pd.lv, g.d_o * s, g.d_d * s, cg);
@@ -949,6 +1094,93 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             std::fill(pd.value_l, pd.value_l + nv, 0.f);
             finish(pd, lobe * (Lu - Ll));
         };
+        // The boundary term of the edge `edge` seen through plane `plane` at film point (x, y)
+        // (Refraction, above): where the camera ray meets a face of that plane and is refracted
+        // past the edge, the two sides are found from the glass's point, and their paths traced
+        // from there; the step is the refracted lobe's weight times the step between them. The
+        // side function is the refracted ray's; its gradient reaches the camera ray through the
+        // point of the face's plane it meets and the refraction (d_delta_scatter), and the face's
+        // vertices and index likewise.
+        auto splat_refracted = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
+                                   double point_weight) {
+            Vec3f o, d;
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
+            if (!at.found || mirrors.plane_of[size_t(at.hit.mesh)].empty() ||
+                mirrors.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
+                return;
+            const SurfacePoint sp = scene.surface_point(at.hit);
+            const BsdfParams bp = scene.bsdf_params(sp);
+            if (bp.kind != MaterialKind::Dielectric || bp.rough) return;
+            if (!(std::abs(dot(d, sp.ng)) >= kMinShadingCosine)) return;
+            Pending pd;
+            const Mesh& gm = scene.meshes[size_t(at.hit.mesh)];
+            Vec3f tv[3];
+            for (int c = 0; c < 3; ++c) {
+                pd.refract_tri[c] = gm.indices[3 * at.hit.prim + c];
+                tv[c] = gm.vertex(pd.refract_tri[c]);
+            }
+            const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], n = cross_normal(u, v);
+            const DeltaParams<float> dp = delta_params(bp);
+            Vec3f refracted, lobe;
+            if (!delta_scatter(dp, n, -d, true, 1.f, refracted, lobe)) return;
+            // The point of the face's plane the camera ray meets, x = o + t d.
+            const float dn = dot(d, n), tp = dot(tv[0] - o, n) / dn;
+            const Vec3f xh = o + d * tp;
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            const EdgeSideGradient G = edge_side_gradient(p0, p1, xh, refracted);
+            DDelta<float> dd;
+            dd.specular = dd.n = dd.wo = Vec3f(0.f);
+            dd.eta = 0.f;
+            d_delta_scatter(dp, n, -d, true, 1.f, G.d_d, Vec3f(0.f), dd);
+            // x's adjoint G.d_o, through t = (q - o) . n / (d . n): to o, d, q (the first vertex)
+            // and n; the refracted direction's to n, wo = -d and the index.
+            const float k = dot(d, G.d_o) / dn;
+            EdgeSideGradient g = G;
+            g.d_o = G.d_o - n * k;
+            g.d_d = g.d_o * tp - dd.wo;
+            const Vec3f dc = d_cross_normal(u, v, (tv[0] - xh) * k + dd.n);
+            const Vec3f du = cross(v, dc), dv = cross(dc, u);
+            pd.refract_dv[0] = n * k - du - dv;
+            pd.refract_dv[1] = du;
+            pd.refract_dv[2] = dv;
+            pd.refract_deta = dd.eta;
+            pd.refract_mesh = at.hit.mesh;
+            pd.refract_material = gm.material;
+            double gx, gy;
+            film_gradient(x, y, eye, d, g, gx, gy);
+            const double glen = std::hypot(gx, gy);
+            if (!(glen > 0.0) || !std::isfinite(glen)) return;
+            // The edge's point the refracted ray passes, and the ray from the glass's point to it.
+            const float s = closest_on_segment(p0, p1, xh, refracted);
+            const Vec3f target = p0 + (p1 - p0) * s;
+            Ray out = spawn_ray(sp, normalize(target - sp.p));
+            out.dir = normalize(target - out.origin);
+            if (!(dot(out.dir, refracted) > 0.9999f)) return;
+            EdgeEye glass_eye;
+            glass_eye.origin = out.origin;
+            EdgeSide side_u, side_l;
+            if (!edge_sides(scene, glass_eye, edge, out, s, dot(target - out.origin, out.dir), side_u, side_l)) return;
+            flush();
+            const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
+            Rng ru = stream, rl = stream;
+            const Vec3f Lu = trace_path(scene, reflected_opt, side_u.ray, ru, counters, nullptr, &side_u);
+            const Vec3f Ll = trace_path(scene, reflected_opt, side_l.ray, rl, counters, nullptr, &side_l);
+            pd.edge = &edge;
+            pd.x = x;
+            pd.y = y;
+            pd.lu = eye.lu;
+            pd.lv = eye.lv;
+            pd.g = g;
+            pd.weight = float(point_weight / glen);
+            std::fill(pd.value_u, pd.value_u + nv, 0.f);
+            std::fill(pd.value_l, pd.value_l + nv, 0.f);
+            finish(pd, lobe * (Lu - Ll));
+        };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
             const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
@@ -964,6 +1196,23 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
+            if (fe.refracted) {
+                // At parameter u of the edge (its part beyond the plane), as the eye sees it
+                // through the plane, weighted by the film length per unit of t there.
+                const MirrorPlane& mp = mirrors.planes[size_t(fe.plane)];
+                const Vec3d a(p0), b(p1);
+                const double span = fe.u1 - fe.u0;
+                auto film_at = [&](double tt, double& fx, double& fy) {
+                    return refracted_film(mp, eye, a + (b - a) * (fe.u0 + span * tt), fx, fy);
+                };
+                double fx, fy, lx, ly, hx, hy;
+                if (!film_at(t, fx, fy) || fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
+                const double lo_t = std::max(0.0, t - 1e-4), hi_t = std::min(1.0, t + 1e-4);
+                if (!film_at(lo_t, lx, ly) || !film_at(hi_t, hx, hy)) continue;
+                const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
+                splat_refracted(i, eye, edge, fe.plane, float(fx), float(fy), sample_weight * per_t / fe.len);
+                continue;
+            }
             if (spherical) {
                 // Drawn with density fe.len / total / world per unit world length; the film
                 // points that see it get its film length per unit world length (in splat).
