@@ -13,6 +13,7 @@
 #include "render/batch.h"
 #include "render/path.h"
 #include "render/tiles.h"
+#include "math/frame.h"
 #include "scene/bsdf.h"
 
 namespace edgepath {
@@ -315,11 +316,18 @@ struct MirrorPlane {
     bool refracts = false;
     double eta = 1.0;        // the far side's index over the camera's side's
     int material = -1;
+    bool behind = false;     // the camera behind its faces (by their winding)
+    TFrame<double> axes;     // about n
+    // The box its faces span in the plane, in those axes from q.
+    double lo[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+    double hi[2] = {-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
 };
 
 // At most kMirrorSetups edge set-ups over all planes (each plane sets up every edge of the
-// scene, twice for glass): the planes whose faces cover the most film.
-constexpr double kMirrorSetups = double(1 << 23);
+// scene, twice for glass): the planes the camera sees from their front first (inside a closed
+// mesh, faces seen from behind are hidden by others), then those whose faces cover the most
+// film. (A glass plane's refracted set-up costs a few tens of nanoseconds where it is culled.)
+constexpr double kMirrorSetups = double(1 << 21);
 
 struct Mirrors {
     std::vector<MirrorPlane> planes;
@@ -390,6 +398,8 @@ struct Mirrors {
                     mp.lens = cam;
                     mp.lens.position = mp.eye.origin;
                     mp.lens.forward = mp.eye.dir;
+                    mp.behind = behind;
+                    mp.axes = TFrame<double>(Vec3d(n));
                     mp.refracts = refracts;
                     mp.eta = behind ? 1.0 / ior : ior;
                     mp.material = m.material;
@@ -400,6 +410,11 @@ struct Mirrors {
                 }
                 of[size_t(f)] = it->second;
                 MirrorPlane& mp = planes[size_t(it->second)];
+                for (int c = 0; c < 3; ++c) {
+                    const Vec3d local = mp.axes.to_local(Vec3d(m.vertex(t[c])) - Vec3d(mp.q));
+                    mp.lo[0] = std::min(mp.lo[0], local.x), mp.hi[0] = std::max(mp.hi[0], local.x);
+                    mp.lo[1] = std::min(mp.lo[1], local.y), mp.hi[1] = std::max(mp.hi[1], local.y);
+                }
                 for (int c = 0; c < 3; ++c) {
                     const Vec3d qc = camera_axes(cam, m.vertex(t[c]) - cam.position);
                     if (lens || (!parallel && !(qc.z > 1e-6 * length(qc)))) {
@@ -425,9 +440,16 @@ struct Mirrors {
                 order.push_back(k);
             }
         }
-        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) { return areas[a] > areas[b]; });
-        size_t keep = order.size();
-        if (num_edges > 0) keep = std::min(keep, std::max<size_t>(1, size_t(kMirrorSetups / double(num_edges))));
+        std::stable_sort(order.begin(), order.end(), [&](size_t a, size_t b) {
+            return planes[a].behind != planes[b].behind ? !planes[a].behind : areas[a] > areas[b];
+        });
+        // (Glass planes count twice: reflected and refracted.)
+        size_t keep = 0;
+        double setups = 0.0;
+        for (; keep < order.size(); ++keep) {
+            setups += double(num_edges) * (planes[order[keep]].refracts ? 2.0 : 1.0);
+            if (keep > 0 && setups > kMirrorSetups) break;
+        }
         std::vector<int32_t> index(planes.size(), -1);
         std::vector<MirrorPlane> kept;
         for (size_t r = 0; r < keep; ++r) {
@@ -627,6 +649,42 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         double jacobian;
         return film_point(cam, eye, Vec3f(x), mp.n, fx, fy, jacobian);
     };
+    // Whether the refraction points of the segment (e0, e1) beyond plane mp (from the camera's
+    // position, or from any point of a thin lens) may lie on the plane's faces: whether the
+    // region that holds them meets the box of the faces (widened by the lens's radius). A point
+    // e's refraction point lies between the eye's foot and e's foot on the plane, on the far side
+    // of the straight line's crossing when eta > 1 (the ray bends towards the normal), on the near
+    // side when eta < 1: within the box of those points over the segment's ends. Parallel rays
+    // all bend into one direction: the refraction points of a segment are a segment.
+    auto refraction_may_meet = [&](const MirrorPlane& mp, const Vec3d& e0, const Vec3d& e1) {
+        const Vec3d q(mp.q), n(mp.n);
+        const TFrame<double>& axes = mp.axes;
+        double lo[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
+        double hi[2] = {-lo[0], -lo[1]};
+        auto hold = [&](const Vec3d& p) {
+            const Vec3d local = axes.to_local(p - q);
+            lo[0] = std::min(lo[0], local.x), hi[0] = std::max(hi[0], local.x);
+            lo[1] = std::min(lo[1], local.y), hi[1] = std::max(hi[1], local.y);
+        };
+        if (!has_eye(cam.type)) {
+            Vec3d r;
+            if (!refracted_direction(Vec3d(cam.forward), n, mp.eta, r)) return false;
+            for (const Vec3d& e : {e0, e1}) hold(e - r * (dot(e - q, n) / dot(r, n)));
+        } else {
+            const Vec3d eye(cam.position);
+            const double h1 = dot(eye - q, n);
+            if (mp.eta < 1.0) hold(eye - n * h1);
+            for (const Vec3d& e : {e0, e1}) {
+                const double h2 = std::max(0.0, -dot(e - q, n));
+                hold(eye + (e - eye) * (h1 / (h1 + h2)));  // the straight line's crossing
+                if (mp.eta >= 1.0) hold(e + n * h2);        // e's foot
+            }
+        }
+        const double reach = cam.type == CameraType::ThinLens ? double(cam.aperture) : 0.0;
+        const double margin = 1e-6 * (std::abs(mp.hi[0] - mp.lo[0]) + std::abs(mp.hi[1] - mp.lo[1])) + reach;
+        return lo[0] <= mp.hi[0] + margin && hi[0] >= mp.lo[0] - margin && lo[1] <= mp.hi[1] + margin &&
+               hi[1] >= mp.lo[1] - margin;
+    };
     // The refracted edge of edge e of mesh m seen through plane mp: its part on the far side of
     // the plane (the parameters u0, u1 of its ends), sampled by the film length of the chord
     // between their film points (any length would do: the samples are weighted by the curve's).
@@ -640,6 +698,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (!(s0 < -mp.tol || s1 < -mp.tol)) return false;  // in front of the plane, or in it
         fe.u0 = s0 > 0.0 ? s0 / (s0 - s1) : 0.0;
         fe.u1 = s1 > 0.0 ? s0 / (s0 - s1) : 1.0;
+        if (!(refraction_may_meet(mp, p0 + (p1 - p0) * fe.u0, p0 + (p1 - p0) * fe.u1))) return false;
         if (!refracted_film(mp, centre, p0 + (p1 - p0) * fe.u0, fe.ax, fe.ay) ||
             !refracted_film(mp, centre, p0 + (p1 - p0) * fe.u1, fe.bx, fe.by))
             return false;
@@ -761,12 +820,19 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     size_t k_all = 0;
     for (const std::vector<FilmEdge>& chunk : chunk_edges)
         for (const FilmEdge& fe : chunk) cumulative[k_all + 1] = cumulative[k_all] + fe.len, ++k_all;
-    const double total = cumulative.back();
     const int64_t n = opt.edge_samples > 0 ? opt.edge_samples
                                            : int64_t(scene.out_width) * scene.out_height * int64_t(opt.spp);
-    // Every point of every edge is drawn with density 1 / total (per unit film length; per unit
-    // world length for uniform sampling, converted to film length per sample).
-    const double sample_weight = total / double(n);
+    // The edges seen directly come first (k < num_direct), then those seen in planes of smooth
+    // faces: each group gets n samples of its own, so that the second, whose samples mostly
+    // meet no face of their plane where there are many small ones, takes none from the first.
+    size_t num_direct = 0;
+    for (const std::vector<FilmEdge>& chunk : chunk_edges)
+        for (const FilmEdge& fe : chunk) num_direct += fe.plane < 0;
+    const double total_direct = cumulative[num_direct], total_smooth = cumulative[num_film] - total_direct;
+    const int64_t n_direct = total_direct > 0.0 ? n : 0, n_smooth = total_smooth > 0.0 ? n : 0;
+    // Every point of every edge is drawn with density 1 / total (its group's) per unit film length
+    // (per unit world length for uniform sampling, converted to film length per sample).
+    const double weight_direct = total_direct / double(n), weight_smooth = total_smooth / double(n);
     const double px_scale = 2.0 * cam.tx / cam.width;  // d(screen offset) / d(film pixel)
 
     const float radius = scene.filter.radius();
@@ -805,7 +871,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     reflected_opt.max_bounces = opt.max_bounces - 1;
     reflected_opt.hide_emitters = false;
     constexpr int64_t kSampleChunk = 4096;
-    for_each_chunk(opt, n, kSampleChunk, [&](int64_t begin, int64_t end) {
+    for_each_chunk(opt, n_direct + n_smooth, kSampleChunk, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
         RayCounters counters;
         std::vector<Pending> pending(static_cast<size_t>(batch));
@@ -1183,10 +1249,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
-            const double at = (uniform ? rng.next_double() : (double(i) + rng.next_double()) / double(n)) * total;
-            const size_t k = std::min(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
-                                             cumulative.begin()) - 1,
-                                      num_film - 1);
+            const bool direct = i < n_direct;
+            const int64_t j = direct ? i : i - n_direct;
+            const double total = direct ? total_direct : total_smooth, sample_weight = direct ? weight_direct : weight_smooth;
+            const double at = (direct ? 0.0 : total_direct) +
+                              (uniform ? rng.next_double() : (double(j) + rng.next_double()) / double(n)) * total;
+            const size_t k = std::clamp(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
+                                               cumulative.begin()) - 1,
+                                        direct ? size_t(0) : num_direct, (direct ? num_direct : num_film) - 1);
             const FilmEdge& fe = film_edge(k);
             const double t = std::clamp((at - cumulative[k]) / fe.len, 0.0, 1.0);
             const Edge& edge = scene.edges()[fe.edge];

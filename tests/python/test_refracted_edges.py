@@ -154,3 +154,35 @@ def test_perspective_cameras_match_finite_differences(camera_type, param):
     error = math.sqrt(float(d.var()) / len(d) + float(f.var()) / len(f))
     assert abs(float(f.mean())) > 1.0
     assert abs(float(d.mean() - f.mean())) < 4 * error + 0.05 * abs(float(f.mean())), (d, f)
+
+
+def test_a_glass_cube_matches_finite_differences():
+    """A glass cube (flat faces, turned) before a random sky, moved along x, at two bounces (in
+    through a face, out through another: the edges of its far faces seen through its near ones,
+    refracted once; the paths reflected inside, whose edges are left out, end there). Image
+    sums, 24 x 24; derivative 8 seeds x 256 spp, finite differences (step 0.005) 8 seeds x 2048
+    spp. Measured at 32 x 32: 227.3 +- 0.9 against 231.7 +- 4.1 (before this term: 325.5); a
+    faceted glass sphere (4 x 8) 248.3 +- 1.8 against 254.3 +- 5.9 (before: 340.6)."""
+    turn = torch.tensor([[0.8, 0., 0.6], [0., 1., 0.], [-0.6, 0., 0.8]]) @ \
+        torch.tensor([[1., 0., 0.], [0., 0.9, -0.436], [0., 0.436, 0.9]])
+
+    def scene(dx):
+        v, i = shapes.box((0., 0., 0.), (.4, .4, .4))
+        cube = ep.Mesh(v @ turn.T + torch.tensor([dx, 0., 0.]), i, material=ep.Material(kind="dielectric", ior=1.5))
+        camera = ep.Camera(position=torch.tensor([0., .3, 2.5]), look_at=torch.zeros(3), resolution=(24, 24), fov=30.0)
+        sky = ep.EnvironmentMap(torch.rand(8, 16, 3, generator=torch.Generator().manual_seed(0)))
+        return ep.Scene(camera, [cube], envmap=sky), cube
+
+    derivatives = []
+    for seed in range(8):
+        s, cube = scene(0.0)
+        derivatives.append(float(ep.derivative_image(s, cube.vertices, torch.tensor([1., 0., 0.]).expand(8, 3),
+                                                     spp=256, max_bounces=2, seed=seed).sum()))
+    eps = 0.005
+    differences = [float((ep.render(scene(eps)[0], spp=2048, max_bounces=2, seed=100 + k) -
+                          ep.render(scene(-eps)[0], spp=2048, max_bounces=2, seed=100 + k)).sum()) / (2 * eps)
+                   for k in range(8)]
+    d, f = torch.tensor(derivatives, dtype=torch.float64), torch.tensor(differences, dtype=torch.float64)
+    error = math.sqrt(float(d.var()) / len(d) + float(f.var()) / len(f))
+    assert abs(float(f.mean())) > 10.0
+    assert abs(float(d.mean() - f.mean())) < 4 * error + 0.05 * abs(float(f.mean())), (d.mean(), f.mean(), error)
