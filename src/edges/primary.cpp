@@ -29,7 +29,7 @@ struct FilmEdge {
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
-    int plane = -1;       // seen in this plane of smooth faces (Mirrors::planes), or directly (-1)
+    int plane = -1;       // seen in this plane of smooth faces (SmoothPlanes::planes), or directly (-1)
     bool refracted = false;  // through the plane (else reflected in it)
     double u0 = 0.0, u1 = 1.0;  // refracted: the part of the edge sampled (its ends' parameters)
 };
@@ -296,15 +296,15 @@ struct LightBoxes {
 // The mirror image of point p across the plane (q, n).
 inline Vec3f mirrored(const Vec3f& p, const Vec3f& q, const Vec3f& n) { return p - n * (2.f * dot(p - q, n)); }
 
-// Planar mirrors: the faces of a mesh whose material reflects a smooth lobe (a mirror, smooth
-// glass, a smooth plastic's coating) and whose shading normal is its geometric normal (no
-// vertex normals, no normal map), grouped by the plane they lie in. What the camera sees in
-// such a face is the scene mirrored across its plane: an edge seen there is the virtual edge
+// Planes of smooth faces: the faces of a mesh whose material reflects a smooth lobe (a mirror,
+// smooth glass, a smooth plastic's coating) and whose shading normal is its geometric normal
+// (no vertex normals, no normal map), grouped by the plane they lie in. What the camera sees
+// in such a face is the scene mirrored across its plane: an edge seen there is the virtual edge
 // (its mirror image), projected onto the film like any other, but seen only through the faces
 // of that plane, and its step is the reflected lobe's weight times the step of the radiance
 // arriving at the mirror. The faces' plane moves with their vertices, so their gradients get
-// a share of the virtual edge's.
-struct MirrorPlane {
+// a share of the virtual edge's. Glass refracts too (Refraction, below).
+struct SmoothPlane {
     int mesh = -1;
     Vec3f q, n;              // a point of the plane and its unit normal, turned towards the camera
     float tol = 0.f;         // distances from the plane below this count as in it
@@ -329,12 +329,12 @@ struct MirrorPlane {
 // film. (A glass plane's refracted set-up costs a few tens of nanoseconds where it is culled.)
 constexpr double kMirrorSetups = double(1 << 21);
 
-struct Mirrors {
-    std::vector<MirrorPlane> planes;
+struct SmoothPlanes {
+    std::vector<SmoothPlane> planes;
     std::vector<std::vector<int32_t>> plane_of;  // per mesh, per triangle: its plane's index, or -1
 
-    Mirrors() = default;
-    Mirrors(const Scene& scene, const Camera& cam, double wx0, double wy0, double wx1, double wy1) {
+    SmoothPlanes() = default;
+    SmoothPlanes(const Scene& scene, const Camera& cam, double wx0, double wy0, double wx1, double wy1) {
         plane_of.resize(scene.meshes.size());
         std::vector<double> areas;
         const size_t num_edges = scene.edges().size();
@@ -387,7 +387,7 @@ struct Mirrors {
                                                     behind};
                 auto [it, added] = by_plane.emplace(key, int32_t(planes.size()));
                 if (added) {
-                    MirrorPlane mp;
+                    SmoothPlane mp;
                     mp.mesh = int(i);
                     mp.q = a;
                     mp.n = n;
@@ -409,7 +409,7 @@ struct Mirrors {
                     areas.push_back(0.0);
                 }
                 of[size_t(f)] = it->second;
-                MirrorPlane& mp = planes[size_t(it->second)];
+                SmoothPlane& mp = planes[size_t(it->second)];
                 for (int c = 0; c < 3; ++c) {
                     const Vec3d local = mp.axes.to_local(Vec3d(m.vertex(t[c])) - Vec3d(mp.q));
                     mp.lo[0] = std::min(mp.lo[0], local.x), mp.hi[0] = std::max(mp.hi[0], local.x);
@@ -432,7 +432,7 @@ struct Mirrors {
         // planes kept.
         std::vector<size_t> order;
         for (size_t k = 0; k < planes.size(); ++k) {
-            MirrorPlane& mp = planes[k];
+            SmoothPlane& mp = planes[k];
             mp.x0 = std::max(mp.x0 - 1.0, wx0), mp.y0 = std::max(mp.y0 - 1.0, wy0);
             mp.x1 = std::min(mp.x1 + 1.0, wx1), mp.y1 = std::min(mp.y1 + 1.0, wy1);
             if (mp.x0 < mp.x1 && mp.y0 < mp.y1) {
@@ -451,7 +451,7 @@ struct Mirrors {
             if (keep > 0 && setups > kMirrorSetups) break;
         }
         std::vector<int32_t> index(planes.size(), -1);
-        std::vector<MirrorPlane> kept;
+        std::vector<SmoothPlane> kept;
         for (size_t r = 0; r < keep; ++r) {
             index[order[r]] = int32_t(kept.size());
             kept.push_back(planes[order[r]]);
@@ -601,15 +601,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return (dark_behind[size_t(e.mesh)] && seen_from_behind(camera_eye, m, e)) ||
                (by_lights && e.kind == EdgeKind::Smooth && !light_boxes.between(m, e));
     };
-    // Edges seen in planar mirrors (Mirrors, above): by a pinhole, thin lens or orthographic
-    // camera, where the radiance is differentiated and paths reflect at least once.
-    const bool mirrors_seen = radiance && !uniform && opt.max_bounces >= 1 && !spherical;
-    const Mirrors mirrors = mirrors_seen ? Mirrors(scene, cam, wx0, wy0, wx1, wy1) : Mirrors();
+    // Edges seen in planar mirrors and through flat glass (SmoothPlanes, above): by a pinhole,
+    // thin lens or orthographic camera, where the radiance is differentiated and paths scatter
+    // at least once.
+    const bool planes_seen = radiance && !uniform && opt.max_bounces >= 1 && !spherical;
+    const SmoothPlanes smooth_planes = planes_seen ? SmoothPlanes(scene, cam, wx0, wy0, wx1, wy1) : SmoothPlanes();
     Eye centre;
     centre.position = cam.position;
     // The virtual edge of edge e of mesh m in mirror plane mp: its part on the camera's side of
     // the plane, mirrored, on the film within the plane's window.
-    auto mirrored_film_edge = [&](const MirrorPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+    auto mirrored_film_edge = [&](const SmoothPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, mp.mesh)) return false;
         Vec3f p0 = m.vertex(e.v0), p1 = m.vertex(e.v1);
         const float s0 = dot(p0 - mp.q, mp.n), s1 = dot(p1 - mp.q, mp.n);
@@ -633,7 +634,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // The film point (fx, fy) that `eye` sees point e (on the far side of refracting plane mp)
     // at: through the plane's refraction point (a pinhole, a lens point), or for parallel rays
     // along their refracted direction.
-    auto refracted_film = [&](const MirrorPlane& mp, const Eye& eye, const Vec3d& e, double& fx, double& fy) {
+    auto refracted_film = [&](const SmoothPlane& mp, const Eye& eye, const Vec3d& e, double& fx, double& fy) {
         const Vec3d q(mp.q), n(mp.n);
         Vec3d x;
         if (!has_eye(cam.type)) {
@@ -656,7 +657,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // of the straight line's crossing when eta > 1 (the ray bends towards the normal), on the near
     // side when eta < 1: within the box of those points over the segment's ends. Parallel rays
     // all bend into one direction: the refraction points of a segment are a segment.
-    auto refraction_may_meet = [&](const MirrorPlane& mp, const Vec3d& e0, const Vec3d& e1) {
+    auto refraction_may_meet = [&](const SmoothPlane& mp, const Vec3d& e0, const Vec3d& e1) {
         const Vec3d q(mp.q), n(mp.n);
         const TFrame<double>& axes = mp.axes;
         double lo[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
@@ -688,7 +689,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // The refracted edge of edge e of mesh m seen through plane mp: its part on the far side of
     // the plane (the parameters u0, u1 of its ends), sampled by the film length of the chord
     // between their film points (any length would do: the samples are weighted by the curve's).
-    auto refracted_film_edge = [&](const MirrorPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+    auto refracted_film_edge = [&](const SmoothPlane& mp, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
         if (!mp.refracts) return false;
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, mp.mesh) &&
             !ior_wanted(mp.material))
@@ -727,7 +728,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     // Each edge directly, then reflected in each plane of smooth faces, then refracted by each.
-    const int64_t num_planes = int64_t(mirrors.planes.size());
+    const int64_t num_planes = int64_t(smooth_planes.planes.size());
     const int64_t num_setups = num_edges * (1 + 2 * num_planes);
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_setups + kSetupChunk - 1) / kSetupChunk));
     for_each_chunk(opt, num_setups, kSetupChunk, [&](int64_t begin, int64_t end) {
@@ -742,7 +743,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (slot >= 0) {
                 FilmEdge fe;
                 const int64_t plane = slot % num_planes;
-                const MirrorPlane& mp = mirrors.planes[size_t(plane)];
+                const SmoothPlane& mp = smooth_planes.planes[size_t(plane)];
                 const Mesh& m = scene.meshes[size_t(e.mesh)];
                 if (!(slot < num_planes ? mirrored_film_edge(mp, m, e, index, fe) : refracted_film_edge(mp, m, e, index, fe)))
                     continue;
@@ -866,7 +867,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         Vec3f refract_dv[3];
         float refract_deta = 0.f;
     };
-    // The side paths of edges seen in mirrors: from the mirror's point, a bounce fewer, emitters seen.
+    // The side paths of edges seen in mirrors or through glass: from the mirror's or the glass's
+    // point, a bounce fewer, emitters seen.
     RenderOptions reflected_opt = opt;
     reflected_opt.max_bounces = opt.max_bounces - 1;
     reflected_opt.hide_emitters = false;
@@ -1090,7 +1092,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (++npending == batch) flush();
         };
         // The boundary term of the virtual edge of `edge` in mirror plane `plane` at film point
-        // (x, y) (Mirrors, above): where the camera ray meets a face of that plane
+        // (x, y) (SmoothPlanes, above): where the camera ray meets a face of that plane
         // and is reflected past the edge, the two sides are found from the mirror's point (as
         // from an eye there), and their paths traced from there; the step is the reflected lobe's
         // weight times the step between them. Traced at once, after the pending samples (the
@@ -1103,8 +1105,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             ray.origin = o;
             ray.dir = d;
             const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
-            if (!at.found || mirrors.plane_of[size_t(at.hit.mesh)].empty() ||
-                mirrors.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
+            if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
+                smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
                 return;
             const SurfacePoint sp = scene.surface_point(at.hit);
             const BsdfParams bp = scene.bsdf_params(sp);
@@ -1175,8 +1177,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             ray.origin = o;
             ray.dir = d;
             const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
-            if (!at.found || mirrors.plane_of[size_t(at.hit.mesh)].empty() ||
-                mirrors.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
+            if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
+                smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
                 return;
             const SurfacePoint sp = scene.surface_point(at.hit);
             const BsdfParams bp = scene.bsdf_params(sp);
@@ -1269,7 +1271,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (fe.refracted) {
                 // At parameter u of the edge (its part beyond the plane), as the eye sees it
                 // through the plane, weighted by the film length per unit of t there.
-                const MirrorPlane& mp = mirrors.planes[size_t(fe.plane)];
+                const SmoothPlane& mp = smooth_planes.planes[size_t(fe.plane)];
                 const Vec3d a(p0), b(p1);
                 const double span = fe.u1 - fe.u0;
                 auto film_at = [&](double tt, double& fx, double& fy) {
@@ -1324,7 +1326,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     // from the lens point. (Seen in a mirror: the virtual edge's.)
                     Vec3f e0 = p0, e1 = p1;
                     if (fe.plane >= 0) {
-                        const MirrorPlane& mp = mirrors.planes[size_t(fe.plane)];
+                        const SmoothPlane& mp = smooth_planes.planes[size_t(fe.plane)];
                         e0 = mirrored(p0, mp.q, mp.n);
                         e1 = mirrored(p1, mp.q, mp.n);
                     }

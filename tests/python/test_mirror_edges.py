@@ -1,5 +1,5 @@
 """Edges seen in planar mirrors: the boundary term of the outlines the camera sees reflected in
-flat smooth faces (edges/primary.cpp, Mirrors).
+flat smooth faces (edges/primary.cpp, SmoothPlanes).
 
 Closed form: a perfect mirror (a conductor of reflectance 1) under a constant sky shows the
 scene mirrored across its plane. Seen only through the mirror, the scene above it renders the
