@@ -422,7 +422,8 @@ struct SmoothPlanes {
                         mp.x0 = wx0, mp.y0 = wy0, mp.x1 = wx1, mp.y1 = wy1;
                         continue;
                     }
-                    const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z), y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
+                    const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z);
+                    const double y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
                     mp.x0 = std::min(mp.x0, x), mp.x1 = std::max(mp.x1, x);
                     mp.y0 = std::min(mp.y0, y), mp.y1 = std::max(mp.y1, y);
                 }
@@ -745,8 +746,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const int64_t plane = slot % num_planes;
                 const SmoothPlane& mp = smooth_planes.planes[size_t(plane)];
                 const Mesh& m = scene.meshes[size_t(e.mesh)];
-                if (!(slot < num_planes ? mirrored_film_edge(mp, m, e, index, fe) : refracted_film_edge(mp, m, e, index, fe)))
-                    continue;
+                const bool kept = slot < num_planes ? mirrored_film_edge(mp, m, e, index, fe)
+                                                    : refracted_film_edge(mp, m, e, index, fe);
+                if (!kept) continue;
                 fe.edge = size_t(index);
                 fe.plane = int(plane);
                 film_edges.push_back(fe);
@@ -1091,15 +1093,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             if (++npending == batch) flush();
         };
-        // The boundary term of the virtual edge of `edge` in mirror plane `plane` at film point
-        // (x, y) (SmoothPlanes, above): where the camera ray meets a face of that plane
-        // and is reflected past the edge, the two sides are found from the mirror's point (as
-        // from an eye there), and their paths traced from there; the step is the reflected lobe's
-        // weight times the step between them. Traced at once, after the pending samples (the
-        // sink gets its additions in the samples' order).
-        auto splat_mirrored = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
-                                  double point_weight) {
-            Vec3f o, d;
+        // Whether the camera ray through film point (x, y) from `eye` (o, d) meets a face of plane
+        // `plane` first, smooth and not seen edge-on (then its shading normal is bent,
+        // bend_normal: no plane's mirror or pane); its hit, point and material.
+        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, Hit& hit,
+                               SurfacePoint& sp, BsdfParams& bp) {
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             Ray ray;
             ray.origin = o;
@@ -1107,93 +1105,102 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
             if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
                 smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
-                return;
-            const SurfacePoint sp = scene.surface_point(at.hit);
-            const BsdfParams bp = scene.bsdf_params(sp);
-            if (bp.kind == MaterialKind::Standard || bp.rough) return;
-            // Seen this near edge-on, its shading normal is bent (bend_normal): no plane's mirror.
-            if (!(std::abs(dot(d, sp.ng)) >= kMinShadingCosine)) return;
-            Vec3f reflected, lobe;
-            if (!delta_scatter(delta_params(bp), sp.ng, -d, false, 1.f, reflected, lobe)) return;
-            // The virtual edge across the plane of the face met (the plane's faces may differ from
-            // it by rounding).
-            Pending pd;
-            const Mesh& mm = scene.meshes[size_t(at.hit.mesh)];
-            pd.mirror_mesh = at.hit.mesh;
-            for (int c = 0; c < 3; ++c) {
-                pd.mirror_tri[c] = mm.indices[3 * at.hit.prim + c];
-                pd.mirror_v[c] = mm.vertex(pd.mirror_tri[c]);
-            }
-            const Vec3f n = cross_normal(pd.mirror_v[1] - pd.mirror_v[0], pd.mirror_v[2] - pd.mirror_v[0]);
+                return false;
+            hit = at.hit;
+            sp = scene.surface_point(at.hit);
+            bp = scene.bsdf_params(sp);
+            return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(d, sp.ng)) >= kMinShadingCosine;
+        };
+        // The rest of a sample seen in a mirror or through glass, its side function g and its
+        // film gradient's norm glen given: the edge's point at parameter s, which the scattered
+        // direction `dir` from the face's point sp passes; its two sides, found from there as from
+        // an eye (`swap`: the upper and lower sides exchanged, as a reflection does); their paths,
+        // traced from there with the sample's stream after the pending samples (the sink gets its
+        // additions in the samples' order); and the jump, the lobe's weight times theirs, splatted.
+        auto finish_smooth = [&](int64_t i, Pending& pd, const Edge& edge, const Eye& eye, float x, float y,
+                                 const EdgeSideGradient& g, double weight, const SurfacePoint& sp, float s,
+                                 const Vec3f& dir, const Vec3f& lobe, bool swap) {
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
-            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
-            const Vec3f v0 = mirrored(p0, pd.mirror_v[0], n), v1 = mirrored(p1, pd.mirror_v[0], n);
-            const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
-            double gx, gy;
-            film_gradient(x, y, eye, d, g, gx, gy);
-            const double glen = std::hypot(gx, gy);
-            if (!(glen > 0.0) || !std::isfinite(glen)) return;
-            // The edge's point the reflected ray passes, and the ray from the mirror's point to it.
-            const float s = closest_on_segment(v0, v1, o, d);
-            const Vec3f target = p0 + (p1 - p0) * s;
+            const Vec3f target = m.vertex(edge.v0) + (m.vertex(edge.v1) - m.vertex(edge.v0)) * s;
             Ray out = spawn_ray(sp, normalize(target - sp.p));
             out.dir = normalize(target - out.origin);
-            // (Off the reflection by more than rounding: the plane's faces disagree.)
-            if (!(dot(out.dir, reflected) > 0.9999f)) return;
-            EdgeEye mirror_eye;
-            mirror_eye.origin = out.origin;
-            EdgeSide real_u, real_l;
-            if (!edge_sides(scene, mirror_eye, edge, out, s, dot(target - out.origin, out.dir), real_u, real_l)) return;
+            // (Off the scattered direction by more than rounding: the plane's faces disagree.)
+            if (!(dot(out.dir, dir) > 0.9999f)) return;
+            EdgeEye face_eye;
+            face_eye.origin = out.origin;
+            EdgeSide upper, lower;
+            if (!edge_sides(scene, face_eye, edge, out, s, dot(target - out.origin, out.dir), upper, lower)) return;
+            if (swap) std::swap(upper, lower);
             flush();
-            // A reflection turns the side function's sign: the virtual edge's upper side is the
-            // edge's lower one, seen from the mirror.
             const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
             Rng ru = stream, rl = stream;
-            const Vec3f Lu = trace_path(scene, reflected_opt, real_l.ray, ru, counters, nullptr, &real_l);
-            const Vec3f Ll = trace_path(scene, reflected_opt, real_u.ray, rl, counters, nullptr, &real_u);
+            const Vec3f Lu = trace_path(scene, reflected_opt, upper.ray, ru, counters, nullptr, &upper);
+            const Vec3f Ll = trace_path(scene, reflected_opt, lower.ray, rl, counters, nullptr, &lower);
             pd.edge = &edge;
             pd.x = x;
             pd.y = y;
             pd.lu = eye.lu;
             pd.lv = eye.lv;
             pd.g = g;
-            pd.weight = float(point_weight / glen);
+            pd.weight = float(weight);
             std::fill(pd.value_u, pd.value_u + nv, 0.f);
             std::fill(pd.value_l, pd.value_l + nv, 0.f);
             finish(pd, lobe * (Lu - Ll));
         };
+        // The boundary term of the virtual edge of `edge` in mirror plane `plane` at film point
+        // (x, y) (SmoothPlanes, above): where the camera ray meets a face of that plane and is
+        // reflected past the edge. The side function is the virtual edge's, across the plane of
+        // the face met (the plane's faces may differ from it by rounding); a reflection turns its
+        // sign, so the virtual edge's upper side is the edge's lower one seen from the mirror.
+        auto splat_mirrored = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
+                                  double point_weight) {
+            Vec3f o, d, reflected, lobe;
+            Hit hit;
+            SurfacePoint sp;
+            BsdfParams bp;
+            if (!meets_plane(eye, x, y, plane, o, d, hit, sp, bp) ||
+                !delta_scatter(delta_params(bp), sp.ng, -d, false, 1.f, reflected, lobe))
+                return;
+            Pending pd;
+            const Mesh& mm = scene.meshes[size_t(hit.mesh)];
+            pd.mirror_mesh = hit.mesh;
+            for (int c = 0; c < 3; ++c) {
+                pd.mirror_tri[c] = mm.indices[3 * hit.prim + c];
+                pd.mirror_v[c] = mm.vertex(pd.mirror_tri[c]);
+            }
+            const Vec3f n = cross_normal(pd.mirror_v[1] - pd.mirror_v[0], pd.mirror_v[2] - pd.mirror_v[0]);
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f v0 = mirrored(m.vertex(edge.v0), pd.mirror_v[0], n);
+            const Vec3f v1 = mirrored(m.vertex(edge.v1), pd.mirror_v[0], n);
+            const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
+            double gx, gy;
+            film_gradient(x, y, eye, d, g, gx, gy);
+            const double glen = std::hypot(gx, gy);
+            if (!(glen > 0.0) || !std::isfinite(glen)) return;
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight / glen, sp, closest_on_segment(v0, v1, o, d),
+                          reflected, lobe, true);
+        };
         // The boundary term of the edge `edge` seen through plane `plane` at film point (x, y)
         // (Refraction, above): where the camera ray meets a face of that plane and is refracted
-        // past the edge, the two sides are found from the glass's point, and their paths traced
-        // from there; the step is the refracted lobe's weight times the step between them. The
-        // side function is the refracted ray's; its gradient reaches the camera ray through the
-        // point of the face's plane it meets and the refraction (d_delta_scatter), and the face's
-        // vertices and index likewise.
+        // past the edge. The side function is the refracted ray's; its gradient reaches the
+        // camera ray through the point of the face's plane it meets and the refraction
+        // (d_delta_scatter), and the face's vertices and index likewise.
         auto splat_refracted = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
                                    double point_weight) {
-            Vec3f o, d;
-            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
-            Ray ray;
-            ray.origin = o;
-            ray.dir = d;
-            const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
-            if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
-                smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
-                return;
-            const SurfacePoint sp = scene.surface_point(at.hit);
-            const BsdfParams bp = scene.bsdf_params(sp);
-            if (bp.kind != MaterialKind::Dielectric || bp.rough) return;
-            if (!(std::abs(dot(d, sp.ng)) >= kMinShadingCosine)) return;
+            Vec3f o, d, refracted, lobe;
+            Hit hit;
+            SurfacePoint sp;
+            BsdfParams bp;
+            if (!meets_plane(eye, x, y, plane, o, d, hit, sp, bp) || bp.kind != MaterialKind::Dielectric) return;
             Pending pd;
-            const Mesh& gm = scene.meshes[size_t(at.hit.mesh)];
+            const Mesh& gm = scene.meshes[size_t(hit.mesh)];
             Vec3f tv[3];
             for (int c = 0; c < 3; ++c) {
-                pd.refract_tri[c] = gm.indices[3 * at.hit.prim + c];
+                pd.refract_tri[c] = gm.indices[3 * hit.prim + c];
                 tv[c] = gm.vertex(pd.refract_tri[c]);
             }
             const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], n = cross_normal(u, v);
             const DeltaParams<float> dp = delta_params(bp);
-            Vec3f refracted, lobe;
             if (!delta_scatter(dp, n, -d, true, 1.f, refracted, lobe)) return;
             // The point of the face's plane the camera ray meets, x = o + t d.
             const float dn = dot(d, n), tp = dot(tv[0] - o, n) / dn;
@@ -1217,43 +1224,21 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             pd.refract_dv[1] = du;
             pd.refract_dv[2] = dv;
             pd.refract_deta = dd.eta;
-            pd.refract_mesh = at.hit.mesh;
+            pd.refract_mesh = hit.mesh;
             pd.refract_material = gm.material;
             double gx, gy;
             film_gradient(x, y, eye, d, g, gx, gy);
             const double glen = std::hypot(gx, gy);
             if (!(glen > 0.0) || !std::isfinite(glen)) return;
-            // The edge's point the refracted ray passes, and the ray from the glass's point to it.
-            const float s = closest_on_segment(p0, p1, xh, refracted);
-            const Vec3f target = p0 + (p1 - p0) * s;
-            Ray out = spawn_ray(sp, normalize(target - sp.p));
-            out.dir = normalize(target - out.origin);
-            if (!(dot(out.dir, refracted) > 0.9999f)) return;
-            EdgeEye glass_eye;
-            glass_eye.origin = out.origin;
-            EdgeSide side_u, side_l;
-            if (!edge_sides(scene, glass_eye, edge, out, s, dot(target - out.origin, out.dir), side_u, side_l)) return;
-            flush();
-            const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
-            Rng ru = stream, rl = stream;
-            const Vec3f Lu = trace_path(scene, reflected_opt, side_u.ray, ru, counters, nullptr, &side_u);
-            const Vec3f Ll = trace_path(scene, reflected_opt, side_l.ray, rl, counters, nullptr, &side_l);
-            pd.edge = &edge;
-            pd.x = x;
-            pd.y = y;
-            pd.lu = eye.lu;
-            pd.lv = eye.lv;
-            pd.g = g;
-            pd.weight = float(point_weight / glen);
-            std::fill(pd.value_u, pd.value_u + nv, 0.f);
-            std::fill(pd.value_l, pd.value_l + nv, 0.f);
-            finish(pd, lobe * (Lu - Ll));
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight / glen, sp, closest_on_segment(p0, p1, xh, refracted),
+                          refracted, lobe, false);
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
             const bool direct = i < n_direct;
             const int64_t j = direct ? i : i - n_direct;
-            const double total = direct ? total_direct : total_smooth, sample_weight = direct ? weight_direct : weight_smooth;
+            const double total = direct ? total_direct : total_smooth;
+            const double sample_weight = direct ? weight_direct : weight_smooth;
             const double at = (direct ? 0.0 : total_direct) +
                               (uniform ? rng.next_double() : (double(j) + rng.next_double()) / double(n)) * total;
             const size_t k = std::clamp(size_t(std::upper_bound(cumulative.begin(), cumulative.end(), at) -
