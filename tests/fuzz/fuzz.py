@@ -185,7 +185,7 @@ def _api_variant(objects, field: str, value):
     elif field in ("two_sided", "nonlinear"):
         setattr(objects["floor_material"], field, value)
     elif field == "floor_normal_map":
-        # None: the floor flat (its shading normal the geometric one: a planar mirror's)
+        # None: the floor flat (its shading normal the geometric one: a planar mirror's or pane's)
         objects["floor_material"].normal_map = value
     elif field in ("max_bounces", "call"):
         return value

@@ -13,8 +13,9 @@ through glass or in a curved mirror from the camera (their outlines there) are m
 so are those seen in a mirror from a later vertex; a case that moves geometry seen in a
 smooth material may be off for that reason (reported apart, as "limited"), unless the only
 smooth surface is the floor made a flat mirror or flat glass, at one bounce, seen by a pinhole,
-thin lens or orthographic camera (the outlines in it and through it have their term). Heavy-tailed
-derivatives (glass at grazing angles) make a case look off now and then: more seeds settle it.
+thin lens or orthographic camera (the outlines in it and through it have their term).
+Heavy-tailed derivatives (glass at grazing angles) make a case look off now and then: more
+seeds settle it.
 
     python tests/fuzz/truth.py --cases 200 --seed 1 [--log FILE]
     python tests/fuzz/truth.py --replay '{"forms": [...], "param": "box.normals", "seed": 5}'
