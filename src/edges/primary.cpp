@@ -1001,15 +1001,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 finish(pending[size_t(k)], radiance ? side_L[size_t(2 * k)] - side_L[size_t(2 * k + 1)] : Vec3f(0.f));
             npending = 0;
         };
-        // The film gradient (gx, gy) of side function g at film point (x, y), whose ray from `eye`
-        // has direction d: a pinhole's, a thin lens's or parallel rays'.
-        auto film_gradient = [&](float x, float y, const Eye& eye, const Vec3f& d, const EdgeSideGradient& g,
-                                 double& gx, double& gy) {
-            if (!has_eye(cam.type)) {
-                gx = dot(g.d_o, cam.right) * px_scale;
-                gy = -dot(g.d_o, cam.up) * px_scale;
-                return;
-            }
+        // The norm of the film gradient of side function g at film point (x, y), whose ray from
+        // `eye` has direction d: a pinhole's, a thin lens's or parallel rays'.
+        auto film_gradient_norm = [&](float x, float y, const Eye& eye, const Vec3f& d, const EdgeSideGradient& g) {
+            if (!has_eye(cam.type)) return std::hypot(dot(g.d_o, cam.right) * px_scale, -dot(g.d_o, cam.up) * px_scale);
             // d = normalize(D), D = focus w - a (a pinhole: focus 1, a = 0), w = forward + sx right
             // + sy up; d(sx)/dx = px_scale, d(sy)/dy = -px_scale.
             const Vec2f sc = cam.screen(x, y);
@@ -1017,8 +1012,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Vec3f D = (cam.forward + cam.right * sc.x + cam.up * sc.y) * focus - (eye.position - cam.position);
             const double scale = focus / length(D);
             const Vec3f dr = cam.right - d * dot(d, cam.right), du = cam.up - d * dot(d, cam.up);
-            gx = dot(g.d_d, dr) * px_scale * scale;
-            gy = -dot(g.d_d, du) * px_scale * scale;
+            return std::hypot(dot(g.d_d, dr) * px_scale * scale, -dot(g.d_d, du) * px_scale * scale);
         };
         // The boundary term of edge `edge` at film point (x, y): the side function's film gradient,
         // the two sides and the splat of the jump through the pixel filter. `point_weight`: the
@@ -1034,7 +1028,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             Vec3f o, d;
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             const EdgeSideGradient g = edge_side_gradient(p0, p1, o, d);
-            double gx, gy;
+            double glen;
             if (spherical) {
                 // d is the film point's unit direction: the side function's film gradient is its
                 // direction gradient along the film's tangents; the film length per unit world
@@ -1043,17 +1037,15 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 Vec3d tx, ty;
                 spherical_film_tangents(cam, x, y, tx, ty);
                 const Vec3d dd(g.d_d);
-                gx = dot(dd, tx);
-                gy = dot(dd, ty);
+                glen = std::hypot(dot(dd, tx), dot(dd, ty));
                 const Vec3d to(*edge_point - cam.position), u(normalize(p1 - p0));
                 const double dist = length(to);
                 const Vec3d w = to / dist;
                 point_weight *= spherical_jacobian(tx, ty, (u - w * dot(w, u)) / dist);
                 if (!(point_weight > 0.0)) return;
             } else {
-                film_gradient(x, y, eye, d, g, gx, gy);
+                glen = film_gradient_norm(x, y, eye, d, g);
             }
-            const double glen = std::hypot(gx, gy);
             if (!(glen > 0.0) || !std::isfinite(glen)) return;
 
             // Both sides, g > 0 (upper) and g < 0 (lower), in the limit at the edge point the
@@ -1111,15 +1103,17 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             bp = scene.bsdf_params(sp);
             return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(d, sp.ng)) >= kMinShadingCosine;
         };
-        // The rest of a sample seen in a mirror or through glass, its side function g and its
-        // film gradient's norm glen given: the edge's point at parameter s, which the scattered
-        // direction `dir` from the face's point sp passes; its two sides, found from there as from
-        // an eye (`swap`: the upper and lower sides exchanged, as a reflection does); their paths,
-        // traced from there with the sample's stream after the pending samples (the sink gets its
+        // The rest of a sample seen in a mirror or through glass, given its side function g, the
+        // norm of g's film gradient glen (nothing where that is not positive) and the film length
+        // the sample stands for: the edge's point at parameter s, which the scattered direction
+        // `dir` from the face's point sp passes; its two sides, found from there as from an eye
+        // (`swap`: the upper and lower sides exchanged, as a reflection does); their paths, traced
+        // from there with the sample's stream after the pending samples (the sink gets its
         // additions in the samples' order); and the jump, the lobe's weight times theirs, splatted.
         auto finish_smooth = [&](int64_t i, Pending& pd, const Edge& edge, const Eye& eye, float x, float y,
-                                 const EdgeSideGradient& g, double weight, const SurfacePoint& sp, float s,
-                                 const Vec3f& dir, const Vec3f& lobe, bool swap) {
+                                 const EdgeSideGradient& g, double point_weight, double glen, const SurfacePoint& sp,
+                                 float s, const Vec3f& dir, const Vec3f& lobe, bool swap) {
+            if (!(glen > 0.0) || !std::isfinite(glen)) return;
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f target = m.vertex(edge.v0) + (m.vertex(edge.v1) - m.vertex(edge.v0)) * s;
             Ray out = spawn_ray(sp, normalize(target - sp.p));
@@ -1142,7 +1136,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             pd.lu = eye.lu;
             pd.lv = eye.lv;
             pd.g = g;
-            pd.weight = float(weight);
+            pd.weight = float(point_weight / glen);
             std::fill(pd.value_u, pd.value_u + nv, 0.f);
             std::fill(pd.value_l, pd.value_l + nv, 0.f);
             finish(pd, lobe * (Lu - Ll));
@@ -1173,12 +1167,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Vec3f v0 = mirrored(m.vertex(edge.v0), pd.mirror_v[0], n);
             const Vec3f v1 = mirrored(m.vertex(edge.v1), pd.mirror_v[0], n);
             const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
-            double gx, gy;
-            film_gradient(x, y, eye, d, g, gx, gy);
-            const double glen = std::hypot(gx, gy);
-            if (!(glen > 0.0) || !std::isfinite(glen)) return;
-            finish_smooth(i, pd, edge, eye, x, y, g, point_weight / glen, sp, closest_on_segment(v0, v1, o, d),
-                          reflected, lobe, true);
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
+                          closest_on_segment(v0, v1, o, d), reflected, lobe, true);
         };
         // The boundary term of the edge `edge` seen through plane `plane` at film point (x, y)
         // (Refraction, above): where the camera ray meets a face of that plane and is refracted
@@ -1226,12 +1216,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             pd.refract_deta = dd.eta;
             pd.refract_mesh = hit.mesh;
             pd.refract_material = gm.material;
-            double gx, gy;
-            film_gradient(x, y, eye, d, g, gx, gy);
-            const double glen = std::hypot(gx, gy);
-            if (!(glen > 0.0) || !std::isfinite(glen)) return;
-            finish_smooth(i, pd, edge, eye, x, y, g, point_weight / glen, sp, closest_on_segment(p0, p1, xh, refracted),
-                          refracted, lobe, false);
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
+                          closest_on_segment(p0, p1, xh, refracted), refracted, lobe, false);
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
