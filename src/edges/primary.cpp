@@ -856,18 +856,23 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         EdgeSideGradient g;
         float weight;  // the film length the sample stands for over the film gradient's norm
         float value_u[kMaxChannelValues], value_l[kMaxChannelValues];
-        // Seen in a mirror: the mirror's face (its mesh, vertex indices and vertices); g is the
-        // side function of the virtual edge.
-        int mirror_mesh = -1;
-        int32_t mirror_tri[3] = {-1, -1, -1};
-        Vec3f mirror_v[3];
-        // Seen through glass: the glass's face (its mesh, vertex indices, material) and the
-        // adjoints of g, the refracted ray's side function, for its vertices and its index (g's
+        // The sample's edge, film point and lens sample (from `eye`), side function and weight.
+        void place(const Edge& e, float fx, float fy, const Eye& eye, const EdgeSideGradient& side, float w) {
+            edge = &e;
+            x = fx;
+            y = fy;
+            lu = eye.lu;
+            lv = eye.lv;
+            g = side;
+            weight = w;
+        }
+        // Seen in a mirror or through glass: the face met (its mesh and vertex indices) and the
+        // adjoints of g for its three vertices and, through glass, for its material's index (g's
         // camera part is the camera ray's, its edge part the edge's).
-        int refract_mesh = -1, refract_material = -1;
-        int32_t refract_tri[3] = {-1, -1, -1};
-        Vec3f refract_dv[3];
-        float refract_deta = 0.f;
+        int face_mesh = -1, face_material = -1;
+        int32_t face_tri[3] = {-1, -1, -1};
+        Vec3f face_dv[3];
+        float face_deta = 0.f;
     };
     // The side paths of edges seen in mirrors or through glass: from the mirror's or the glass's
     // point, a bounce fewer, emitters seen.
@@ -889,43 +894,17 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             sides.resize(size_t(2 * batch));
             side_L.resize(size_t(2 * batch));
         }
-        // Adds s * dg/d(vertices) of a sample seen in a mirror: g is the side function of the
-        // virtual edge, whose ends are the edge's mirrored across the plane of the mirror's face.
-        auto add_mirrored_gradient = [&](const Pending& pd, float s) {
-            const Edge& edge = *pd.edge;
-            const Mesh& m = scene.meshes[size_t(edge.mesh)];
-            const Vec3f ta = pd.mirror_v[0], u = pd.mirror_v[1] - ta, v = pd.mirror_v[2] - ta;
-            const Vec3f n = cross_normal(u, v);
-            Vec3f dp0(0.f), dp1(0.f), dq(0.f), dn(0.f);
-            d_mirrored(m.vertex(edge.v0), ta, n, pd.g.d_e0 * s, dp0, dq, dn);
-            d_mirrored(m.vertex(edge.v1), ta, n, pd.g.d_e1 * s, dp1, dq, dn);
-            if (vertices_wanted(slots, edge.mesh)) {
-                const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
-                sink.add3(vs, edge.v0, dp0.x, dp0.y, dp0.z);
-                sink.add3(vs, edge.v1, dp1.x, dp1.y, dp1.z);
-            }
-            if (vertices_wanted(slots, pd.mirror_mesh)) {
-                // q = the face's first vertex, n = cross_normal(u, v): the cross product's adjoint
-                // dc, and that of c = cross(u, v).
-                const Vec3f dc = d_cross_normal(u, v, dn);
-                const Vec3f du = cross(v, dc), dv = cross(dc, u), da = dq - du - dv;
-                const GradSlot& ms = slots.meshes[size_t(pd.mirror_mesh)].vertices;
-                sink.add3(ms, pd.mirror_tri[0], da.x, da.y, da.z);
-                sink.add3(ms, pd.mirror_tri[1], du.x, du.y, du.z);
-                sink.add3(ms, pd.mirror_tri[2], dv.x, dv.y, dv.z);
-            }
-        };
-        // Adds s * dg/d(the glass's vertices and index) of a sample seen through glass.
-        auto add_refracted_gradient = [&](const Pending& pd, float s) {
-            if (vertices_wanted(slots, pd.refract_mesh)) {
-                const GradSlot& gs = slots.meshes[size_t(pd.refract_mesh)].vertices;
+        // Adds s * dg/d(the face's vertices and index) of a sample seen in a mirror or through glass.
+        auto add_face_gradient = [&](const Pending& pd, float s) {
+            if (vertices_wanted(slots, pd.face_mesh)) {
+                const GradSlot& fs = slots.meshes[size_t(pd.face_mesh)].vertices;
                 for (int c = 0; c < 3; ++c) {
-                    const Vec3f a = pd.refract_dv[c] * s;
-                    sink.add3(gs, pd.refract_tri[c], a.x, a.y, a.z);
+                    const Vec3f a = pd.face_dv[c] * s;
+                    sink.add3(fs, pd.face_tri[c], a.x, a.y, a.z);
                 }
             }
-            if (ior_wanted(pd.refract_material))
-                sink.add(slots.materials[size_t(pd.refract_material)].ior, 0, s * pd.refract_deta);
+            if (ior_wanted(pd.face_material))
+                sink.add(slots.materials[size_t(pd.face_material)].ior, 0, s * pd.face_deta);
         };
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
         auto finish = [&](Pending& pd, const Vec3f& L) {
@@ -960,14 +939,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             };
             // Adds s * dg/d(parameter) to the sink.
             auto add_side_gradient = [&](float s) {
-                if (pd.mirror_mesh >= 0) {
-                    add_mirrored_gradient(pd, s);
-                } else if (vertices_wanted(slots, edge.mesh)) {
+                if (vertices_wanted(slots, edge.mesh)) {
                     const GradSlot& vs = slots.meshes[size_t(edge.mesh)].vertices;
                     sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
                     sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
                 }
-                if (pd.refract_mesh >= 0) add_refracted_gradient(pd, s);
+                if (pd.face_mesh >= 0) add_face_gradient(pd, s);
                 if (camera_wanted) {
                     float cg[kCameraParams] = {};
                     d_camera_ray(scene.camera_params, x, y, pd.lu, pd.lv, g.d_o * s, g.d_d * s, cg);
@@ -1063,13 +1040,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 eval_hit_channels(scene, layout, first_u.ray, first_u.found, first_u.hit, pd.value_u);
                 eval_hit_channels(scene, layout, first_l.ray, first_l.found, first_l.hit, pd.value_l);
             }
-            pd.edge = &edge;
-            pd.x = x;
-            pd.y = y;
-            pd.lu = eye.lu;
-            pd.lv = eye.lv;
-            pd.g = g;
-            pd.weight = float(point_weight / glen);
+            pd.place(edge, x, y, eye, g, float(point_weight / glen));
             if (radiance) {
                 // Both side paths with the same stream: trace_path's radiance from each side's
                 // ray and hit.
@@ -1087,9 +1058,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         };
         // Whether the camera ray through film point (x, y) from `eye` (o, d) meets a face of plane
         // `plane` first, smooth and not seen edge-on (then its shading normal is bent,
-        // bend_normal: no plane's mirror or pane); its hit, point and material.
-        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, Hit& hit,
-                               SurfacePoint& sp, BsdfParams& bp) {
+        // bend_normal: no plane's mirror or pane); its point, material and vertices tv, its mesh
+        // and vertex indices into pd.
+        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
+                               BsdfParams& bp, Vec3f* tv, Pending& pd) {
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             Ray ray;
             ray.origin = o;
@@ -1098,10 +1070,25 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
                 smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
                 return false;
-            hit = at.hit;
             sp = scene.surface_point(at.hit);
             bp = scene.bsdf_params(sp);
+            const Mesh& fm = scene.meshes[size_t(at.hit.mesh)];
+            pd.face_mesh = at.hit.mesh;
+            for (int c = 0; c < 3; ++c) {
+                pd.face_tri[c] = fm.indices[3 * at.hit.prim + c];
+                tv[c] = fm.vertex(pd.face_tri[c]);
+            }
             return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(d, sp.ng)) >= kMinShadingCosine;
+        };
+        // pd's face adjoints for the adjoints dq, dn of the face's plane: q its first vertex, n =
+        // cross_normal(u, v) of its edges u, v from there (d_cross_normal gives the adjoint of
+        // c = cross(u, v)).
+        auto set_face_adjoints = [&](Pending& pd, const Vec3f& u, const Vec3f& v, const Vec3f& dq, const Vec3f& dn) {
+            const Vec3f dc = d_cross_normal(u, v, dn);
+            const Vec3f du = cross(v, dc), dv = cross(dc, u);
+            pd.face_dv[0] = dq - du - dv;
+            pd.face_dv[1] = du;
+            pd.face_dv[2] = dv;
         };
         // The rest of a sample seen in a mirror or through glass, given its side function g, the
         // norm of g's film gradient glen (nothing where that is not positive) and the film length
@@ -1130,13 +1117,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             Rng ru = stream, rl = stream;
             const Vec3f Lu = trace_path(scene, reflected_opt, upper.ray, ru, counters, nullptr, &upper);
             const Vec3f Ll = trace_path(scene, reflected_opt, lower.ray, rl, counters, nullptr, &lower);
-            pd.edge = &edge;
-            pd.x = x;
-            pd.y = y;
-            pd.lu = eye.lu;
-            pd.lv = eye.lv;
-            pd.g = g;
-            pd.weight = float(point_weight / glen);
+            pd.place(edge, x, y, eye, g, float(point_weight / glen));
             std::fill(pd.value_u, pd.value_u + nv, 0.f);
             std::fill(pd.value_l, pd.value_l + nv, 0.f);
             finish(pd, lobe * (Lu - Ll));
@@ -1148,25 +1129,26 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // sign, so the virtual edge's upper side is the edge's lower one seen from the mirror.
         auto splat_mirrored = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
                                   double point_weight) {
-            Vec3f o, d, reflected, lobe;
-            Hit hit;
+            Vec3f o, d, reflected, lobe, tv[3];
             SurfacePoint sp;
             BsdfParams bp;
-            if (!meets_plane(eye, x, y, plane, o, d, hit, sp, bp) ||
+            Pending pd;
+            if (!meets_plane(eye, x, y, plane, o, d, sp, bp, tv, pd) ||
                 !delta_scatter(delta_params(bp), sp.ng, -d, false, 1.f, reflected, lobe))
                 return;
-            Pending pd;
-            const Mesh& mm = scene.meshes[size_t(hit.mesh)];
-            pd.mirror_mesh = hit.mesh;
-            for (int c = 0; c < 3; ++c) {
-                pd.mirror_tri[c] = mm.indices[3 * hit.prim + c];
-                pd.mirror_v[c] = mm.vertex(pd.mirror_tri[c]);
-            }
-            const Vec3f n = cross_normal(pd.mirror_v[1] - pd.mirror_v[0], pd.mirror_v[2] - pd.mirror_v[0]);
+            const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], n = cross_normal(u, v);
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
-            const Vec3f v0 = mirrored(m.vertex(edge.v0), pd.mirror_v[0], n);
-            const Vec3f v1 = mirrored(m.vertex(edge.v1), pd.mirror_v[0], n);
-            const EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            const Vec3f v0 = mirrored(p0, tv[0], n), v1 = mirrored(p1, tv[0], n);
+            // The virtual edge's side function; its edge part taken back through the mirroring to
+            // the edge's vertices and the face's plane.
+            EdgeSideGradient g = edge_side_gradient(v0, v1, o, d);
+            const Vec3f a0 = g.d_e0, a1 = g.d_e1;
+            Vec3f dq(0.f), dn(0.f);
+            g.d_e0 = g.d_e1 = Vec3f(0.f);
+            d_mirrored(p0, tv[0], n, a0, g.d_e0, dq, dn);
+            d_mirrored(p1, tv[0], n, a1, g.d_e1, dq, dn);
+            set_face_adjoints(pd, u, v, dq, dn);
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
                           closest_on_segment(v0, v1, o, d), reflected, lobe, true);
         };
@@ -1177,18 +1159,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // (d_delta_scatter), and the face's vertices and index likewise.
         auto splat_refracted = [&](int64_t i, const Eye& eye, const Edge& edge, int plane, float x, float y,
                                    double point_weight) {
-            Vec3f o, d, refracted, lobe;
-            Hit hit;
+            Vec3f o, d, refracted, lobe, tv[3];
             SurfacePoint sp;
             BsdfParams bp;
-            if (!meets_plane(eye, x, y, plane, o, d, hit, sp, bp) || bp.kind != MaterialKind::Dielectric) return;
             Pending pd;
-            const Mesh& gm = scene.meshes[size_t(hit.mesh)];
-            Vec3f tv[3];
-            for (int c = 0; c < 3; ++c) {
-                pd.refract_tri[c] = gm.indices[3 * hit.prim + c];
-                tv[c] = gm.vertex(pd.refract_tri[c]);
-            }
+            if (!meets_plane(eye, x, y, plane, o, d, sp, bp, tv, pd) || bp.kind != MaterialKind::Dielectric) return;
             const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], n = cross_normal(u, v);
             const DeltaParams<float> dp = delta_params(bp);
             if (!delta_scatter(dp, n, -d, true, 1.f, refracted, lobe)) return;
@@ -1208,14 +1183,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             EdgeSideGradient g = G;
             g.d_o = G.d_o - n * k;
             g.d_d = g.d_o * tp - dd.wo;
-            const Vec3f dc = d_cross_normal(u, v, (tv[0] - xh) * k + dd.n);
-            const Vec3f du = cross(v, dc), dv = cross(dc, u);
-            pd.refract_dv[0] = n * k - du - dv;
-            pd.refract_dv[1] = du;
-            pd.refract_dv[2] = dv;
-            pd.refract_deta = dd.eta;
-            pd.refract_mesh = hit.mesh;
-            pd.refract_material = gm.material;
+            set_face_adjoints(pd, u, v, n * k, (tv[0] - xh) * k + dd.n);
+            pd.face_deta = dd.eta;
+            pd.face_material = scene.meshes[size_t(pd.face_mesh)].material;
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
                           closest_on_segment(p0, p1, xh, refracted), refracted, lobe, false);
         };
