@@ -31,7 +31,8 @@ struct FilmEdge {
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
     int plane = -1;       // seen in this plane of smooth faces (SmoothPlanes::planes), or directly (-1)
     bool refracted = false;  // through the plane (else reflected in it)
-    double u0 = 0.0, u1 = 1.0;  // refracted: the part of the edge sampled (its ends' parameters)
+    int chain = -1;          // seen through this chain of two planes (Chains; plane: its first)
+    double u0 = 0.0, u1 = 1.0;  // refracted, chained: the part of the edge sampled (its ends' parameters)
 };
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
@@ -318,6 +319,11 @@ struct SmoothPlane {
     int material = -1;
     bool behind = false;     // the camera behind its faces (by their winding)
     TFrame<double> axes;     // about n
+    // How its faces turn a ray (for chains of two planes, below): the direction's part of its
+    // material's delta_params (no textures: those weigh, they do not turn), about the faces'
+    // normal by their winding (delta_scatter finds the side a ray comes from).
+    DeltaParams<double> delta;
+    Vec3d winding_n;
     // The box its faces span in the plane, in those axes from q.
     double lo[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
     double hi[2] = {-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
@@ -403,6 +409,11 @@ struct SmoothPlanes {
                     mp.refracts = refracts;
                     mp.eta = behind ? 1.0 / ior : ior;
                     mp.material = m.material;
+                    mp.delta.dielectric = mat.kind == MaterialKind::Dielectric;
+                    mp.delta.coat = mat.kind == MaterialKind::Plastic;
+                    mp.delta.two_sided = mat.two_sided;
+                    mp.delta.eta = ior;
+                    mp.winding_n = normalize(Vec3d(behind ? -n : n));
                     mp.x0 = mp.y0 = std::numeric_limits<double>::infinity();
                     mp.x1 = mp.y1 = -std::numeric_limits<double>::infinity();
                     planes.push_back(mp);
@@ -514,6 +525,125 @@ bool refracted_direction(const Vec3d& w, const Vec3d& n, double eta, Vec3d& r) {
     const double c1 = -dot(w, n), q = (1.0 - c1 * c1) / (eta * eta);
     if (!(c1 > 0.0) || q >= 1.0) return false;
     r = w / eta + n * (c1 / eta - std::sqrt(1.0 - q));
+    return true;
+}
+
+// Chains of two planes. Some edges are seen after two smooth faces: through a pane (in at one
+// face, out at the other), in a face of a glass object from inside after entering at another
+// (a Fresnel or total internal reflection), in a mirror seen in another mirror. A chain is two
+// planes of SmoothPlanes, each reflecting or (glass of one index) refracting, and the film point
+// that sees an edge point e through it has no closed form: the point x1 of the first plane where
+// the camera ray must meet it is found by Gauss-Newton steps on x1's coordinates in that plane
+// (the ray from the eye through x1, turned there, meets the second plane, is turned there, and
+// must pass e). An edge seen so is sampled like one seen through a plane: along the edge, each
+// point weighted by the film length per unit of the edge's parameter.
+struct Chain {
+    int plane[2];
+    bool refract[2];
+};
+
+// At most this many edge set-ups over all chains (each costs a few Newton solves).
+constexpr double kChainSetups = double(1 << 18);
+
+// Follows the ray from o along d through the chain's (unbounded) planes: x1, the first plane's
+// point, x, the second's, and dir, the direction leaving it. False where the ray misses a plane
+// (parallel to it, or behind) or a lobe does not exist there.
+bool follow_chain(const std::vector<SmoothPlane>& planes, const Chain& ch, Vec3d o, Vec3d d, Vec3d& x1, Vec3d& x,
+                  Vec3d& dir) {
+    for (int k = 0; k < 2; ++k) {
+        const SmoothPlane& mp = planes[size_t(ch.plane[k])];
+        const double t = dot(Vec3d(mp.q) - o, mp.winding_n) / dot(d, mp.winding_n);
+        if (!(t > 0.0) || !std::isfinite(t)) return false;
+        o = o + d * t;
+        if (k == 0) x1 = o;
+        Vec3d weight;
+        if (!delta_scatter(mp.delta, mp.winding_n, -d, ch.refract[k], 1.0, d, weight)) return false;
+    }
+    x = o;
+    dir = d;
+    return true;
+}
+
+// A first guess of x1 for edge point e: the ray from the eye (or along `forward`, parallel rays)
+// to e's image unfolded across the reflecting planes (exact for two reflections, refractions
+// taken straight), where it meets the first plane; e's foot on it where that line is parallel.
+Vec3d chain_guess(const std::vector<SmoothPlane>& planes, const Chain& ch, const Vec3d& eye, bool parallel,
+                  const Vec3d& forward, const Vec3d& e) {
+    Vec3d v = e;
+    for (int k = 1; k >= 0; --k)
+        if (!ch.refract[k]) {
+            const SmoothPlane& mp = planes[size_t(ch.plane[k])];
+            v = v - mp.winding_n * (2.0 * dot(v - Vec3d(mp.q), mp.winding_n));
+        }
+    const SmoothPlane& first = planes[size_t(ch.plane[0])];
+    const Vec3d q(first.q), n(first.winding_n);
+    const Vec3d from = parallel ? v : eye, dir = parallel ? forward : v - eye;
+    const Vec3d x = from + dir * (dot(q - from, n) / dot(dir, n));
+    if (std::isfinite(x.x) && std::isfinite(x.y) && std::isfinite(x.z)) return x;
+    return e - n * dot(e - q, n);
+}
+
+// The chain's point x1 (in: the guess) and x2 through which the eye (a point, or parallel rays
+// along `forward`) sees e. Steps that do not bring the ray leaving x2 closer to e (in angle) are
+// halved; false where they stall before it passes e to 1e-10 radians.
+bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const Vec3d& eye, bool parallel,
+                 const Vec3d& forward, const Vec3d& e, Vec3d& x1, Vec3d& x2) {
+    const SmoothPlane& first = planes[size_t(ch.plane[0])];
+    const Vec3d q(first.q);
+    const TFrame<double>& axes = first.axes;
+    auto residual = [&](double a, double b, Vec3d& r, Vec3d& p1, Vec3d& p2) {
+        const Vec3d x = q + axes.s * a + axes.t * b;
+        Vec3d dir;
+        if (!follow_chain(planes, ch, parallel ? x - forward : eye, parallel ? forward : normalize(x - eye), p1, p2,
+                          dir))
+            return false;
+        const Vec3d to = e - p2;
+        const double len = length(to);
+        if (!(len > 0.0)) return false;
+        r = to / len - normalize(dir);
+        return std::isfinite(r.x) && std::isfinite(r.y) && std::isfinite(r.z);
+    };
+    const Vec3d local = axes.to_local(x1 - q);
+    double a = local.x, b = local.y;
+    Vec3d r, p1, p2;
+    if (!residual(a, b, r, p1, p2)) return false;
+    double err = length(r);
+    const double scale = std::abs(first.hi[0] - first.lo[0]) + std::abs(first.hi[1] - first.lo[1]);
+    int slow = 0;  // steps in a row that did not halve the error, far from a root
+    for (int it = 0; it < 24 && err > 1e-13; ++it) {
+        const double h = 1e-7 * (scale + std::abs(a) + std::abs(b));
+        Vec3d ra, rb, unused1, unused2;
+        double ha = h, hb = h;
+        if (!residual(a + ha, b, ra, unused1, unused2)) {
+            ha = -h;
+            if (!residual(a + ha, b, ra, unused1, unused2)) return false;
+        }
+        if (!residual(a, b + hb, rb, unused1, unused2)) {
+            hb = -h;
+            if (!residual(a, b + hb, rb, unused1, unused2)) return false;
+        }
+        const Vec3d ja = (ra - r) / ha, jb = (rb - r) / hb;
+        const double m00 = dot(ja, ja), m01 = dot(ja, jb), m11 = dot(jb, jb);
+        const double g0 = dot(ja, r), g1 = dot(jb, r), det = m00 * m11 - m01 * m01;
+        if (!(det > 0.0)) return false;
+        double da = -(m11 * g0 - m01 * g1) / det, db = -(m00 * g1 - m01 * g0) / det;
+        bool stepped = false;
+        const double before = err;
+        for (int halve = 0; halve < 10 && !stepped; ++halve, da *= 0.5, db *= 0.5) {
+            Vec3d rn, n1, n2;
+            if (residual(a + da, b + db, rn, n1, n2) && length(rn) < err) {
+                a += da, b += db, r = rn, p1 = n1, p2 = n2, err = length(rn);
+                stepped = true;
+            }
+        }
+        // (Gauss-Newton steps near a root shrink the error fast: slow ones, far from any, tend
+        // to a minimum of the error that is no root.)
+        slow = err > 0.5 * before && err > 1e-6 ? slow + 1 : 0;
+        if (!stepped || slow == 3) break;
+    }
+    if (!(err <= 1e-10)) return false;
+    x1 = p1;
+    x2 = p2;
     return true;
 }
 
@@ -632,6 +762,18 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     auto ior_wanted = [&](int material) {
         return size_t(material) < slots.materials.size() && slots.materials[size_t(material)].ior.wanted();
     };
+    // The film point (fx, fy) through which `eye` sees point x of plane mp (parallel rays: the
+    // camera's, whose direction is the forward axis).
+    auto plane_point_film = [&](const SmoothPlane& mp, const Eye& eye, const Vec3d& x, double& fx, double& fy) {
+        if (!has_eye(cam.type)) {
+            const Vec3d qc = camera_axes(cam, Vec3f(x) - cam.position);
+            fx = film_x(cam, qc.x);
+            fy = film_y(cam, qc.y);
+            return std::isfinite(fx) && std::isfinite(fy);
+        }
+        double jacobian;
+        return film_point(cam, eye, Vec3f(x), mp.n, fx, fy, jacobian);
+    };
     // The film point (fx, fy) that `eye` sees point e (on the far side of refracting plane mp)
     // at: through the plane's refraction point (a pinhole, a lens point), or for parallel rays
     // along their refracted direction.
@@ -642,14 +784,100 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             Vec3d r;
             if (!refracted_direction(Vec3d(cam.forward), n, mp.eta, r)) return false;
             x = e - r * (dot(e - q, n) / dot(r, n));
-            const Vec3d qc = camera_axes(cam, Vec3f(x) - cam.position);
-            fx = film_x(cam, qc.x);
-            fy = film_y(cam, qc.y);
-            return std::isfinite(fx) && std::isfinite(fy);
+        } else if (!refraction_point(Vec3d(eye.position), e, q, n, mp.eta, x)) {
+            return false;
         }
-        if (!refraction_point(Vec3d(eye.position), e, q, n, mp.eta, x)) return false;
-        double jacobian;
-        return film_point(cam, eye, Vec3f(x), mp.n, fx, fy, jacobian);
+        return plane_point_film(mp, eye, x, fx, fy);
+    };
+    // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
+    // pair of planes and each lobe of each (a refraction only where the plane refracts) whose
+    // second plane has faces on the side of the first the first lobe sends rays to, and whose
+    // first plane has faces on the side of a one-sided second plane's front. Up to kChainSetups
+    // edge set-ups (at least one chain's), the chains first whose rays most likely meet their
+    // planes' faces (below).
+    // The sides of plane `of` (by its winding) that the box of plane p's faces reaches: bit 0
+    // its front, bit 1 its back.
+    auto sides_reached = [](const SmoothPlane& p, const SmoothPlane& of) {
+        int sides = 0;
+        for (double u : {p.lo[0], p.hi[0]})
+            for (double v : {p.lo[1], p.hi[1]}) {
+                const double h = dot(Vec3d(p.q) + p.axes.s * u + p.axes.t * v - Vec3d(of.q), of.winding_n);
+                sides |= (h > double(of.tol) ? 1 : 0) | (h < -double(of.tol) ? 2 : 0);
+            }
+        return sides;
+    };
+    std::vector<Chain> chains;
+    if (planes_seen && opt.max_bounces >= 2) {
+        const std::vector<SmoothPlane>& planes = smooth_planes.planes;
+        // The share of the rays from the camera through plane a's faces, turned there
+        // (`refract`), that may meet plane b's faces: where they meet b's plane, the box of the
+        // rays through the corners of a's faces' box (widened by a quarter, for a refraction's
+        // bending), the part of it within b's faces' box. (Exact but for the widening: a
+        // reflection's rays come from one point, and parallel rays refract into one direction.)
+        // All where a corner's ray does not reach the plane, and with a thin lens.
+        const Vec3d eye(cam.position), forward(cam.forward);
+        const bool parallel = !has_eye(cam.type);
+        auto beam_share = [&](const SmoothPlane& a, bool refract, const SmoothPlane& b) {
+            if (cam.type == CameraType::ThinLens) return 1.0;
+            double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+            for (double u : {a.lo[0], a.hi[0]})
+                for (double v : {a.lo[1], a.hi[1]}) {
+                    const Vec3d c = Vec3d(a.q) + a.axes.s * u + a.axes.t * v;
+                    // (A corner behind the camera: its rays through a's faces reach any way.)
+                    if (!parallel && !(dot(c - eye, forward) > 0.0)) return 1.0;
+                    const Vec3d d = parallel ? forward : normalize(c - eye);
+                    Vec3d dir, weight;
+                    if (!delta_scatter(a.delta, a.winding_n, -d, refract, 1.0, dir, weight)) return 1.0;
+                    const double t = dot(Vec3d(b.q) - c, b.winding_n) / dot(dir, b.winding_n);
+                    if (!(t > 0.0) || !std::isfinite(t)) return 1.0;
+                    const Vec3d l = b.axes.to_local(c + dir * t - Vec3d(b.q));
+                    lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
+                    lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
+                }
+            double area = 1.0, within = 1.0;
+            for (int k = 0; k < 2; ++k) {
+                const double w = 0.25 * (hi[k] - lo[k]) + 1e-9 * (std::abs(b.hi[k]) + std::abs(b.lo[k]));
+                lo[k] -= w, hi[k] += w;
+                area *= hi[k] - lo[k];
+                within *= std::max(0.0, std::min(hi[k], b.hi[k]) - std::max(lo[k], b.lo[k]));
+            }
+            return area > 0.0 ? within / area : 1.0;
+        };
+        // The candidates, by the film area of their first plane's window times that share.
+        std::vector<std::pair<double, Chain>> candidates;
+        for (size_t p1 = 0; p1 < planes.size(); ++p1)
+            for (size_t p2 = 0; p2 < planes.size(); ++p2) {
+                if (p1 == p2) continue;
+                const SmoothPlane &a = planes[p1], &b = planes[p2];
+                // Reflected rays stay on the camera's side of the first plane (its front as the
+                // camera sees it: mp.n), refracted ones cross it.
+                const int reach = sides_reached(b, a);
+                const int camera_side = a.behind ? 2 : 1;
+                const bool one_sided = !b.delta.dielectric && !b.delta.two_sided;
+                if (one_sided && !(sides_reached(a, b) & 1)) continue;
+                const double film_area = (a.x1 - a.x0) * (a.y1 - a.y0);
+                for (int r1 = 0; r1 < (a.refracts ? 2 : 1); ++r1) {
+                    if (!(reach & (r1 ? 3 - camera_side : camera_side))) continue;
+                    const double share = beam_share(a, r1 == 1, b);
+                    if (!(share > 0.0)) continue;
+                    for (int r2 = 0; r2 < (b.refracts ? 2 : 1); ++r2)
+                        candidates.push_back({film_area * share, Chain{{int(p1), int(p2)}, {r1 == 1, r2 == 1}}});
+                }
+            }
+        std::stable_sort(candidates.begin(), candidates.end(),
+                         [](const auto& x, const auto& y) { return x.first > y.first; });
+        const size_t keep = size_t(std::max(1.0, kChainSetups / std::max(1.0, double(all_edges.size()))));
+        for (size_t k = 0; k < candidates.size() && k < keep; ++k) chains.push_back(candidates[k].second);
+    }
+    // The film point that `eye` sees point e at through chain ch; x1 (in: a guess where `guessed`)
+    // and x2 its planes' points.
+    auto chain_film = [&](const Chain& ch, const Eye& eye, const Vec3d& e, bool guessed, Vec3d& x1, Vec3d& x2,
+                          double& fx, double& fy) {
+        const bool parallel = !has_eye(cam.type);
+        const Vec3d from(eye.position), forward(cam.forward);
+        if (!guessed) x1 = chain_guess(smooth_planes.planes, ch, from, parallel, forward, e);
+        return chain_point(smooth_planes.planes, ch, from, parallel, forward, e, x1, x2) &&
+               plane_point_film(smooth_planes.planes[size_t(ch.plane[0])], eye, x1, fx, fy);
     };
     // Whether the refraction points of the segment (e0, e1) beyond plane mp (from the camera's
     // position, or from any point of a thin lens) may lie on the plane's faces: whether the
@@ -726,11 +954,98 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         fe.refracted = true;
         return fe.len > 0.0;
     };
+    // The edge e of mesh m seen through chain ch: its part on the side of the second plane the
+    // rays leave it to (the parameters u0, u1 of its ends), sampled by the film length of the
+    // polyline through the film points of five of its points (those the chain sees). Left out
+    // where no first-plane or second-plane point found comes near the faces of its plane.
+    auto chained_film_edge = [&](const Chain& ch, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+        const SmoothPlane& a = smooth_planes.planes[size_t(ch.plane[0])];
+        const SmoothPlane& b = smooth_planes.planes[size_t(ch.plane[1])];
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, a.mesh) &&
+            !vertices_wanted(slots, b.mesh) && !(ch.refract[0] && ior_wanted(a.material)) &&
+            !(ch.refract[1] && ior_wanted(b.material)))
+            return false;
+        // The sides of the second plane rays arrive from (where the first plane's faces are),
+        // and leave to.
+        const int in = sides_reached(a, b);
+        const int out = ch.refract[1] ? ((in & 1) << 1) | ((in & 2) >> 1) : in;
+        const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
+        const double s0 = dot(p0 - Vec3d(b.q), b.winding_n), s1 = dot(p1 - Vec3d(b.q), b.winding_n);
+        if (out == 1 || out == 2) {
+            const double sign = out == 1 ? 1.0 : -1.0, h0 = sign * s0, h1 = sign * s1;
+            if (!(h0 > double(b.tol) || h1 > double(b.tol))) return false;
+            fe.u0 = h0 < 0.0 ? h0 / (h0 - h1) : 0.0;
+            fe.u1 = h1 < 0.0 ? h0 / (h0 - h1) : 1.0;
+        } else if (out == 0) {
+            return false;
+        }
+        // Five points' film points, each solve starting from the last's.
+        constexpr int kPoints = 5;
+        double fx[kPoints], fy[kPoints];
+        bool ok[kPoints];
+        Vec3d x1, x2, middle_x1, middle_x2;
+        bool guessed = false, any_middle = false;
+        double box1[4] = {1e300, 1e300, -1e300, -1e300}, box2[4] = {1e300, 1e300, -1e300, -1e300};
+        auto hold = [](double* box, const SmoothPlane& mp, const Vec3d& x) {
+            const Vec3d l = mp.axes.to_local(x - Vec3d(mp.q));
+            box[0] = std::min(box[0], l.x), box[1] = std::min(box[1], l.y);
+            box[2] = std::max(box[2], l.x), box[3] = std::max(box[3], l.y);
+        };
+        int found = 0;
+        for (int k = 0; k < kPoints; ++k) {
+            const double u = fe.u0 + (fe.u1 - fe.u0) * double(k) / double(kPoints - 1);
+            ok[k] = chain_film(ch, centre, p0 + (p1 - p0) * u, guessed, x1, x2, fx[k], fy[k]);
+            guessed = ok[k];
+            if (!ok[k]) continue;
+            ++found;
+            hold(box1, a, x1);
+            hold(box2, b, x2);
+            if (!any_middle || k <= kPoints / 2) middle_x1 = x1, middle_x2 = x2, any_middle = true;
+        }
+        if (found < 2) return false;
+        // The points found, and the faces' boxes, each widened by half the points' spread (the
+        // curve between the points bends).
+        auto near = [](const double* box, const SmoothPlane& mp) {
+            const double wx = 0.5 * (box[2] - box[0]), wy = 0.5 * (box[3] - box[1]);
+            const double margin = 1e-6 * (std::abs(mp.hi[0] - mp.lo[0]) + std::abs(mp.hi[1] - mp.lo[1]));
+            return box[0] - wx <= mp.hi[0] + margin && box[2] + wx >= mp.lo[0] - margin &&
+                   box[1] - wy <= mp.hi[1] + margin && box[3] + wy >= mp.lo[1] - margin;
+        };
+        if (!near(box1, a) || !near(box2, b)) return false;
+        double len = 0.0;
+        for (int k = 1, last = -1; k <= kPoints; ++k) {
+            const int j = k - 1;
+            if (!ok[j]) continue;
+            if (last >= 0) len += std::hypot(fx[j] - fx[last], fy[j] - fy[last]);
+            last = j;
+        }
+        // Whether it folds, seen from the second plane's point of a middle point (parallel rays
+        // stay parallel through flat faces).
+        EdgeEye seen_from;
+        if (has_eye(cam.type)) {
+            seen_from.origin = Vec3f(middle_x2);
+        } else {
+            Vec3d o1, o2, dir;
+            if (!follow_chain(smooth_planes.planes, ch, middle_x1 - Vec3d(cam.forward), Vec3d(cam.forward), o1, o2, dir))
+                return false;
+            seen_from.parallel = true;
+            seen_from.dir = Vec3f(dir);
+        }
+        if (!is_fold(seen_from, m, e) && e.kind == EdgeKind::Smooth) {
+            fe.weight = smooth_weights[size_t(index)];
+            if (!(fe.weight > 0.0)) return false;
+        }
+        fe.len = len * fe.weight;
+        fe.chain = int(&ch - chains.data());
+        fe.plane = ch.plane[0];
+        return fe.len > 0.0;
+    };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     // Each edge directly, then reflected in each plane of smooth faces, then refracted by each.
     const int64_t num_planes = int64_t(smooth_planes.planes.size());
-    const int64_t num_setups = num_edges * (1 + 2 * num_planes);
+    const int64_t num_chains = int64_t(chains.size());
+    const int64_t num_setups = num_edges * (1 + 2 * num_planes + num_chains);
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_setups + kSetupChunk - 1) / kSetupChunk));
     for_each_chunk(opt, num_setups, kSetupChunk, [&](int64_t begin, int64_t end) {
         // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
@@ -741,6 +1056,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const int64_t index = setup % num_edges, slot = setup / num_edges - 1;
             const Edge& e = all_edges[size_t(index)];
             if (e.flat) continue;
+            if (slot >= 2 * num_planes) {
+                FilmEdge fe;
+                if (!chained_film_edge(chains[size_t(slot - 2 * num_planes)], scene.meshes[size_t(e.mesh)], e, index, fe))
+                    continue;
+                fe.edge = size_t(index);
+                film_edges.push_back(fe);
+                continue;
+            }
             if (slot >= 0) {
                 FilmEdge fe;
                 const int64_t plane = slot % num_planes;
@@ -866,19 +1189,25 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             g = side;
             weight = w;
         }
-        // Seen in a mirror or through glass: the face met (its mesh and vertex indices) and the
-        // adjoints of g for its three vertices and, through glass, for its material's index (g's
-        // camera part is the camera ray's, its edge part the edge's).
-        int face_mesh = -1, face_material = -1;
-        int32_t face_tri[3] = {-1, -1, -1};
-        Vec3f face_dv[3];
-        float face_deta = 0.f;
+        // Seen in a mirror or through glass: the faces met (up to two, through a chain), each
+        // with its mesh and vertex indices and the adjoints of g for its three vertices and,
+        // where it refracts, for its material's index (g's camera part is the camera ray's, its
+        // edge part the edge's).
+        struct Face {
+            int mesh = -1, material = -1;
+            int32_t tri[3] = {-1, -1, -1};
+            Vec3f dv[3];
+            float deta = 0.f;
+        };
+        Face faces[2];
     };
     // The side paths of edges seen in mirrors or through glass: from the mirror's or the glass's
     // point, a bounce fewer, emitters seen.
     RenderOptions reflected_opt = opt;
     reflected_opt.max_bounces = opt.max_bounces - 1;
     reflected_opt.hide_emitters = false;
+    RenderOptions chained_opt = reflected_opt;
+    chained_opt.max_bounces = opt.max_bounces - 2;
     constexpr int64_t kSampleChunk = 4096;
     for_each_chunk(opt, n_direct + n_smooth, kSampleChunk, [&](int64_t begin, int64_t end) {
         GradSink& sink = sinks.local();
@@ -896,15 +1225,18 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         // Adds s * dg/d(the face's vertices and index) of a sample seen in a mirror or through glass.
         auto add_face_gradient = [&](const Pending& pd, float s) {
-            if (vertices_wanted(slots, pd.face_mesh)) {
-                const GradSlot& fs = slots.meshes[size_t(pd.face_mesh)].vertices;
-                for (int c = 0; c < 3; ++c) {
-                    const Vec3f a = pd.face_dv[c] * s;
-                    sink.add3(fs, pd.face_tri[c], a.x, a.y, a.z);
+            for (const Pending::Face& face : pd.faces) {
+                if (face.mesh < 0) break;
+                if (vertices_wanted(slots, face.mesh)) {
+                    const GradSlot& fs = slots.meshes[size_t(face.mesh)].vertices;
+                    for (int c = 0; c < 3; ++c) {
+                        const Vec3f a = face.dv[c] * s;
+                        sink.add3(fs, face.tri[c], a.x, a.y, a.z);
+                    }
                 }
+                if (ior_wanted(face.material))
+                    sink.add(slots.materials[size_t(face.material)].ior, 0, s * face.deta);
             }
-            if (ior_wanted(pd.face_material))
-                sink.add(slots.materials[size_t(pd.face_material)].ior, 0, s * pd.face_deta);
         };
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
         auto finish = [&](Pending& pd, const Vec3f& L) {
@@ -944,7 +1276,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     sink.add3(vs, edge.v0, s * g.d_e0.x, s * g.d_e0.y, s * g.d_e0.z);
                     sink.add3(vs, edge.v1, s * g.d_e1.x, s * g.d_e1.y, s * g.d_e1.z);
                 }
-                if (pd.face_mesh >= 0) add_face_gradient(pd, s);
+                if (pd.faces[0].mesh >= 0) add_face_gradient(pd, s);
                 if (camera_wanted) {
                     float cg[kCameraParams] = {};
                     d_camera_ray(scene.camera_params, x, y, pd.lu, pd.lv, g.d_o * s, g.d_d * s, cg);
@@ -1056,39 +1388,64 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             if (++npending == batch) flush();
         };
-        // Whether the camera ray through film point (x, y) from `eye` (o, d) meets a face of plane
-        // `plane` first, smooth and not seen edge-on (then its shading normal is bent,
-        // bend_normal: no plane's mirror or pane); its point, material and vertices tv, its mesh
-        // and vertex indices into pd.
-        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
-                               BsdfParams& bp, Vec3f* tv, Pending& pd) {
-            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
-            Ray ray;
-            ray.origin = o;
-            ray.dir = d;
-            const FirstHit at = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
+        // Whether `ray` meets a face of plane `plane` first (`hide`: past hidden emitters), smooth
+        // and not met edge-on (then its shading normal is bent, bend_normal: no plane's mirror or
+        // pane); its point, material and vertices tv, its mesh and vertex indices into `face`.
+        auto meets_face = [&](const Ray& ray, bool hide, int plane, SurfacePoint& sp, BsdfParams& bp, Vec3f* tv,
+                              Pending::Face& face) {
+            const FirstHit at = first_hit(scene, ray, hide, Tracing::Exact);
             if (!at.found || smooth_planes.plane_of[size_t(at.hit.mesh)].empty() ||
                 smooth_planes.plane_of[size_t(at.hit.mesh)][size_t(at.hit.prim)] != plane)
                 return false;
             sp = scene.surface_point(at.hit);
             bp = scene.bsdf_params(sp);
             const Mesh& fm = scene.meshes[size_t(at.hit.mesh)];
-            pd.face_mesh = at.hit.mesh;
+            face.mesh = at.hit.mesh;
             for (int c = 0; c < 3; ++c) {
-                pd.face_tri[c] = fm.indices[3 * at.hit.prim + c];
-                tv[c] = fm.vertex(pd.face_tri[c]);
+                face.tri[c] = fm.indices[3 * at.hit.prim + c];
+                tv[c] = fm.vertex(face.tri[c]);
             }
-            return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(d, sp.ng)) >= kMinShadingCosine;
+            return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(ray.dir, sp.ng)) >= kMinShadingCosine;
         };
-        // pd's face adjoints for the adjoints dq, dn of the face's plane: q its first vertex, n =
+        // The same for the camera ray through film point (x, y) from `eye` (o, d), into pd's first face.
+        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
+                               BsdfParams& bp, Vec3f* tv, Pending& pd) {
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            return meets_face(ray, opt.hide_emitters, plane, sp, bp, tv, pd.faces[0]);
+        };
+        // A face's adjoints for the adjoints dq, dn of its plane: q its first vertex, n =
         // cross_normal(u, v) of its edges u, v from there (d_cross_normal gives the adjoint of
         // c = cross(u, v)).
-        auto set_face_adjoints = [&](Pending& pd, const Vec3f& u, const Vec3f& v, const Vec3f& dq, const Vec3f& dn) {
+        auto set_face_adjoints = [&](Pending::Face& face, const Vec3f& u, const Vec3f& v, const Vec3f& dq,
+                                     const Vec3f& dn) {
             const Vec3f dc = d_cross_normal(u, v, dn);
             const Vec3f du = cross(v, dc), dv = cross(dc, u);
-            pd.face_dv[0] = dq - du - dv;
-            pd.face_dv[1] = du;
-            pd.face_dv[2] = dv;
+            face.dv[0] = dq - du - dv;
+            face.dv[1] = du;
+            face.dv[2] = dv;
+        };
+        // Through a face of plane (q, n) met by the ray o + t d at x, scattered into the direction
+        // dir by the delta lobe dp (`refract`): the adjoints of o and d (into do_, dd_) and of the
+        // face's plane and index (into `face`, its edges u, v) for the adjoints ax of x and adir
+        // of dir. x = o + t d, t = (q - o) . n / (d . n).
+        auto scatter_adjoints = [&](const DeltaParams<float>& dp, const Vec3f& q, const Vec3f& u, const Vec3f& v,
+                                    const Vec3f& n, const Vec3f& o, const Vec3f& d, bool refract, Vec3f ax,
+                                    Vec3f adir, Pending::Face& face, Vec3f& do_, Vec3f& dd_) {
+            const float dn = dot(d, n), t = dot(q - o, n) / dn;
+            const Vec3f x = o + d * t;
+            DDelta<float> dd;
+            dd.specular = dd.n = dd.wo = Vec3f(0.f);
+            dd.eta = 0.f;
+            d_delta_scatter(dp, n, -d, refract, 1.f, adir, Vec3f(0.f), dd);
+            const float k = dot(d, ax) / dn;
+            do_ = ax - n * k;
+            dd_ = do_ * t - dd.wo;
+            set_face_adjoints(face, u, v, n * k, (q - x) * k + dd.n);
+            face.deta = dd.eta;
+            face.material = refract ? scene.meshes[size_t(face.mesh)].material : -1;
         };
         // The rest of a sample seen in a mirror or through glass, given its side function g, the
         // norm of g's film gradient glen (nothing where that is not positive) and the film length
@@ -1099,7 +1456,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // additions in the samples' order); and the jump, the lobe's weight times theirs, splatted.
         auto finish_smooth = [&](int64_t i, Pending& pd, const Edge& edge, const Eye& eye, float x, float y,
                                  const EdgeSideGradient& g, double point_weight, double glen, const SurfacePoint& sp,
-                                 float s, const Vec3f& dir, const Vec3f& lobe, bool swap) {
+                                 float s, const Vec3f& dir, const Vec3f& lobe, bool swap,
+                                 const RenderOptions& side_opt) {
             if (!(glen > 0.0) || !std::isfinite(glen)) return;
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f target = m.vertex(edge.v0) + (m.vertex(edge.v1) - m.vertex(edge.v0)) * s;
@@ -1115,8 +1473,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             flush();
             const Rng stream = Rng::for_sample(seed, uint64_t(i), 1);
             Rng ru = stream, rl = stream;
-            const Vec3f Lu = trace_path(scene, reflected_opt, upper.ray, ru, counters, nullptr, &upper);
-            const Vec3f Ll = trace_path(scene, reflected_opt, lower.ray, rl, counters, nullptr, &lower);
+            const Vec3f Lu = trace_path(scene, side_opt, upper.ray, ru, counters, nullptr, &upper);
+            const Vec3f Ll = trace_path(scene, side_opt, lower.ray, rl, counters, nullptr, &lower);
             pd.place(edge, x, y, eye, g, float(point_weight / glen));
             std::fill(pd.value_u, pd.value_u + nv, 0.f);
             std::fill(pd.value_l, pd.value_l + nv, 0.f);
@@ -1148,9 +1506,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             g.d_e0 = g.d_e1 = Vec3f(0.f);
             d_mirrored(p0, tv[0], n, a0, g.d_e0, dq, dn);
             d_mirrored(p1, tv[0], n, a1, g.d_e1, dq, dn);
-            set_face_adjoints(pd, u, v, dq, dn);
+            set_face_adjoints(pd.faces[0], u, v, dq, dn);
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
-                          closest_on_segment(v0, v1, o, d), reflected, lobe, true);
+                          closest_on_segment(v0, v1, o, d), reflected, lobe, true, reflected_opt);
         };
         // The boundary term of the edge `edge` seen through plane `plane` at film point (x, y)
         // (Refraction, above): where the camera ray meets a face of that plane and is refracted
@@ -1168,26 +1526,54 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const DeltaParams<float> dp = delta_params(bp);
             if (!delta_scatter(dp, n, -d, true, 1.f, refracted, lobe)) return;
             // The point of the face's plane the camera ray meets, x = o + t d.
-            const float dn = dot(d, n), tp = dot(tv[0] - o, n) / dn;
+            const float tp = dot(tv[0] - o, n) / dot(d, n);
             const Vec3f xh = o + d * tp;
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
-            const EdgeSideGradient G = edge_side_gradient(p0, p1, xh, refracted);
-            DDelta<float> dd;
-            dd.specular = dd.n = dd.wo = Vec3f(0.f);
-            dd.eta = 0.f;
-            d_delta_scatter(dp, n, -d, true, 1.f, G.d_d, Vec3f(0.f), dd);
-            // x's adjoint G.d_o, through t = (q - o) . n / (d . n): to o, d, q (the first vertex)
-            // and n; the refracted direction's to n, wo = -d and the index.
-            const float k = dot(d, G.d_o) / dn;
-            EdgeSideGradient g = G;
-            g.d_o = G.d_o - n * k;
-            g.d_d = g.d_o * tp - dd.wo;
-            set_face_adjoints(pd, u, v, n * k, (tv[0] - xh) * k + dd.n);
-            pd.face_deta = dd.eta;
-            pd.face_material = scene.meshes[size_t(pd.face_mesh)].material;
+            EdgeSideGradient g = edge_side_gradient(p0, p1, xh, refracted);
+            // x's and the refracted direction's adjoints to the camera ray, the face and the index.
+            scatter_adjoints(dp, tv[0], u, v, n, o, d, true, g.d_o, g.d_d, pd.faces[0], g.d_o, g.d_d);
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
-                          closest_on_segment(p0, p1, xh, refracted), refracted, lobe, false);
+                          closest_on_segment(p0, p1, xh, refracted), refracted, lobe, false, reflected_opt);
+        };
+        // The boundary term of the edge `edge` seen through chain `chain` at film point (x, y)
+        // (Chain, above): where the camera ray meets a face of its first plane, is turned there,
+        // meets a face of its second plane first, and is turned there past the edge. The side
+        // function is the last ray's; its gradient reaches the camera ray back through both
+        // faces' points and lobes, and both faces' vertices (and indices) likewise.
+        auto splat_chained = [&](int64_t i, const Eye& eye, const Edge& edge, const Chain& chain, float x, float y,
+                                 double point_weight) {
+            Vec3f o, d, tv[2][3], lobe[2];
+            SurfacePoint sp[2];
+            BsdfParams bp;
+            Pending pd;
+            DeltaParams<float> dp[2];
+            Vec3f dir[3], from[3], u[2], v[2], n[2];
+            if (!meets_plane(eye, x, y, chain.plane[0], o, d, sp[0], bp, tv[0], pd)) return;
+            from[0] = o;
+            dir[0] = d;
+            for (int k = 0; k < 2; ++k) {
+                if (k == 1) {
+                    Ray ray = spawn_ray(sp[0], dir[1]);
+                    if (!meets_face(ray, false, chain.plane[1], sp[1], bp, tv[1], pd.faces[1])) return;
+                }
+                dp[k] = delta_params(bp);
+                if (chain.refract[k] && bp.kind != MaterialKind::Dielectric) return;
+                u[k] = tv[k][1] - tv[k][0], v[k] = tv[k][2] - tv[k][0], n[k] = cross_normal(u[k], v[k]);
+                if (!delta_scatter(dp[k], n[k], -dir[k], chain.refract[k], 1.f, dir[k + 1], lobe[k])) return;
+                // The point of the face's plane the ray meets.
+                from[k + 1] = from[k] + dir[k] * (dot(tv[k][0] - from[k], n[k]) / dot(dir[k], n[k]));
+            }
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            EdgeSideGradient g = edge_side_gradient(p0, p1, from[2], dir[2]);
+            // Back through the second face, then the first: the adjoints of each ray's origin and
+            // direction in turn.
+            for (int k = 1; k >= 0; --k)
+                scatter_adjoints(dp[k], tv[k][0], u[k], v[k], n[k], from[k], dir[k], chain.refract[k], g.d_o, g.d_d,
+                                 pd.faces[k], g.d_o, g.d_d);
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp[1],
+                          closest_on_segment(p0, p1, from[2], dir[2]), dir[2], lobe[0] * lobe[1], false, chained_opt);
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
@@ -1209,6 +1595,26 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
+            if (fe.chain >= 0) {
+                // As through one plane (below), each film point solved for from the last's.
+                const Chain& ch = chains[size_t(fe.chain)];
+                const Vec3d a(p0), b(p1);
+                const double span = fe.u1 - fe.u0;
+                Vec3d x1, x2, y1;
+                auto film_at = [&](double tt, bool guessed, Vec3d& z1, double& fx, double& fy) {
+                    return chain_film(ch, eye, a + (b - a) * (fe.u0 + span * tt), guessed, z1, x2, fx, fy);
+                };
+                double fx, fy, lx, ly, hx, hy;
+                if (!film_at(t, false, x1, fx, fy) || fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
+                const double lo_t = std::max(0.0, t - 1e-4), hi_t = std::min(1.0, t + 1e-4);
+                y1 = x1;
+                if (!film_at(lo_t, true, y1, lx, ly)) continue;
+                y1 = x1;
+                if (!film_at(hi_t, true, y1, hx, hy)) continue;
+                const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
+                splat_chained(i, eye, edge, ch, float(fx), float(fy), sample_weight * per_t / fe.len);
+                continue;
+            }
             if (fe.refracted) {
                 // At parameter u of the edge (its part beyond the plane), as the eye sees it
                 // through the plane, weighted by the film length per unit of t there.
