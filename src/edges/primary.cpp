@@ -591,11 +591,15 @@ bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const 
     const SmoothPlane& first = planes[size_t(ch.plane[0])];
     const Vec3d q(first.q);
     const TFrame<double>& axes = first.axes;
+    // The size of the first plane's faces: the Jacobian's step and, for parallel rays, how far
+    // before x1 they start (a unit would round away a small scene's detail).
+    const double scale = std::abs(first.hi[0] - first.lo[0]) + std::abs(first.hi[1] - first.lo[1]);
+    const double back = scale > 0.0 ? scale : 1.0;
     auto residual = [&](double a, double b, Vec3d& r, Vec3d& p1, Vec3d& p2) {
         const Vec3d x = q + axes.s * a + axes.t * b;
         Vec3d dir;
-        if (!follow_chain(planes, ch, parallel ? x - forward : eye, parallel ? forward : normalize(x - eye), p1, p2,
-                          dir))
+        if (!follow_chain(planes, ch, parallel ? x - forward * back : eye, parallel ? forward : normalize(x - eye),
+                          p1, p2, dir))
             return false;
         const Vec3d to = e - p2;
         const double len = length(to);
@@ -608,7 +612,6 @@ bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const 
     Vec3d r, p1, p2;
     if (!residual(a, b, r, p1, p2)) return false;
     double err = length(r);
-    const double scale = std::abs(first.hi[0] - first.lo[0]) + std::abs(first.hi[1] - first.lo[1]);
     int slow = 0;  // steps in a row that did not halve the error, far from a root
     for (int it = 0; it < 24 && err > 1e-13; ++it) {
         const double h = 1e-7 * (scale + std::abs(a) + std::abs(b));
@@ -1026,7 +1029,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             seen_from.origin = Vec3f(middle_x2);
         } else {
             Vec3d o1, o2, dir;
-            if (!follow_chain(smooth_planes.planes, ch, middle_x1 - Vec3d(cam.forward), Vec3d(cam.forward), o1, o2, dir))
+            const double back = length(middle_x2 - middle_x1) + std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
+            if (!follow_chain(smooth_planes.planes, ch, middle_x1 - Vec3d(cam.forward) * back, Vec3d(cam.forward), o1,
+                              o2, dir))
                 return false;
             seen_from.parallel = true;
             seen_from.dir = Vec3f(dir);
