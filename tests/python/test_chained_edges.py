@@ -18,13 +18,13 @@ A pinhole's rays through a pane, and a glass cube's reflections inside it, are c
 finite differences.
 """
 
-import math
-
 import pytest
 import torch
 
 import edgepath as ep
 from edgepath import shapes
+from test_mirror_edges import assert_same_derivative_image, gradients_of_both
+from test_refracted_edges import _fresnel, _sky, glass_cube, matches_finite_differences
 
 ETA = 1.5
 BLACK = ep.Material(diffuse=0.0)
@@ -32,15 +32,6 @@ POSITION, LOOK_AT = torch.tensor([-1.2, 2.5, 0.9]), torch.tensor([.2, -1.2, .1])
 # The pane: glass between y = -0.45 and y = -0.15, far wider than the view; the box below it.
 PANE_CENTER, PANE_HALF, PANE_BOTTOM = (0., -.3, 0.), (20., .15, 20.), -.45
 BOX_CENTER, BOX_HALF = (.2, -1.2, .1), (.3, .2, .25)
-
-
-def _sky():
-    return ep.EnvironmentMap(torch.full((1, 1, 3), 1.))
-
-
-def _fresnel(ci, eta):
-    ct = math.sqrt(1 - (1 - ci * ci) / eta ** 2)
-    return ((ci - eta * ct) ** 2 / (ci + eta * ct) ** 2 + (eta * ci - ct) ** 2 / (eta * ci + ct) ** 2) / 2
 
 
 def _pane_camera(camera_type, shift, resolution):
@@ -114,11 +105,7 @@ def test_derivative_images_equal_the_moved_boxs_dimmed(param):
     unit = torch.eye(3)
     p, d = {"box x": (params[0], unit[0]), "box y": (params[0], unit[1]), "box z": (params[0], unit[2]),
             "thickness": (params[1], torch.tensor(1.)), "camera": (params[3], torch.tensor(1.))}[param]
-    a = ep.derivative_image(scene, p, d, **KW)
-    b = ep.derivative_image(air, p, d, **KW) * (1 - _fresnel(COS, ETA)) ** 2
-    norm = b.abs().sum()
-    assert norm > 1.0, norm
-    assert (a - b).abs().sum() < 0.02 * norm, ((a - b).abs().sum() / norm, a.sum(), b.sum())
+    assert_same_derivative_image(scene, air, p, d, (1 - _fresnel(COS, ETA)) ** 2, **KW)
 
 
 def test_the_index_moves_the_outline_through_a_pane():
@@ -200,42 +187,15 @@ def test_derivative_images_equal_the_four_copies(param, camera_type):
             "near box y": (offsets[1], unit[1]), "floor": (placement, torch.tensor([1., 0.])),
             "wall": (placement, torch.tensor([0., 1.])), "camera": (camera_t, torch.tensor(1.))}[param]
     kw = dict(KW, edge_samples=4 * KW["edge_samples"]) if camera_type == "thinlens" else KW
-    a = ep.derivative_image(seen, p, d, **kw)
-    b = ep.derivative_image(direct, p, d, **kw)
-    norm = b.abs().sum()
-    assert norm > 1.0, norm
-    assert (a - b).abs().sum() < 0.02 * norm, ((a - b).abs().sum() / norm, a.sum(), b.sum())
+    assert_same_derivative_image(seen, direct, p, d, **kw)
 
 
 def test_gradients_equal_the_four_copies():
     """The gradient pass (every parameter at once, an adjoint image) against the same of the
     four copies."""
-    grads = []
-    for scene_index in range(2):
-        scenes = _corner("perspective")
-        scene, (offsets, placement, camera_t) = scenes[scene_index], scenes[2:]
-        g = torch.Generator().manual_seed(4)
-        adjoint = torch.rand(24, 24, 3, generator=g) - .5
-        (ep.render(scene, **KW) * adjoint).sum().backward()
-        grads.append(torch.cat([offsets[0].grad, offsets[1].grad, placement.grad, camera_t.grad[None]]))
-    seen, direct = grads
+    seen, direct = gradients_of_both(lambda: _corner("perspective"), **KW)
     assert direct.abs().max() > 1.0
     assert torch.allclose(seen, direct, rtol=0.01, atol=0.01 * float(direct.abs().max())), (seen, direct)
-
-
-def _matches_finite_differences(scene, param, direction, step, spp, fd_spp, seeds, fd_seeds, bounces, floor):
-    """The derivative image's sum (`seeds` renders at `spp`) against the central finite
-    difference of the image's sum (ep.finite_difference_image, steps of +-`step`, `fd_seeds`
-    renders at `fd_spp`): within 4 standard errors plus 5%, the latter above `floor` in
-    magnitude."""
-    d = torch.tensor([float(ep.derivative_image(scene, param, direction, spp=spp, max_bounces=bounces, seed=s).sum())
-                      for s in range(seeds)], dtype=torch.float64)
-    f = torch.tensor([float(ep.finite_difference_image(scene, param, direction, eps=2 * step, spp=fd_spp,
-                                                       max_bounces=bounces, seed=100 + s).sum())
-                      for s in range(fd_seeds)], dtype=torch.float64)
-    error = math.sqrt(float(d.var()) / len(d) + float(f.var()) / len(f))
-    assert abs(float(f.mean())) > floor
-    assert abs(float(d.mean() - f.mean())) < 4 * error + 0.05 * abs(float(f.mean())), (d, f, error)
 
 
 @pytest.mark.parametrize("param", ["box x", "thickness"])
@@ -249,8 +209,8 @@ def test_a_pinhole_through_a_pane_matches_finite_differences(param):
     bottom = (pane[:, 1] < PANE_CENTER[1]).float()[:, None] * torch.tensor([0., 1., 0.])
     param, direction = {"box x": (box, torch.tensor([1., 0., 0.]).expand(box.shape)),
                         "thickness": (pane, bottom)}[param]
-    _matches_finite_differences(scene, param, direction, step=0.025, spp=256, fd_spp=4096, seeds=4, fd_seeds=8,
-                                bounces=2, floor=4.0)
+    matches_finite_differences(scene, param, direction, step=0.025, spp=256, fd_spp=4096, seeds=4, fd_seeds=8,
+                               floor=4.0)
 
 
 def test_a_glass_cube_at_three_bounces_matches_finite_differences():
@@ -260,12 +220,6 @@ def test_a_glass_cube_at_three_bounces_matches_finite_differences():
     derivative 8 seeds x 256 spp, finite differences (step 0.005) 8 seeds x 2048 spp. Measured
     at 32 x 32: 217.6 +- 3.8 against 219.0 +- 3.4 (before this term: 167.8 +- 0.9); a faceted
     glass sphere (4 x 8) 257.5 +- 3.9 against 258.5 +- 4.7 (before: 223.6)."""
-    turn = torch.tensor([[0.8, 0., 0.6], [0., 1., 0.], [-0.6, 0., 0.8]]) @ \
-        torch.tensor([[1., 0., 0.], [0., 0.9, -0.436], [0., 0.436, 0.9]])
-    v, i = shapes.box((0., 0., 0.), (.4, .4, .4))
-    cube = ep.Mesh(v @ turn.T, i, material=ep.Material(kind="dielectric", ior=1.5))
-    camera = ep.Camera(position=torch.tensor([0., .3, 2.5]), look_at=torch.zeros(3), resolution=(24, 24), fov=30.0)
-    sky = ep.EnvironmentMap(torch.rand(8, 16, 3, generator=torch.Generator().manual_seed(0)))
-    _matches_finite_differences(ep.Scene(camera, [cube], envmap=sky), cube.vertices,
-                                torch.tensor([1., 0., 0.]).expand(8, 3), step=0.005, spp=256, fd_spp=2048, seeds=8,
-                                fd_seeds=8, bounces=3, floor=10.0)
+    scene = glass_cube()
+    matches_finite_differences(scene, scene.meshes[0].vertices, torch.tensor([1., 0., 0.]).expand(8, 3), step=0.005,
+                               spp=256, fd_spp=2048, seeds=8, fd_seeds=8, floor=10.0, bounces=3)
