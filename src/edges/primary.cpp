@@ -538,12 +538,34 @@ bool refracted_direction(const Vec3d& w, const Vec3d& n, double eta, Vec3d& r) {
 // must pass e). An edge seen so is sampled like one seen through a plane: along the edge, each
 // point weighted by the film length per unit of the edge's parameter.
 struct Chain {
-    int plane[2];
-    bool refract[2];
+    int plane[2] = {-1, -1};
+    bool refract[2] = {false, false};
+    // The rays leaving the second plane, bounded (where `bounded`): their origins within the
+    // ball (origin, origin_radius), their directions within the cone about `axis` of half-angle
+    // `spread`. An edge outside every ray from that ball within that cone is not seen.
+    bool bounded = false;
+    Vec3d origin, axis;
+    double origin_radius = 0.0, spread = 0.0, cos_spread = -1.0, sin_spread = 0.0;
+
+    // Whether a ray from the origin ball within the cone may meet the segment (p0, p1): the
+    // segment's ball seen from the origin ball's centre within the cone widened by both balls'
+    // angular radius b, sin b = reach / dist (compared by cosines: cos(angle) >= cos(spread + b)).
+    bool may_see(const Vec3d& p0, const Vec3d& p1) const {
+        if (!bounded) return true;
+        const Vec3d to = (p0 + p1) * 0.5 - origin;
+        const double dist = length(to), reach = origin_radius + 0.5 * length(p1 - p0);
+        if (!(dist > reach)) return true;
+        // (spread < pi / 2 where bounded and b <= pi / 2: their sum below a half turn, where the
+        // cosine falls.)
+        const double sin_b = reach / dist, cos_b = std::sqrt(1.0 - sin_b * sin_b);
+        return dot(to, axis) >= dist * (cos_spread * cos_b - sin_spread * sin_b);
+    }
 };
 
-// At most this many edge set-ups over all chains (each costs a few Newton solves).
+// At most this many edge set-ups over all chains (each costs a few Newton solves), and this many
+// tests of whether a chain's beam may see an edge (Chain::may_see) in choosing them.
 constexpr double kChainSetups = double(1 << 18);
+constexpr double kChainTests = double(1 << 24);
 
 // Follows the ray from o along d through the chain's (unbounded) planes: x1, the first plane's
 // point, x, the second's, and dir, the direction leaving it. False where the ray misses a plane
@@ -817,9 +839,57 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // rays through the corners of a's faces' box (widened by a quarter, for a refraction's
         // bending), the part of it within b's faces' box. (Exact but for the widening: a
         // reflection's rays come from one point, and parallel rays refract into one direction.)
-        // All where a corner's ray does not reach the plane, and with a thin lens.
+        // All with a thin lens or a corner behind the camera, a thousandth (any, but unlikely)
+        // where a corner's ray is not turned (total internal reflection) or does not reach the
+        // plane.
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type);
+        // The bounds of a chain's beam (Chain::may_see): the four rays from the camera through
+        // the corners of its first plane's faces' box, followed through both planes; their
+        // directions' cone and their origins' ball, each widened by a quarter (the rays between
+        // the corners' bend). None with a thin lens, or where a corner's ray misses a plane.
+        auto bound_beam = [&](Chain& ch) {
+            if (cam.type == CameraType::ThinLens) return;
+            const SmoothPlane& a = planes[size_t(ch.plane[0])];
+            Vec3d o[4], d[4], sum_d(0.0);
+            int k = 0;
+            for (double u : {a.lo[0], a.hi[0]})
+                for (double v : {a.lo[1], a.hi[1]}) {
+                    const Vec3d c = Vec3d(a.q) + a.axes.s * u + a.axes.t * v;
+                    if (!parallel && !(dot(c - eye, forward) > 0.0)) return;
+                    const double back = std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
+                    const Vec3d from = parallel ? c - forward * (back > 0.0 ? back : 1.0) : eye;
+                    Vec3d x1;
+                    if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eye), x1, o[k], d[k])) return;
+                    d[k] = normalize(d[k]);
+                    sum_d = sum_d + d[k];
+                    ++k;
+                }
+            // The origins lie on the second plane's faces too: their box (widened) within those
+            // faces' box, in the second plane's axes.
+            const SmoothPlane& b = planes[size_t(ch.plane[1])];
+            double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
+            for (int j = 0; j < 4; ++j) {
+                const Vec3d l = b.axes.to_local(o[j] - Vec3d(b.q));
+                lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
+                lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
+            }
+            for (int j = 0; j < 2; ++j) {
+                const double w = 0.125 * (hi[j] - lo[j]);
+                lo[j] = std::max(lo[j] - w, b.lo[j]), hi[j] = std::min(hi[j] + w, b.hi[j]);
+                if (!(lo[j] <= hi[j])) lo[j] = b.lo[j], hi[j] = b.hi[j];
+            }
+            ch.origin = Vec3d(b.q) + b.axes.s * (0.5 * (lo[0] + hi[0])) + b.axes.t * (0.5 * (lo[1] + hi[1]));
+            ch.origin_radius = 0.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]) * (1.0 + 1e-6);
+            ch.axis = normalize(sum_d);
+            if (!(length(sum_d) > 0.0)) return;
+            for (int j = 0; j < 4; ++j)
+                ch.spread = std::max(ch.spread, 1.25 * std::acos(std::clamp(dot(d[j], ch.axis), -1.0, 1.0)));
+            ch.bounded = std::isfinite(ch.origin_radius) && std::isfinite(ch.spread) && ch.spread < 0.5 * kPi;
+            ch.cos_spread = std::cos(ch.spread);
+            ch.sin_spread = std::sin(ch.spread);
+        };
+        constexpr double kUnlikely = 1e-3;
         auto beam_share = [&](const SmoothPlane& a, bool refract, const SmoothPlane& b) {
             if (cam.type == CameraType::ThinLens) return 1.0;
             double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
@@ -830,9 +900,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     if (!parallel && !(dot(c - eye, forward) > 0.0)) return 1.0;
                     const Vec3d d = parallel ? forward : normalize(c - eye);
                     Vec3d dir, weight;
-                    if (!delta_scatter(a.delta, a.winding_n, -d, refract, 1.0, dir, weight)) return 1.0;
+                    if (!delta_scatter(a.delta, a.winding_n, -d, refract, 1.0, dir, weight)) return kUnlikely;
+                    // (A corner's ray that does not reach b's plane: the beam may meet b's faces
+                    // where it turns towards them, unlikely: ranked below the shares found.)
                     const double t = dot(Vec3d(b.q) - c, b.winding_n) / dot(dir, b.winding_n);
-                    if (!(t > 0.0) || !std::isfinite(t)) return 1.0;
+                    if (!(t > 0.0) || !std::isfinite(t)) return kUnlikely;
                     const Vec3d l = b.axes.to_local(c + dir * t - Vec3d(b.q));
                     lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
                     lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
@@ -846,7 +918,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             return area > 0.0 ? within / area : 1.0;
         };
-        // The candidates, by the film area of their first plane's window times that share.
+        // The candidates, by the film area of their first plane's window times that share, and
+        // a thousandth of that where the camera sees the first plane's faces from behind (inside
+        // a closed mesh, others hide them: as SmoothPlanes orders them).
         std::vector<std::pair<double, Chain>> candidates;
         for (size_t p1 = 0; p1 < planes.size(); ++p1)
             for (size_t p2 = 0; p2 < planes.size(); ++p2) {
@@ -858,19 +932,46 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const int camera_side = a.behind ? 2 : 1;
                 const bool one_sided = !b.delta.dielectric && !b.delta.two_sided;
                 if (one_sided && !(sides_reached(a, b) & 1)) continue;
-                const double film_area = (a.x1 - a.x0) * (a.y1 - a.y0);
+                const double film_area = (a.x1 - a.x0) * (a.y1 - a.y0) * (a.behind ? kUnlikely : 1.0);
                 for (int r1 = 0; r1 < (a.refracts ? 2 : 1); ++r1) {
                     if (!(reach & (r1 ? 3 - camera_side : camera_side))) continue;
                     const double share = beam_share(a, r1 == 1, b);
                     if (!(share > 0.0)) continue;
-                    for (int r2 = 0; r2 < (b.refracts ? 2 : 1); ++r2)
-                        candidates.push_back({film_area * share, Chain{{int(p1), int(p2)}, {r1 == 1, r2 == 1}}});
+                    for (int r2 = 0; r2 < (b.refracts ? 2 : 1); ++r2) {
+                        Chain ch;
+                        ch.plane[0] = int(p1), ch.plane[1] = int(p2);
+                        ch.refract[0] = r1 == 1, ch.refract[1] = r2 == 1;
+                        bound_beam(ch);
+                        candidates.push_back({film_area * share, ch});
+                    }
                 }
             }
         std::stable_sort(candidates.begin(), candidates.end(),
                          [](const auto& x, const auto& y) { return x.first > y.first; });
-        const size_t keep = size_t(std::max(1.0, kChainSetups / std::max(1.0, double(all_edges.size()))));
-        for (size_t k = 0; k < candidates.size() && k < keep; ++k) chains.push_back(candidates[k].second);
+        // The best ranked first, each with the edges its beam may see, until those edges or the
+        // tests for them reach their limits (counted in parallel, a block of candidates at a time).
+        constexpr int64_t kBlock = 64;
+        double setups = 0.0, tests = 0.0;
+        std::vector<int64_t> seen(static_cast<size_t>(kBlock));
+        for (size_t begin = 0; begin < candidates.size() && setups < kChainSetups && tests < kChainTests;
+             begin += size_t(kBlock)) {
+            const int64_t count = std::min(kBlock, int64_t(candidates.size() - begin));
+            parallel_indices(opt, count, [&](int64_t j) {
+                const Chain& ch = candidates[begin + size_t(j)].second;
+                int64_t n = 0;
+                for (const Edge& e : all_edges) {
+                    const Mesh& m = scene.meshes[size_t(e.mesh)];
+                    n += !e.flat && ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)));
+                }
+                seen[size_t(j)] = n;
+            });
+            for (int64_t j = 0; j < count && setups < kChainSetups && tests < kChainTests; ++j) {
+                tests += double(all_edges.size());
+                if (seen[size_t(j)] == 0) continue;
+                setups += double(seen[size_t(j)]);
+                chains.push_back(candidates[begin + size_t(j)].second);
+            }
+        }
     }
     // The film point that `eye` sees point e at through chain ch; x1 (in: a guess where `guessed`)
     // and x2 its planes' points.
@@ -959,7 +1060,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     // The edge e of mesh m seen through chain ch: its part on the side of the second plane the
     // rays leave it to (the parameters u0, u1 of its ends), sampled by the film length of the
-    // polyline through the film points of five of its points (those the chain sees). Left out
+    // polyline through the film points of five of its points (those the chain sees; where one
+    // is, a short chord beside it). Left out
     // where no first-plane or second-plane point found comes near the faces of its plane.
     auto chained_film_edge = [&](const Chain& ch, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
         const SmoothPlane& a = smooth_planes.planes[size_t(ch.plane[0])];
@@ -970,6 +1072,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             return false;
         // The sides of the second plane rays arrive from (where the first plane's faces are),
         // and leave to.
+        if (!ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)))) return false;
         const int in = sides_reached(a, b);
         const int out = ch.refract[1] ? ((in & 1) << 1) | ((in & 2) >> 1) : in;
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
@@ -982,11 +1085,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         } else if (out == 0) {
             return false;
         }
-        // Five points' film points, each solve starting from the last's.
+        // Three points' film points, each solve starting from the last's.
         constexpr int kPoints = 5;
         double fx[kPoints], fy[kPoints];
         bool ok[kPoints];
-        Vec3d x1, x2, middle_x1, middle_x2;
+        Vec3d x1, x2, middle_x1, middle_x2, found_x1[kPoints];
         bool guessed = false, any_middle = false;
         double box1[4] = {1e300, 1e300, -1e300, -1e300}, box2[4] = {1e300, 1e300, -1e300, -1e300};
         auto hold = [](double* box, const SmoothPlane& mp, const Vec3d& x) {
@@ -1001,9 +1104,35 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             guessed = ok[k];
             if (!ok[k]) continue;
             ++found;
+            found_x1[k] = x1;
             hold(box1, a, x1);
             hold(box2, b, x2);
             if (!any_middle || k <= kPoints / 2) middle_x1 = x1, middle_x2 = x2, any_middle = true;
+        }
+        double len = 0.0;
+        for (int k = 1, last = -1; k <= kPoints; ++k) {
+            const int j = k - 1;
+            if (!ok[j]) continue;
+            if (last >= 0) len += std::hypot(fx[j] - fx[last], fy[j] - fy[last]);
+            last = j;
+        }
+        if (found == 1) {
+            // Seen near one point only: the film length there, per unit parameter, from a point
+            // an eighth of the spacing on either side, stands for the part's.
+            const int j = int(std::find(ok, ok + kPoints, true) - ok);
+            const double uj = fe.u0 + (fe.u1 - fe.u0) * double(j) / double(kPoints - 1);
+            const double du = (fe.u1 - fe.u0) / double(8 * (kPoints - 1));
+            for (const double u : {uj + du, uj - du}) {
+                if (u < fe.u0 || u > fe.u1) continue;
+                Vec3d y1 = found_x1[j], y2;
+                double gx, gy;
+                if (!chain_film(ch, centre, p0 + (p1 - p0) * u, true, y1, y2, gx, gy)) continue;
+                len = std::hypot(gx - fx[j], gy - fy[j]) * (fe.u1 - fe.u0) / du;
+                hold(box1, a, y1);
+                hold(box2, b, y2);
+                found = 2;
+                break;
+            }
         }
         if (found < 2) return false;
         // The points found, and the faces' boxes, each widened by half the points' spread (the
@@ -1015,13 +1144,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                    box[1] - wy <= mp.hi[1] + margin && box[3] + wy >= mp.lo[1] - margin;
         };
         if (!near(box1, a) || !near(box2, b)) return false;
-        double len = 0.0;
-        for (int k = 1, last = -1; k <= kPoints; ++k) {
-            const int j = k - 1;
-            if (!ok[j]) continue;
-            if (last >= 0) len += std::hypot(fx[j] - fx[last], fy[j] - fy[last]);
-            last = j;
-        }
         // Whether it folds, seen from the second plane's point of a middle point (parallel rays
         // stay parallel through flat faces).
         EdgeEye seen_from;
