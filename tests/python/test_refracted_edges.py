@@ -126,12 +126,14 @@ def test_the_index_moves_the_outline():
     assert (a - b).abs().sum() < 0.02 * norm, ((a - b).abs().sum() / norm, a.sum(), b.sum())
 
 
-def matches_finite_differences(scene, param, direction, step, spp, fd_spp, seeds, fd_seeds, floor, bounces=2):
-    """The derivative image's sum (`seeds` renders at `spp`) against the central finite
-    difference of the image's sum (ep.finite_difference_image, steps of +-`step`, `fd_seeds`
-    renders at `fd_spp`) at `bounces` bounces: within 4 standard errors plus 5%, the latter
-    above `floor` in magnitude."""
-    d = torch.tensor([float(ep.derivative_image(scene, param, direction, spp=spp, max_bounces=bounces, seed=s).sum())
+def matches_finite_differences(scene, param, direction, step, spp, fd_spp, seeds, fd_seeds, floor, bounces=2,
+                               **kw):
+    """The derivative image's sum (`seeds` renders at `spp`, with options `kw`) against the
+    central finite difference of the image's sum (ep.finite_difference_image, steps of
+    +-`step`, `fd_seeds` renders at `fd_spp`) at `bounces` bounces: within 4 standard errors
+    plus 5%, the latter above `floor` in magnitude."""
+    d = torch.tensor([float(ep.derivative_image(scene, param, direction, spp=spp, max_bounces=bounces, seed=s,
+                                                **kw).sum())
                       for s in range(seeds)], dtype=torch.float64)
     f = torch.tensor([float(ep.finite_difference_image(scene, param, direction, eps=2 * step, spp=fd_spp,
                                                        max_bounces=bounces, seed=100 + s).sum())
