@@ -174,8 +174,14 @@ def test_a_mirror_corner_shows_the_four_copies():
     assert (a < .5).any() and (a > .5).any()
 
 
-@pytest.mark.parametrize("camera_type", ["perspective", "orthographic", "thinlens"])
-@pytest.mark.parametrize("param", ["box x", "box y", "box z", "near box y", "floor", "wall", "camera"])
+# The thin lens at four times the edge samples (its lens points add their own noise): the far
+# box along x, the near box, a mirror and the camera.
+CORNER_CASES = [(p, c) for c in ("perspective", "orthographic")
+                for p in ("box x", "box y", "box z", "near box y", "floor", "wall", "camera")] + \
+    [(p, "thinlens") for p in ("box x", "near box y", "floor", "camera")]
+
+
+@pytest.mark.parametrize("param,camera_type", CORNER_CASES)
 def test_derivative_images_equal_the_four_copies(param, camera_type):
     """Per pixel, to 2% of the image's L1 norm (measured: below 0.03% for the boxes, 0.2-0.8%
     for the mirrors and the camera; the thin lens, at four times the edge samples, 0.1-0.3% and
@@ -201,7 +207,7 @@ def test_gradients_equal_the_four_copies():
 @pytest.mark.parametrize("param", ["box x", "thickness"])
 def test_a_pinhole_through_a_pane_matches_finite_differences(param):
     """Each ray through the pane is moved by its own vector. Image sums, 16 x 16; derivative 4
-    seeds x 256 spp, finite differences (step 0.025) 8 seeds x 4096 spp. Measured (8 seeds, and
+    seeds x 256 spp, finite differences (step 0.025) 6 seeds x 4096 spp. Measured (8 seeds, and
     16 x 8192 spp): the box along x 8.10 +- 0.01 against 8.01 +- 0.28, the thickness 13.15 +-
     0.47 against 13.14 +- 0.13 (before this term: 0 for both)."""
     scene, params = _pane("perspective", (16, 16))
@@ -209,7 +215,7 @@ def test_a_pinhole_through_a_pane_matches_finite_differences(param):
     bottom = (pane[:, 1] < PANE_CENTER[1]).float()[:, None] * torch.tensor([0., 1., 0.])
     param, direction = {"box x": (box, torch.tensor([1., 0., 0.]).expand(box.shape)),
                         "thickness": (pane, bottom)}[param]
-    matches_finite_differences(scene, param, direction, step=0.025, spp=256, fd_spp=4096, seeds=4, fd_seeds=8,
+    matches_finite_differences(scene, param, direction, step=0.025, spp=256, fd_spp=4096, seeds=4, fd_seeds=6,
                                floor=4.0)
 
 
