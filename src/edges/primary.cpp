@@ -814,12 +814,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         return plane_point_film(mp, eye, x, fx, fy);
     };
-    // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
-    // pair of planes and each lobe of each (a refraction only where the plane refracts) whose
-    // second plane has faces on the side of the first the first lobe sends rays to, and whose
-    // first plane has faces on the side of a one-sided second plane's front. Up to kChainSetups
-    // edge set-ups (at least one chain's), the chains first whose rays most likely meet their
-    // planes' faces (below).
     // The sides of plane `of` (by its winding) that the box of plane p's faces reaches: bit 0
     // its front, bit 1 its back.
     auto sides_reached = [](const SmoothPlane& p, const SmoothPlane& of) {
@@ -831,6 +825,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
         return sides;
     };
+    // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
+    // pair of planes and each lobe of each (a refraction only where the plane refracts) whose
+    // second plane has faces on the side of the first the first lobe sends rays to, and whose
+    // first plane has faces on the side of a one-sided second plane's front. The chains whose
+    // rays most likely meet their planes' faces first, each with the edges its beam may see,
+    // up to kChainSetups edge set-ups (below).
     std::vector<Chain> chains;
     if (planes_seen && opt.max_bounces >= 2) {
         const std::vector<SmoothPlane>& planes = smooth_planes.planes;
@@ -845,9 +845,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type);
         // The bounds of a chain's beam (Chain::may_see): the four rays from the camera through
-        // the corners of its first plane's faces' box, followed through both planes; their
-        // directions' cone and their origins' ball, each widened by a quarter (the rays between
-        // the corners' bend). None with a thin lens, or where a corner's ray misses a plane.
+        // the corners of its first plane's faces' box, followed through both planes; the cone of
+        // their directions, widened by a quarter (the rays between the corners' bend), from the
+        // ball of their origins (below). None with a thin lens, or where a corner's ray misses a
+        // plane.
         auto bound_beam = [&](Chain& ch) {
             if (cam.type == CameraType::ThinLens) return;
             const SmoothPlane& a = planes[size_t(ch.plane[0])];
@@ -879,10 +880,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 lo[j] = std::max(lo[j] - w, b.lo[j]), hi[j] = std::min(hi[j] + w, b.hi[j]);
                 if (!(lo[j] <= hi[j])) lo[j] = b.lo[j], hi[j] = b.hi[j];
             }
+            if (!(length(sum_d) > 0.0)) return;
             ch.origin = Vec3d(b.q) + b.axes.s * (0.5 * (lo[0] + hi[0])) + b.axes.t * (0.5 * (lo[1] + hi[1]));
             ch.origin_radius = 0.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]) * (1.0 + 1e-6);
             ch.axis = normalize(sum_d);
-            if (!(length(sum_d) > 0.0)) return;
             for (int j = 0; j < 4; ++j)
                 ch.spread = std::max(ch.spread, 1.25 * std::acos(std::clamp(dot(d[j], ch.axis), -1.0, 1.0)));
             ch.bounded = std::isfinite(ch.origin_radius) && std::isfinite(ch.spread) && ch.spread < 0.5 * kPi;
@@ -1061,8 +1062,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // The edge e of mesh m seen through chain ch: its part on the side of the second plane the
     // rays leave it to (the parameters u0, u1 of its ends), sampled by the film length of the
     // polyline through the film points of five of its points (those the chain sees; where one
-    // is, a short chord beside it). Left out
-    // where no first-plane or second-plane point found comes near the faces of its plane.
+    // is, a short chord beside it). Left out outside the chain's beam, and where no first-plane
+    // or second-plane point found comes near the faces of its plane.
     auto chained_film_edge = [&](const Chain& ch, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
         const SmoothPlane& a = smooth_planes.planes[size_t(ch.plane[0])];
         const SmoothPlane& b = smooth_planes.planes[size_t(ch.plane[1])];
@@ -1070,9 +1071,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             !vertices_wanted(slots, b.mesh) && !(ch.refract[0] && ior_wanted(a.material)) &&
             !(ch.refract[1] && ior_wanted(b.material)))
             return false;
+        if (!ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)))) return false;
         // The sides of the second plane rays arrive from (where the first plane's faces are),
         // and leave to.
-        if (!ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)))) return false;
         const int in = sides_reached(a, b);
         const int out = ch.refract[1] ? ((in & 1) << 1) | ((in & 2) >> 1) : in;
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
@@ -1085,7 +1086,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         } else if (out == 0) {
             return false;
         }
-        // Three points' film points, each solve starting from the last's.
+        // Five points' film points, each solve starting from the last's.
         constexpr int kPoints = 5;
         double fx[kPoints], fy[kPoints];
         bool ok[kPoints];
@@ -1169,7 +1170,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
-    // Each edge directly, then reflected in each plane of smooth faces, then refracted by each.
+    // Each edge directly, then reflected in each plane of smooth faces, then refracted by each,
+    // then seen through each chain.
     const int64_t num_planes = int64_t(smooth_planes.planes.size());
     const int64_t num_chains = int64_t(chains.size());
     const int64_t num_setups = num_edges * (1 + 2 * num_planes + num_chains);
@@ -1333,6 +1335,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     RenderOptions reflected_opt = opt;
     reflected_opt.max_bounces = opt.max_bounces - 1;
     reflected_opt.hide_emitters = false;
+    // Through a chain of two faces: from the second face's point, two bounces fewer.
     RenderOptions chained_opt = reflected_opt;
     chained_opt.max_bounces = opt.max_bounces - 2;
     constexpr int64_t kSampleChunk = 4096;
@@ -1579,8 +1582,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // the sample stands for: the edge's point at parameter s, which the scattered direction
         // `dir` from the face's point sp passes; its two sides, found from there as from an eye
         // (`swap`: the upper and lower sides exchanged, as a reflection does); their paths, traced
-        // from there with the sample's stream after the pending samples (the sink gets its
-        // additions in the samples' order); and the jump, the lobe's weight times theirs, splatted.
+        // from there with options `side_opt` and the sample's stream after the pending samples
+        // (the sink gets its additions in the samples' order); and the jump, the lobe's weight
+        // (`lobe`: through a chain, both faces') times theirs, splatted.
         auto finish_smooth = [&](int64_t i, Pending& pd, const Edge& edge, const Eye& eye, float x, float y,
                                  const EdgeSideGradient& g, double point_weight, double glen, const SurfacePoint& sp,
                                  float s, const Vec3f& dir, const Vec3f& lobe, bool swap,
