@@ -327,6 +327,9 @@ struct SmoothPlane {
     // The box its faces span in the plane, in those axes from q.
     double lo[2] = {std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity()};
     double hi[2] = {-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity()};
+
+    // Corner k (0 to 3) of that box, in world space.
+    Vec3d corner(int k) const { return Vec3d(q) + axes.s * (k & 1 ? hi[0] : lo[0]) + axes.t * (k & 2 ? hi[1] : lo[1]); }
 };
 
 // At most kMirrorSetups edge set-ups over all planes (each plane sets up every edge of the
@@ -818,11 +821,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // its front, bit 1 its back.
     auto sides_reached = [](const SmoothPlane& p, const SmoothPlane& of) {
         int sides = 0;
-        for (double u : {p.lo[0], p.hi[0]})
-            for (double v : {p.lo[1], p.hi[1]}) {
-                const double h = dot(Vec3d(p.q) + p.axes.s * u + p.axes.t * v - Vec3d(of.q), of.winding_n);
-                sides |= (h > double(of.tol) ? 1 : 0) | (h < -double(of.tol) ? 2 : 0);
-            }
+        for (int k = 0; k < 4; ++k) {
+            const double h = dot(p.corner(k) - Vec3d(of.q), of.winding_n);
+            sides |= (h > double(of.tol) ? 1 : 0) | (h < -double(of.tol) ? 2 : 0);
+        }
         return sides;
     };
     // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
@@ -853,19 +855,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (cam.type == CameraType::ThinLens) return;
             const SmoothPlane& a = planes[size_t(ch.plane[0])];
             Vec3d o[4], d[4], sum_d(0.0);
-            int k = 0;
-            for (double u : {a.lo[0], a.hi[0]})
-                for (double v : {a.lo[1], a.hi[1]}) {
-                    const Vec3d c = Vec3d(a.q) + a.axes.s * u + a.axes.t * v;
-                    if (!parallel && !(dot(c - eye, forward) > 0.0)) return;
-                    const double back = std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
-                    const Vec3d from = parallel ? c - forward * (back > 0.0 ? back : 1.0) : eye;
-                    Vec3d x1;
-                    if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eye), x1, o[k], d[k])) return;
-                    d[k] = normalize(d[k]);
-                    sum_d = sum_d + d[k];
-                    ++k;
-                }
+            const double back = std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
+            for (int k = 0; k < 4; ++k) {
+                const Vec3d c = a.corner(k);
+                if (!parallel && !(dot(c - eye, forward) > 0.0)) return;
+                const Vec3d from = parallel ? c - forward * (back > 0.0 ? back : 1.0) : eye;
+                Vec3d x1;
+                if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eye), x1, o[k], d[k])) return;
+                d[k] = normalize(d[k]);
+                sum_d = sum_d + d[k];
+            }
             // The origins lie on the second plane's faces too: their box (widened) within those
             // faces' box, in the second plane's axes.
             const SmoothPlane& b = planes[size_t(ch.plane[1])];
@@ -894,22 +893,21 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         auto beam_share = [&](const SmoothPlane& a, bool refract, const SmoothPlane& b) {
             if (cam.type == CameraType::ThinLens) return 1.0;
             double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
-            for (double u : {a.lo[0], a.hi[0]})
-                for (double v : {a.lo[1], a.hi[1]}) {
-                    const Vec3d c = Vec3d(a.q) + a.axes.s * u + a.axes.t * v;
-                    // (A corner behind the camera: its rays through a's faces reach any way.)
-                    if (!parallel && !(dot(c - eye, forward) > 0.0)) return 1.0;
-                    const Vec3d d = parallel ? forward : normalize(c - eye);
-                    Vec3d dir, weight;
-                    if (!delta_scatter(a.delta, a.winding_n, -d, refract, 1.0, dir, weight)) return kUnlikely;
-                    // (A corner's ray that does not reach b's plane: the beam may meet b's faces
-                    // where it turns towards them, unlikely: ranked below the shares found.)
-                    const double t = dot(Vec3d(b.q) - c, b.winding_n) / dot(dir, b.winding_n);
-                    if (!(t > 0.0) || !std::isfinite(t)) return kUnlikely;
-                    const Vec3d l = b.axes.to_local(c + dir * t - Vec3d(b.q));
-                    lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
-                    lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
-                }
+            for (int k = 0; k < 4; ++k) {
+                const Vec3d c = a.corner(k);
+                // (A corner behind the camera: its rays through a's faces reach any way.)
+                if (!parallel && !(dot(c - eye, forward) > 0.0)) return 1.0;
+                const Vec3d d = parallel ? forward : normalize(c - eye);
+                Vec3d dir, weight;
+                if (!delta_scatter(a.delta, a.winding_n, -d, refract, 1.0, dir, weight)) return kUnlikely;
+                // (A corner's ray that does not reach b's plane: the beam may meet b's faces where
+                // it turns towards them, unlikely: ranked below the shares found.)
+                const double t = dot(Vec3d(b.q) - c, b.winding_n) / dot(dir, b.winding_n);
+                if (!(t > 0.0) || !std::isfinite(t)) return kUnlikely;
+                const Vec3d l = b.axes.to_local(c + dir * t - Vec3d(b.q));
+                lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
+                lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
+            }
             double area = 1.0, within = 1.0;
             for (int k = 0; k < 2; ++k) {
                 const double w = 0.25 * (hi[k] - lo[k]) + 1e-9 * (std::abs(b.hi[k]) + std::abs(b.lo[k]));
@@ -1726,41 +1724,33 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
-            if (fe.chain >= 0) {
-                // As through one plane (below), each film point solved for from the last's.
-                const Chain& ch = chains[size_t(fe.chain)];
+            if (fe.chain >= 0 || fe.refracted) {
+                // At parameter u of the edge (its part beyond the plane, or past the chain's
+                // second plane), as the eye sees it through the plane or the chain, weighted by
+                // the film length per unit of t there: a central difference quotient 1e-4 wide.
+                // (Through a chain each solve near t starts from t's.)
                 const Vec3d a(p0), b(p1);
                 const double span = fe.u1 - fe.u0;
-                Vec3d x1, x2, y1;
-                auto film_at = [&](double tt, bool guessed, Vec3d& z1, double& fx, double& fy) {
-                    return chain_film(ch, eye, a + (b - a) * (fe.u0 + span * tt), guessed, z1, x2, fx, fy);
+                const Chain* ch = fe.chain >= 0 ? &chains[size_t(fe.chain)] : nullptr;
+                Vec3d at_t, x1, x2;
+                auto film_at = [&](double tt, bool near_t, double& fx, double& fy) {
+                    const Vec3d e = a + (b - a) * (fe.u0 + span * tt);
+                    if (!ch) return refracted_film(smooth_planes.planes[size_t(fe.plane)], eye, e, fx, fy);
+                    x1 = at_t;
+                    if (!chain_film(*ch, eye, e, near_t, x1, x2, fx, fy)) return false;
+                    if (!near_t) at_t = x1;
+                    return true;
                 };
                 double fx, fy, lx, ly, hx, hy;
-                if (!film_at(t, false, x1, fx, fy) || fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
+                if (!film_at(t, false, fx, fy) || fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
                 const double lo_t = std::max(0.0, t - 1e-4), hi_t = std::min(1.0, t + 1e-4);
-                y1 = x1;
-                if (!film_at(lo_t, true, y1, lx, ly)) continue;
-                y1 = x1;
-                if (!film_at(hi_t, true, y1, hx, hy)) continue;
+                if (!film_at(lo_t, true, lx, ly) || !film_at(hi_t, true, hx, hy)) continue;
                 const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
-                splat_chained(i, eye, edge, ch, float(fx), float(fy), sample_weight * per_t / fe.len);
-                continue;
-            }
-            if (fe.refracted) {
-                // At parameter u of the edge (its part beyond the plane), as the eye sees it
-                // through the plane, weighted by the film length per unit of t there.
-                const SmoothPlane& mp = smooth_planes.planes[size_t(fe.plane)];
-                const Vec3d a(p0), b(p1);
-                const double span = fe.u1 - fe.u0;
-                auto film_at = [&](double tt, double& fx, double& fy) {
-                    return refracted_film(mp, eye, a + (b - a) * (fe.u0 + span * tt), fx, fy);
-                };
-                double fx, fy, lx, ly, hx, hy;
-                if (!film_at(t, fx, fy) || fx < wx0 || fx > wx1 || fy < wy0 || fy > wy1) continue;
-                const double lo_t = std::max(0.0, t - 1e-4), hi_t = std::min(1.0, t + 1e-4);
-                if (!film_at(lo_t, lx, ly) || !film_at(hi_t, hx, hy)) continue;
-                const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
-                splat_refracted(i, eye, edge, fe.plane, float(fx), float(fy), sample_weight * per_t / fe.len);
+                const double w = sample_weight * per_t / fe.len;
+                if (ch)
+                    splat_chained(i, eye, edge, *ch, float(fx), float(fy), w);
+                else
+                    splat_refracted(i, eye, edge, fe.plane, float(fx), float(fy), w);
                 continue;
             }
             if (spherical) {
