@@ -540,12 +540,11 @@ bool refracted_direction(const Vec3d& w, const Vec3d& n, double eta, Vec3d& r) {
 // (the ray from the eye through x1, turned there, meets the second plane, is turned there, and
 // must pass e). An edge seen so is sampled like one seen through a plane: along the edge, each
 // point weighted by the film length per unit of the edge's parameter.
-struct Chain {
-    int plane[2] = {-1, -1};
-    bool refract[2] = {false, false};
-    // The rays leaving the second plane, bounded (where `bounded`): their origins within the
-    // ball (origin, origin_radius), their directions within the cone about `axis` of half-angle
-    // `spread`. An edge outside every ray from that ball within that cone is not seen.
+
+// A bundle of rays, bounded (where `bounded`): their origins within the ball (origin,
+// origin_radius), their directions within the cone about `axis` of half-angle `spread`. An edge
+// outside every ray from that ball within that cone is not seen.
+struct Beam {
     bool bounded = false;
     Vec3d origin, axis;
     double origin_radius = 0.0, spread = 0.0, cos_spread = -1.0, sin_spread = 0.0;
@@ -563,6 +562,30 @@ struct Chain {
         const double sin_b = reach / dist, cos_b = std::sqrt(1.0 - sin_b * sin_b);
         return dot(to, axis) >= dist * (cos_spread * cos_b - sin_spread * sin_b);
     }
+
+    // The cone of the unit directions d[0, k) (their sum nonzero): about their mean, as wide as
+    // the widest angle from it times `widen`, plus `extra` radians. False where that is not
+    // below a quarter turn (no bound).
+    bool bound_directions(const Vec3d* d, int k, double widen, double extra) {
+        Vec3d sum(0.0);
+        for (int j = 0; j < k; ++j) sum = sum + d[j];
+        if (!(length(sum) > 0.0)) return false;
+        axis = normalize(sum);
+        spread = 0.0;
+        for (int j = 0; j < k; ++j) spread = std::max(spread, widen * std::acos(std::clamp(dot(d[j], axis), -1.0, 1.0)));
+        spread += extra;
+        cos_spread = std::cos(spread);
+        sin_spread = std::sin(spread);
+        return std::isfinite(spread) && spread < 0.5 * kPi;
+    }
+};
+
+// A chain of two planes: the eye sees edge point e through face points x1 of the first plane and
+// x2 of the second (the ray from the eye through x1, turned there, meets the second plane, is
+// turned there, and must pass e). Its beam bounds the rays leaving the second plane.
+struct Chain : Beam {
+    int plane[2] = {-1, -1};
+    bool refract[2] = {false, false};
 };
 
 // At most this many edge set-ups over all chains (each costs a few Newton solves), and this many
@@ -608,47 +631,27 @@ Vec3d chain_guess(const std::vector<SmoothPlane>& planes, const Chain& ch, const
     return e - n * dot(e - q, n);
 }
 
-// The chain's point x1 (in: the guess) and x2 through which the eye (a point, or parallel rays
-// along `forward`) sees e. Steps that do not bring the ray leaving x2 closer to e (in angle) are
-// halved; false where they stall before it passes e to 1e-10 radians.
-bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const Vec3d& eye, bool parallel,
-                 const Vec3d& forward, const Vec3d& e, Vec3d& x1, Vec3d& x2) {
-    const SmoothPlane& first = planes[size_t(ch.plane[0])];
-    const Vec3d q(first.q);
-    const TFrame<double>& axes = first.axes;
-    // The size of the first plane's faces: the Jacobian's step and, for parallel rays, how far
-    // before x1 they start (a unit would round away a small scene's detail).
-    const double scale = std::abs(first.hi[0] - first.lo[0]) + std::abs(first.hi[1] - first.lo[1]);
-    const double back = scale > 0.0 ? scale : 1.0;
-    auto residual = [&](double a, double b, Vec3d& r, Vec3d& p1, Vec3d& p2) {
-        const Vec3d x = q + axes.s * a + axes.t * b;
-        Vec3d dir;
-        if (!follow_chain(planes, ch, parallel ? x - forward * back : eye, parallel ? forward : normalize(x - eye),
-                          p1, p2, dir))
-            return false;
-        const Vec3d to = e - p2;
-        const double len = length(to);
-        if (!(len > 0.0)) return false;
-        r = to / len - normalize(dir);
-        return std::isfinite(r.x) && std::isfinite(r.y) && std::isfinite(r.z);
-    };
-    const Vec3d local = axes.to_local(x1 - q);
-    double a = local.x, b = local.y;
-    Vec3d r, p1, p2;
-    if (!residual(a, b, r, p1, p2)) return false;
+// Gauss-Newton steps on two coordinates (a, b) towards a zero of residual(a, b, r) (a 3-vector;
+// false where it is not defined), the Jacobian by differences of 1e-7 (scale + |a| + |b|).
+// Steps that do not lower |r| are halved, up to 10 times; three slow steps in a row far from a
+// root give up. True where |r| <= 1e-10 at the (a, b) it leaves.
+template <class Residual>
+bool solve_2d(Residual&& residual, double scale, double& a, double& b) {
+    Vec3d r;
+    if (!residual(a, b, r)) return false;
     double err = length(r);
     int slow = 0;  // steps in a row that did not halve the error, far from a root
     for (int it = 0; it < 24 && err > 1e-13; ++it) {
         const double h = 1e-7 * (scale + std::abs(a) + std::abs(b));
-        Vec3d ra, rb, unused1, unused2;
+        Vec3d ra, rb;
         double ha = h, hb = h;
-        if (!residual(a + ha, b, ra, unused1, unused2)) {
+        if (!residual(a + ha, b, ra)) {
             ha = -h;
-            if (!residual(a + ha, b, ra, unused1, unused2)) return false;
+            if (!residual(a + ha, b, ra)) return false;
         }
-        if (!residual(a, b + hb, rb, unused1, unused2)) {
+        if (!residual(a, b + hb, rb)) {
             hb = -h;
-            if (!residual(a, b + hb, rb, unused1, unused2)) return false;
+            if (!residual(a, b + hb, rb)) return false;
         }
         const Vec3d ja = (ra - r) / ha, jb = (rb - r) / hb;
         const double m00 = dot(ja, ja), m01 = dot(ja, jb), m11 = dot(jb, jb);
@@ -658,9 +661,9 @@ bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const 
         bool stepped = false;
         const double before = err;
         for (int halve = 0; halve < 10 && !stepped; ++halve, da *= 0.5, db *= 0.5) {
-            Vec3d rn, n1, n2;
-            if (residual(a + da, b + db, rn, n1, n2) && length(rn) < err) {
-                a += da, b += db, r = rn, p1 = n1, p2 = n2, err = length(rn);
+            Vec3d rn;
+            if (residual(a + da, b + db, rn) && length(rn) < err) {
+                a += da, b += db, r = rn, err = length(rn);
                 stepped = true;
             }
         }
@@ -669,10 +672,44 @@ bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const 
         slow = err > 0.5 * before && err > 1e-6 ? slow + 1 : 0;
         if (!stepped || slow == 3) break;
     }
-    if (!(err <= 1e-10)) return false;
-    x1 = p1;
-    x2 = p2;
-    return true;
+    return err <= 1e-10;
+}
+
+// The angle residual of a ray leaving x along dir that should pass e: the unit direction to e
+// less dir's. False where e is at x or it is not finite.
+bool towards(const Vec3d& x, const Vec3d& dir, const Vec3d& e, Vec3d& r) {
+    const Vec3d to = e - x;
+    const double len = length(to);
+    if (!(len > 0.0)) return false;
+    r = to / len - normalize(dir);
+    return std::isfinite(r.x) && std::isfinite(r.y) && std::isfinite(r.z);
+}
+
+// The chain's point x1 (in: the guess) and x2 through which the eye (a point, or parallel rays
+// along `forward`) sees e (solve_2d on x1's coordinates in the first plane).
+bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const Vec3d& eye, bool parallel,
+                 const Vec3d& forward, const Vec3d& e, Vec3d& x1, Vec3d& x2) {
+    const SmoothPlane& first = planes[size_t(ch.plane[0])];
+    const Vec3d q(first.q);
+    const TFrame<double>& axes = first.axes;
+    // The size of the first plane's faces: the Jacobian's step and, for parallel rays, how far
+    // before x1 they start (a unit would round away a small scene's detail).
+    const double scale = std::abs(first.hi[0] - first.lo[0]) + std::abs(first.hi[1] - first.lo[1]);
+    const double back = scale > 0.0 ? scale : 1.0;
+    auto follow = [&](double a, double b, Vec3d& r, Vec3d& p1, Vec3d& p2) {
+        const Vec3d x = q + axes.s * a + axes.t * b;
+        Vec3d dir;
+        return follow_chain(planes, ch, parallel ? x - forward * back : eye, parallel ? forward : normalize(x - eye),
+                            p1, p2, dir) &&
+               towards(p2, dir, e, r);
+    };
+    const Vec3d local = axes.to_local(x1 - q);
+    double a = local.x, b = local.y;
+    Vec3d r;
+    Vec3d p1, p2;
+    if (!solve_2d([&](double u, double v, Vec3d& res) { return follow(u, v, res, p1, p2); }, scale, a, b))
+        return false;
+    return follow(a, b, r, x1, x2);
 }
 
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
@@ -854,7 +891,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         auto bound_beam = [&](Chain& ch) {
             if (cam.type == CameraType::ThinLens) return;
             const SmoothPlane& a = planes[size_t(ch.plane[0])];
-            Vec3d o[4], d[4], sum_d(0.0);
+            Vec3d o[4], d[4];
             const double back = std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
             for (int k = 0; k < 4; ++k) {
                 const Vec3d c = a.corner(k);
@@ -863,7 +900,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 Vec3d x1;
                 if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eye), x1, o[k], d[k])) return;
                 d[k] = normalize(d[k]);
-                sum_d = sum_d + d[k];
             }
             // The origins lie on the second plane's faces too: their box (widened) within those
             // faces' box, in the second plane's axes.
@@ -879,15 +915,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 lo[j] = std::max(lo[j] - w, b.lo[j]), hi[j] = std::min(hi[j] + w, b.hi[j]);
                 if (!(lo[j] <= hi[j])) lo[j] = b.lo[j], hi[j] = b.hi[j];
             }
-            if (!(length(sum_d) > 0.0)) return;
             ch.origin = Vec3d(b.q) + b.axes.s * (0.5 * (lo[0] + hi[0])) + b.axes.t * (0.5 * (lo[1] + hi[1]));
             ch.origin_radius = 0.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]) * (1.0 + 1e-6);
-            ch.axis = normalize(sum_d);
-            for (int j = 0; j < 4; ++j)
-                ch.spread = std::max(ch.spread, 1.25 * std::acos(std::clamp(dot(d[j], ch.axis), -1.0, 1.0)));
-            ch.bounded = std::isfinite(ch.origin_radius) && std::isfinite(ch.spread) && ch.spread < 0.5 * kPi;
-            ch.cos_spread = std::cos(ch.spread);
-            ch.sin_spread = std::sin(ch.spread);
+            ch.bounded = ch.bound_directions(d, 4, 1.25, 0.0) && std::isfinite(ch.origin_radius);
         };
         constexpr double kUnlikely = 1e-3;
         auto beam_share = [&](const SmoothPlane& a, bool refract, const SmoothPlane& b) {
