@@ -25,14 +25,15 @@ namespace {
 // An edge's part on the film: the edge and the clipped segment (full-film pixels).
 struct FilmEdge {
     size_t edge;  // in Scene::edges()
-    double ax, ay, bx, by;
+    double ax, ay, bx, by;  // (curved: the barycentrics of its part's ends on the face, the solves' guesses)
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
     int plane = -1;       // seen in this plane of smooth faces (SmoothPlanes::planes), or directly (-1)
     bool refracted = false;  // through the plane (else reflected in it)
     int chain = -1;          // seen through this chain of two planes (Chains; plane: its first)
-    double u0 = 0.0, u1 = 1.0;  // refracted, chained: the part of the edge sampled (its ends' parameters)
+    int curved = -1;         // seen in or through this curved face (CurvedFace)
+    double u0 = 0.0, u1 = 1.0;  // refracted, chained, curved: the part of the edge sampled (its ends' parameters)
 };
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
@@ -297,6 +298,28 @@ struct LightBoxes {
 // The mirror image of point p across the plane (q, n).
 inline Vec3f mirrored(const Vec3f& p, const Vec3f& q, const Vec3f& n) { return p - n * (2.f * dot(p - q, n)); }
 
+// Whether the material reflects a smooth lobe everywhere (a mirror, smooth glass, a smooth
+// plastic's coating) and has no normal map: glass and plastic are smooth where their
+// roughness is 0.
+bool smooth_lobe(const Material& mat) {
+    if (mat.kind == MaterialKind::Standard || !mat.normal_map.empty()) return false;
+    if (mat.kind == MaterialKind::Conductor) return true;
+    const Texture& r = mat.roughness;
+    const int64_t texels = int64_t(r.width) * r.height * r.channels;
+    return r.empty() || *std::min_element(r.data, r.data + texels) <= 0.f;
+}
+
+// The direction part of a smooth material's delta_params (no textures: those weigh, they do not
+// turn), in double.
+DeltaParams<double> delta_turn(const Material& mat) {
+    DeltaParams<double> d;
+    d.dielectric = mat.kind == MaterialKind::Dielectric;
+    d.coat = mat.kind == MaterialKind::Plastic;
+    d.two_sided = mat.two_sided;
+    d.eta = d.dielectric && mat.ior.is_constant() ? double(mat.ior.data[0]) : 1.0;  // (glass of one index refracts)
+    return d;
+}
+
 // Planes of smooth faces: the faces of a mesh whose material reflects a smooth lobe (a mirror,
 // smooth glass, a smooth plastic's coating) and whose shading normal is its geometric normal
 // (no vertex normals, no normal map), grouped by the plane they lie in. What the camera sees
@@ -353,13 +376,7 @@ struct SmoothPlanes {
         for (size_t i = 0; i < scene.meshes.size(); ++i) {
             const Mesh& m = scene.meshes[i];
             const Material& mat = scene.materials[size_t(m.material)];
-            if (mat.kind == MaterialKind::Standard || m.normals || !mat.normal_map.empty()) continue;
-            if (mat.kind != MaterialKind::Conductor) {
-                // Glass and plastic are smooth where their roughness is 0.
-                const Texture& r = mat.roughness;
-                const int64_t texels = int64_t(r.width) * r.height * r.channels;
-                if (!r.empty() && !(*std::min_element(r.data, r.data + texels) <= 0.f)) continue;
-            }
+            if (m.normals || !smooth_lobe(mat)) continue;
             // Planes a ten-thousandth of the mesh's size apart are one (and the faces of one plane
             // further apart than rounding, as far from the origin as they may lie, several: that
             // costs samples only, since each face is seen only through its own plane's samples).
@@ -412,10 +429,7 @@ struct SmoothPlanes {
                     mp.refracts = refracts;
                     mp.eta = behind ? 1.0 / ior : ior;
                     mp.material = m.material;
-                    mp.delta.dielectric = mat.kind == MaterialKind::Dielectric;
-                    mp.delta.coat = mat.kind == MaterialKind::Plastic;
-                    mp.delta.two_sided = mat.two_sided;
-                    mp.delta.eta = ior;
+                    mp.delta = delta_turn(mat);
                     mp.winding_n = normalize(Vec3d(behind ? -n : n));
                     mp.x0 = mp.y0 = std::numeric_limits<double>::infinity();
                     mp.x1 = mp.y1 = -std::numeric_limits<double>::infinity();
@@ -549,13 +563,15 @@ struct Beam {
     Vec3d origin, axis;
     double origin_radius = 0.0, spread = 0.0, cos_spread = -1.0, sin_spread = 0.0;
 
-    // Whether a ray from the origin ball within the cone may meet the segment (p0, p1): the
+    // Whether a ray from the origin ball within the cone may meet the segment (p0, p1) (below): the
     // segment's ball seen from the origin ball's centre within the cone widened by both balls'
     // angular radius b, sin b = reach / dist (compared by cosines: cos(angle) >= cos(spread + b)).
-    bool may_see(const Vec3d& p0, const Vec3d& p1) const {
+    bool may_see(const Vec3d& p0, const Vec3d& p1) const { return may_see_ball((p0 + p1) * 0.5, 0.5 * length(p1 - p0)); }
+    // The same for a ball (c, radius).
+    bool may_see_ball(const Vec3d& c, double radius) const {
         if (!bounded) return true;
-        const Vec3d to = (p0 + p1) * 0.5 - origin;
-        const double dist = length(to), reach = origin_radius + 0.5 * length(p1 - p0);
+        const Vec3d to = c - origin;
+        const double dist = length(to), reach = origin_radius + radius;
         if (!(dist > reach)) return true;
         // (spread < pi / 2 where bounded and b <= pi / 2: their sum below a half turn, where the
         // cosine falls.)
@@ -712,6 +728,219 @@ bool chain_point(const std::vector<SmoothPlane>& planes, const Chain& ch, const 
     return follow(a, b, r, x1, x2);
 }
 
+// Curved smooth faces. A mesh with shading normals (interpolated across each face) whose
+// material reflects a smooth lobe is a curved mirror or piece of glass: each face turns the rays
+// through it by its own, varying normal, and the film point through which the camera sees an
+// edge point e in it (or through it) has no closed form. A CurvedFace is one face with one lobe
+// (reflection, or refraction for glass of one index): the point where the camera ray must meet
+// it is found by Gauss-Newton steps on that point's barycentrics (solve_2d); the turned ray is
+// the renderer's: the interpolated normal, normalised and bent (bend_normal), the delta lobe about
+// it, kept on its side of the face (delta_side). Edges are sampled along their parameter and
+// weighted by the film length per unit parameter (as through a plane), each face's samples only
+// where the camera ray meets that face first. Its beam bounds the rays leaving it: from the
+// face's ball, within the cone of the three corners' turned rays widened by a quarter (their
+// normals and the camera's rays turn smoothly across it).
+struct CurvedFace : Beam {
+    int mesh = -1;
+    int64_t prim = -1;
+    bool refract = false;
+    bool behind = false;  // the camera behind the face (by its winding)
+    DeltaParams<double> delta;
+    Vec3d v0, e1, e2, ng;  // its first vertex, edges from there, unit geometric normal
+    Vec3d n[3];            // its vertices' shading normals, as given (interpolated, then normalised)
+    double film_area = 0.0;
+
+    // The face's unit shading normal, bent for the viewer wo, at barycentrics (b1, b2) (of its
+    // plane, outside the face too), and the ray leaving point x there.
+    bool turn(double b1, double b2, const Vec3d& d, Vec3d& dir) const {
+        const Vec3d N = n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2;
+        const double l = length(N);
+        const Vec3d wo = -d, ns = bend_normal(l > 0.0 ? N / l : ng, ng, wo);
+        Vec3d weight;
+        if (!delta_scatter(delta, ns, wo, refract, 1.0, dir, weight)) return false;
+        dir = delta_side(dir, ng, delta_side_sign(wo, ng, refract));
+        return true;
+    }
+
+    // The part (u0, u1) of the segment (p0, p1) on the side of the face's plane its lobe sends
+    // rays to (reflected rays leave on the camera's side, refracted ones on the other); false
+    // where none is (beyond a millionth of the face's size).
+    bool out_side(const Vec3d& p0, const Vec3d& p1, double& u0, double& u1) const {
+        const double sign = behind != refract ? -1.0 : 1.0;
+        const double h0 = sign * dot(p0 - v0, ng), h1 = sign * dot(p1 - v0, ng);
+        const double tol = 1e-6 * (length(e1) + length(e2));
+        if (!(h0 > tol || h1 > tol)) return false;
+        u0 = h0 < 0.0 ? h0 / (h0 - h1) : 0.0;
+        u1 = h1 < 0.0 ? h0 / (h0 - h1) : 1.0;
+        return true;
+    }
+};
+
+// At most this many edge set-ups over all curved faces.
+constexpr size_t kCurvedSetups = size_t(1) << 16;
+
+// The scene's edges that are not flat in a tree of balls, for finding those a beam may see: each
+// node's ball holds its edges' (segments'), a leaf's up to 8 edges; split at the median of the
+// longest side of its edges' midpoints' box.
+class EdgeBalls {
+public:
+    EdgeBalls() = default;
+    explicit EdgeBalls(const Scene& scene) {
+        const std::vector<Edge>& edges = scene.edges();
+        for (size_t i = 0; i < edges.size(); ++i) {
+            const Edge& e = edges[i];
+            if (e.flat) continue;
+            const Mesh& m = scene.meshes[size_t(e.mesh)];
+            const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
+            order_.push_back(int32_t(i));
+            mid_.push_back((p0 + p1) * 0.5);
+            half_.push_back(0.5 * length(p1 - p0));
+        }
+        std::vector<int32_t> items(order_.size());
+        for (size_t k = 0; k < items.size(); ++k) items[k] = int32_t(k);
+        if (!items.empty()) build(items, 0, int32_t(items.size()));
+        std::vector<int32_t> edge_of(items.size());
+        for (size_t k = 0; k < items.size(); ++k) edge_of[k] = order_[size_t(items[k])];
+        leaf_items_ = std::move(items);
+        order_ = std::move(edge_of);
+    }
+    // Calls fn(edge) for each edge (index into scene.edges()) whose segment `beam` may see, in
+    // the tree's order.
+    template <class Fn>
+    void visit(const Beam& beam, Fn&& fn) const {
+        if (nodes_.empty()) return;
+        int32_t stack[64];
+        int top = 0;
+        stack[top++] = 0;
+        while (top > 0) {
+            const Node& node = nodes_[size_t(stack[--top])];
+            if (!beam.may_see_ball(node.c, node.r)) continue;
+            if (node.left < 0) {
+                for (int32_t k = node.begin; k < node.end; ++k) {
+                    const size_t item = size_t(leaf_items_[size_t(k)]);
+                    if (beam.may_see_ball(mid_[item], half_[item])) fn(order_[size_t(k)]);
+                }
+                continue;
+            }
+            stack[top++] = node.right;
+            stack[top++] = node.left;
+        }
+    }
+
+private:
+    struct Node {
+        Vec3d c;
+        double r = 0.0;
+        int32_t begin = 0, end = 0, left = -1, right = -1;
+    };
+    std::vector<int32_t> order_, leaf_items_;  // by position in the tree: the edge, its item
+    std::vector<Vec3d> mid_;                   // by item: the edge's midpoint and half length
+    std::vector<double> half_;
+    std::vector<Node> nodes_;
+
+    int32_t build(std::vector<int32_t>& items, int32_t begin, int32_t end) {
+        const int32_t index = int32_t(nodes_.size());
+        nodes_.push_back(Node());
+        Vec3d lo(std::numeric_limits<double>::infinity()), hi(-std::numeric_limits<double>::infinity());
+        for (int32_t k = begin; k < end; ++k) {
+            const Vec3d& c = mid_[size_t(items[size_t(k)])];
+            lo = Vec3d(std::min(lo.x, c.x), std::min(lo.y, c.y), std::min(lo.z, c.z));
+            hi = Vec3d(std::max(hi.x, c.x), std::max(hi.y, c.y), std::max(hi.z, c.z));
+        }
+        Node node;
+        node.c = (lo + hi) * 0.5;
+        for (int32_t k = begin; k < end; ++k) {
+            const size_t item = size_t(items[size_t(k)]);
+            node.r = std::max(node.r, length(mid_[item] - node.c) + half_[item]);
+        }
+        node.r *= 1.0 + 1e-9;
+        node.begin = begin;
+        node.end = end;
+        // (Depth below 64: a split halves the count, down to 8 a leaf.)
+        if (end - begin > 8) {
+            const Vec3d size = hi - lo;
+            const int axis = size.x >= size.y && size.x >= size.z ? 0 : (size.y >= size.z ? 1 : 2);
+            const int32_t half = begin + (end - begin) / 2;
+            std::nth_element(items.begin() + begin, items.begin() + half, items.begin() + end, [&](int32_t a, int32_t b) {
+                const Vec3d &ca = mid_[size_t(a)], &cb = mid_[size_t(b)];
+                const double va = axis == 0 ? ca.x : axis == 1 ? ca.y : ca.z, vb = axis == 0 ? cb.x : axis == 1 ? cb.y : cb.z;
+                return va < vb || (va == vb && a < b);
+            });
+            node.left = build(items, begin, half);
+            node.right = build(items, half, end);
+        }
+        nodes_[size_t(index)] = node;
+        return index;
+    }
+};
+
+// A first guess of the barycentrics (b1, b2) of curved face cf's point for edge point e, seen
+// from the eye (a point, or parallel rays along `forward`): as if the face were the plane through
+// its centre whose normal is its corners' normals' mean, e mirrored across it and seen from the
+// eye, or the eye's ray refracted there to e (exact for a flat face); its centre where that
+// fails.
+void curved_guess(const CurvedFace& cf, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
+                  double& b1, double& b2) {
+    b1 = b2 = 1.0 / 3.0;
+    const Vec3d c = cf.v0 + (cf.e1 + cf.e2) / 3.0;
+    Vec3d n = normalize(normalize(cf.n[0]) + normalize(cf.n[1]) + normalize(cf.n[2]));
+    if (parallel ? dot(n, forward) > 0.0 : dot(n, eye - c) < 0.0) n = -n;  // towards the eye
+    Vec3d x;
+    if (!cf.refract) {
+        const Vec3d mirrored = e - n * (2.0 * dot(e - c, n));
+        const Vec3d from = parallel ? mirrored : eye, dir = parallel ? forward : mirrored - eye;
+        x = from + dir * (dot(c - from, n) / dot(dir, n));
+    } else {
+        // (The far side's index over the near side's: the material's from its front.)
+        const double eta = cf.behind ? 1.0 / cf.delta.eta : cf.delta.eta;
+        if (parallel) {
+            Vec3d r;
+            if (!refracted_direction(forward, n, eta, r)) return;
+            x = e - r * (dot(e - c, n) / dot(r, n));
+        } else if (!refraction_point(eye, e, c, n, eta, x)) {
+            return;
+        }
+    }
+    // Its barycentrics (least squares in the face's plane).
+    const Vec3d w = x - cf.v0;
+    const double a11 = dot(cf.e1, cf.e1), a12 = dot(cf.e1, cf.e2), a22 = dot(cf.e2, cf.e2);
+    const double r1 = dot(w, cf.e1), r2 = dot(w, cf.e2), det = a11 * a22 - a12 * a12;
+    const double g1 = (a22 * r1 - a12 * r2) / det, g2 = (a11 * r2 - a12 * r1) / det;
+    if (std::isfinite(g1) && std::isfinite(g2)) b1 = g1, b2 = g2;
+}
+
+// The point x of curved face cf (its barycentrics b1, b2; in: the guess) where the ray from the
+// eye (a point, or parallel rays along `forward`) is turned to pass e. Beyond the face its normals
+// are extrapolated, and may turn rays to e at other points too: where the solve from the guess
+// ends outside the face, it starts again from the face's centre and from points near its
+// corners, and keeps the first point found inside (else the one found outside).
+bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
+                  double& b1, double& b2, Vec3d& x) {
+    auto follow = [&](double a, double b, Vec3d& r, Vec3d& p) {
+        p = cf.v0 + cf.e1 * a + cf.e2 * b;
+        Vec3d dir;
+        return cf.turn(a, b, parallel ? forward : normalize(p - eye), dir) && towards(p, dir, e, r);
+    };
+    auto inside = [](double a, double b) { return a >= 0.0 && b >= 0.0 && a + b <= 1.0; };
+    Vec3d r, p;
+    auto solve = [&](double& a, double& b) {
+        return solve_2d([&](double u, double v, Vec3d& res) { return follow(u, v, res, p); }, 1.0, a, b);
+    };
+    const bool found = solve(b1, b2);
+    if (!found || !inside(b1, b2)) {
+        constexpr double kStarts[4][2] = {{1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8}};
+        for (const auto& start : kStarts) {
+            double a = start[0], b = start[1];
+            if (solve(a, b) && inside(a, b)) {
+                b1 = a, b2 = b;
+                return follow(b1, b2, r, x);
+            }
+        }
+        if (!found) return false;
+    }
+    return follow(b1, b2, r, x);
+}
+
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
     return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
 }
@@ -723,6 +952,11 @@ bool primary_edges_wanted(const Scene& scene, const RenderOptions& opt, const Sc
     if (slots.camera.wanted()) return true;
     for (size_t i = 0; i < scene.meshes.size(); ++i)
         if (vertices_wanted(slots, int(i))) return true;
+    // Curved mirrors' and glass's shading normals turn the edges seen in them (CurvedFace).
+    for (size_t i = 0; i < scene.meshes.size(); ++i)
+        if (i < slots.meshes.size() && slots.meshes[i].normals.wanted() && scene.meshes[i].normals &&
+            smooth_lobe(scene.materials[size_t(scene.meshes[i].material)]))
+            return true;
     // Glass's index bends the edges seen through it (Refraction).
     for (const SceneGradients::MaterialSlots& m : slots.materials)
         if (m.ior.wanted()) return true;
@@ -829,7 +1063,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     // The film point (fx, fy) through which `eye` sees point x of plane mp (parallel rays: the
     // camera's, whose direction is the forward axis).
-    auto plane_point_film = [&](const SmoothPlane& mp, const Eye& eye, const Vec3d& x, double& fx, double& fy) {
+    auto point_film = [&](const Eye& eye, const Vec3d& x, const Vec3f& n, double& fx, double& fy) {
         if (!has_eye(cam.type)) {
             const Vec3d qc = camera_axes(cam, Vec3f(x) - cam.position);
             fx = film_x(cam, qc.x);
@@ -837,7 +1071,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             return std::isfinite(fx) && std::isfinite(fy);
         }
         double jacobian;
-        return film_point(cam, eye, Vec3f(x), mp.n, fx, fy, jacobian);
+        return film_point(cam, eye, Vec3f(x), n, fx, fy, jacobian);
     };
     // The film point (fx, fy) that `eye` sees point e (on the far side of refracting plane mp)
     // at: through the plane's refraction point (a pinhole, a lens point), or for parallel rays
@@ -852,7 +1086,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         } else if (!refraction_point(Vec3d(eye.position), e, q, n, mp.eta, x)) {
             return false;
         }
-        return plane_point_film(mp, eye, x, fx, fy);
+        return point_film(eye, x, mp.n, fx, fy);
     };
     // The sides of plane `of` (by its winding) that the box of plane p's faces reaches: bit 0
     // its front, bit 1 its back.
@@ -863,6 +1097,32 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             sides |= (h > double(of.tol) ? 1 : 0) | (h < -double(of.tol) ? 2 : 0);
         }
         return sides;
+    };
+    // Of `count` candidates in rank order (beam_of(j) their beams), keeps (keep(j)) the best
+    // ranked first, each with the edges its beam may see, until those edges or the tests for them
+    // reach their limits (counted in parallel, a block of candidates at a time).
+    auto keep_seen = [&](size_t count, auto&& beam_of, double max_setups, double max_tests, auto&& keep) {
+        constexpr int64_t kBlock = 64;
+        double setups = 0.0, tests = 0.0;
+        std::vector<int64_t> seen(static_cast<size_t>(kBlock));
+        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += size_t(kBlock)) {
+            const int64_t block = std::min(kBlock, int64_t(count - begin));
+            parallel_indices(opt, block, [&](int64_t j) {
+                const Beam& beam = beam_of(begin + size_t(j));
+                int64_t n = 0;
+                for (const Edge& e : all_edges) {
+                    const Mesh& m = scene.meshes[size_t(e.mesh)];
+                    n += !e.flat && beam.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)));
+                }
+                seen[size_t(j)] = n;
+            });
+            for (int64_t j = 0; j < block && setups < max_setups && tests < max_tests; ++j) {
+                tests += double(all_edges.size());
+                if (seen[size_t(j)] == 0) continue;
+                setups += double(seen[size_t(j)]);
+                keep(begin + size_t(j));
+            }
+        }
     };
     // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
     // pair of planes and each lobe of each (a refraction only where the plane refracts) whose
@@ -977,28 +1237,106 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
         std::stable_sort(candidates.begin(), candidates.end(),
                          [](const auto& x, const auto& y) { return x.first > y.first; });
-        // The best ranked first, each with the edges its beam may see, until those edges or the
-        // tests for them reach their limits (counted in parallel, a block of candidates at a time).
-        constexpr int64_t kBlock = 64;
-        double setups = 0.0, tests = 0.0;
-        std::vector<int64_t> seen(static_cast<size_t>(kBlock));
-        for (size_t begin = 0; begin < candidates.size() && setups < kChainSetups && tests < kChainTests;
-             begin += size_t(kBlock)) {
-            const int64_t count = std::min(kBlock, int64_t(candidates.size() - begin));
-            parallel_indices(opt, count, [&](int64_t j) {
-                const Chain& ch = candidates[begin + size_t(j)].second;
-                int64_t n = 0;
-                for (const Edge& e : all_edges) {
-                    const Mesh& m = scene.meshes[size_t(e.mesh)];
-                    n += !e.flat && ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)));
+        keep_seen(candidates.size(), [&](size_t j) -> const Beam& { return candidates[j].second; }, kChainSetups,
+                  kChainTests, [&](size_t j) { chains.push_back(candidates[j].second); });
+    }
+    // Curved faces (CurvedFace, above), where paths scatter at least once: each face of a mesh
+    // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
+    // rays from (a one-sided mirror's front), with each lobe, those covering the most film first
+    // (faces seen from behind count a thousandth: inside a closed mesh others hide them), each
+    // with the edges its beam may see, up to kCurvedSetups set-ups. No beam with a thin lens.
+    std::vector<CurvedFace> curved;
+    std::vector<std::pair<int32_t, int32_t>> curved_setups;  // (face in `curved`, edge)
+    if (planes_seen) {
+        const Vec3d eye(cam.position), forward(cam.forward);
+        const bool parallel = !has_eye(cam.type), lens = cam.type == CameraType::ThinLens;
+        std::vector<CurvedFace> candidates;
+        for (size_t i = 0; i < scene.meshes.size(); ++i) {
+            const Mesh& m = scene.meshes[i];
+            const Material& mat = scene.materials[size_t(m.material)];
+            if (!m.normals || !smooth_lobe(mat)) continue;
+            const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
+            const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
+            for (int64_t f = 0; f < m.num_triangles; ++f) {
+                if (m.is_degenerate(f)) continue;
+                const int32_t *t = m.indices + 3 * f, *ni = m.normal_indices + 3 * f;
+                CurvedFace cf;
+                cf.mesh = int(i);
+                cf.prim = f;
+                Vec3d v[3];
+                for (int c = 0; c < 3; ++c) {
+                    v[c] = Vec3d(m.vertex(t[c]));
+                    cf.n[c] = Vec3d(Vec3f::load(m.normals + 3 * ni[c]));
                 }
-                seen[size_t(j)] = n;
+                cf.v0 = v[0], cf.e1 = v[1] - v[0], cf.e2 = v[2] - v[0];
+                cf.ng = Vec3d(m.unit_face_normal(f));
+                const double side = parallel ? -dot(cf.ng, forward) : dot(cf.ng, eye - v[0]);
+                if ((front_only && !(side > 0.0)) || !(side != 0.0)) continue;
+                cf.behind = side < 0.0;
+                cf.delta = delta_turn(mat);
+                // The film box its corners span (the whole window where one reaches behind the
+                // camera, or with a thin lens), within the window.
+                double x0 = wx0, y0 = wy0, x1 = wx1, y1 = wy1;
+                bool whole = lens;
+                for (int c = 0; c < 3 && !whole; ++c)
+                    whole = !parallel && !(camera_axes(cam, Vec3f(v[c]) - cam.position).z > 1e-6 * length(v[c] - eye));
+                if (!whole) {
+                    x0 = y0 = std::numeric_limits<double>::infinity(), x1 = y1 = -x0;
+                    for (int c = 0; c < 3; ++c) {
+                        const Vec3d qc = camera_axes(cam, Vec3f(v[c]) - cam.position);
+                        const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z);
+                        const double y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
+                        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
+                    }
+                    x0 = std::max(x0 - 1.0, wx0), y0 = std::max(y0 - 1.0, wy0);
+                    x1 = std::min(x1 + 1.0, wx1), y1 = std::min(y1 + 1.0, wy1);
+                    if (!(x0 < x1 && y0 < y1)) continue;
+                }
+                cf.film_area = (x1 - x0) * (y1 - y0) * (cf.behind ? 1e-3 : 1.0);
+                const Vec3d centre = (v[0] + v[1] + v[2]) / 3.0;
+                for (int r = 0; r < (refracts ? 2 : 1); ++r) {
+                    CurvedFace lobe = cf;
+                    lobe.refract = r == 1;
+                    Vec3d d[3];
+                    bool bounded = !lens;
+                    for (int c = 0; c < 3 && bounded; ++c) {
+                        const Vec3d to = v[c] - eye;
+                        bounded = (parallel || dot(to, forward) > 0.0) &&
+                                  lobe.turn(c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0, parallel ? forward : normalize(to), d[c]);
+                        d[c] = normalize(d[c]);
+                        lobe.origin_radius = std::max(lobe.origin_radius, length(v[c] - centre) * (1.0 + 1e-6));
+                    }
+                    lobe.origin = centre;
+                    lobe.bounded = bounded && lobe.bound_directions(d, 3, 1.25, 1e-6) && std::isfinite(lobe.origin_radius);
+                    candidates.push_back(lobe);
+                }
+            }
+        }
+        std::stable_sort(candidates.begin(), candidates.end(),
+                         [](const CurvedFace& a, const CurvedFace& b) { return a.film_area > b.film_area; });
+        // The best ranked first, each with the edges its beam may see on the side its lobe
+        // sends rays to (found in a tree of the edges' balls, a block of faces at a time in
+        // parallel), until those reach kCurvedSetups.
+        const EdgeBalls balls = candidates.empty() ? EdgeBalls() : EdgeBalls(scene);
+        constexpr size_t kBlock = 64;
+        std::vector<std::vector<int32_t>> seen(kBlock);
+        for (size_t begin = 0; begin < candidates.size() && curved_setups.size() < kCurvedSetups; begin += kBlock) {
+            const size_t block = std::min(kBlock, candidates.size() - begin);
+            parallel_indices(opt, int64_t(block), [&](int64_t j) {
+                const CurvedFace& cf = candidates[begin + size_t(j)];
+                std::vector<int32_t>& found = seen[size_t(j)];
+                found.clear();
+                balls.visit(cf, [&](int32_t index) {
+                    const Edge& e = all_edges[size_t(index)];
+                    const Mesh& m = scene.meshes[size_t(e.mesh)];
+                    double u0, u1;
+                    if (cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), u0, u1)) found.push_back(index);
+                });
             });
-            for (int64_t j = 0; j < count && setups < kChainSetups && tests < kChainTests; ++j) {
-                tests += double(all_edges.size());
-                if (seen[size_t(j)] == 0) continue;
-                setups += double(seen[size_t(j)]);
-                chains.push_back(candidates[begin + size_t(j)].second);
+            for (size_t j = 0; j < block && curved_setups.size() < kCurvedSetups; ++j) {
+                if (seen[j].empty()) continue;
+                for (const int32_t index : seen[j]) curved_setups.push_back({int32_t(curved.size()), index});
+                curved.push_back(candidates[begin + j]);
             }
         }
     }
@@ -1010,7 +1348,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const Vec3d from(eye.position), forward(cam.forward);
         if (!guessed) x1 = chain_guess(smooth_planes.planes, ch, from, parallel, forward, e);
         return chain_point(smooth_planes.planes, ch, from, parallel, forward, e, x1, x2) &&
-               plane_point_film(smooth_planes.planes[size_t(ch.plane[0])], eye, x1, fx, fy);
+               point_film(eye, x1, smooth_planes.planes[size_t(ch.plane[0])].n, fx, fy);
     };
     // Whether the refraction points of the segment (e0, e1) beyond plane mp (from the camera's
     // position, or from any point of a thin lens) may lie on the plane's faces: whether the
@@ -1196,10 +1534,124 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         fe.plane = ch.plane[0];
         return fe.len > 0.0;
     };
+    auto normals_wanted = [&](int mesh) {
+        return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].normals.wanted();
+    };
+    // The film point that `eye` sees point e at in or through curved face cf; (b1, b2) (in: a
+    // guess) the barycentrics of its point there.
+    auto curved_film = [&](const CurvedFace& cf, const Eye& eye, const Vec3d& e, bool guessed, double& b1, double& b2,
+                           double& fx, double& fy) {
+        const Vec3d from(eye.position), forward(cam.forward);
+        const bool parallel = !has_eye(cam.type);
+        if (!guessed) curved_guess(cf, from, parallel, forward, e, b1, b2);
+        Vec3d x;
+        return curved_point(cf, from, parallel, forward, e, b1, b2, x) && point_film(eye, x, Vec3f(cf.ng), fx, fy);
+    };
+    // The edge e of mesh m seen in or through curved face cf: its part on the side of the face
+    // the lobe sends rays to, and of that the sixteenths the face's beam may see, sampled by the
+    // film length of the polyline through the film points of five of its points (from the last
+    // of them outside the face before the first inside to the first outside after the last
+    // inside; where one point only is found, a short chord beside it). Left out where no point
+    // found lies near the face.
+    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
+            !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
+            return false;
+        const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
+        double u0, u1;
+        if (!cf.may_see(p0, p1) || !cf.out_side(p0, p1, u0, u1)) return false;
+        constexpr int kPieces = 16;
+        int first = -1, last = -1;
+        for (int k = 0; k < kPieces; ++k) {
+            const double a = u0 + (u1 - u0) * double(k) / kPieces, b = u0 + (u1 - u0) * double(k + 1) / kPieces;
+            if (!cf.may_see(p0 + (p1 - p0) * a, p0 + (p1 - p0) * b)) continue;
+            if (first < 0) first = k;
+            last = k;
+        }
+        if (first < 0) return false;
+        const double span = u1 - u0;
+        u1 = u0 + span * double(last + 1) / kPieces;
+        u0 = u0 + span * double(first) / kPieces;
+        // Five points' film points, each solve starting from the last's (the first from the
+        // face's centre).
+        constexpr int kPoints = 5;
+        double fx[kPoints], fy[kPoints], bb1[kPoints], bb2[kPoints];
+        bool ok[kPoints], inside[kPoints];
+        double b1 = 0.0, b2 = 0.0;
+        bool guessed = false;
+        int first_in = -1, last_in = -1;
+        double box[4] = {1e300, 1e300, -1e300, -1e300};
+        for (int k = 0; k < kPoints; ++k) {
+            const double u = u0 + (u1 - u0) * double(k) / double(kPoints - 1);
+            guessed = ok[k] = curved_film(cf, centre, p0 + (p1 - p0) * u, guessed, b1, b2, fx[k], fy[k]);
+            if (!ok[k]) {
+                inside[k] = false;
+                continue;
+            }
+            bb1[k] = b1, bb2[k] = b2;
+            inside[k] = b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
+            if (inside[k]) last_in = k, first_in = first_in < 0 ? k : first_in;
+            box[0] = std::min(box[0], b1), box[1] = std::min(box[1], b2);
+            box[2] = std::max(box[2], b1), box[3] = std::max(box[3], b2);
+        }
+        // Near the face: the points' box of barycentrics, widened by half its size (the curve
+        // between the points bends), meets the face's.
+        const double wx = 0.5 * (box[2] - box[0]) + 1e-9, wy = 0.5 * (box[3] - box[1]) + 1e-9;
+        if (!(box[2] + wx >= 0.0 && box[3] + wy >= 0.0 && box[0] - wx + box[1] - wy <= 1.0)) return false;
+        int lo = 0, hi = kPoints - 1;
+        if (first_in >= 0) lo = std::max(first_in - 1, 0), hi = std::min(last_in + 1, kPoints - 1);
+        auto at = [&](int k) { return u0 + (u1 - u0) * double(k) / double(kPoints - 1); };
+        double len = 0.0;
+        int found = 0, middle = -1;
+        for (int k = lo, prev = -1; k <= hi; ++k) {
+            if (!ok[k]) continue;
+            ++found;
+            if (middle < 0 || (inside[k] && !inside[middle])) middle = k;
+            if (prev >= 0) len += std::hypot(fx[k] - fx[prev], fy[k] - fy[prev]);
+            prev = k;
+        }
+        if (found == 0) return false;
+        if (found == 1) {
+            // Seen near one point only: the film length there, per unit parameter, from a point
+            // an eighth of the spacing on either side, stands for the part's.
+            const double du = (u1 - u0) / double(8 * (kPoints - 1));
+            found = 0;
+            for (const double u : {at(middle) + du, at(middle) - du}) {
+                if (u < u0 || u > u1) continue;
+                double c1 = bb1[middle], c2 = bb2[middle], gx, gy;
+                if (!curved_film(cf, centre, p0 + (p1 - p0) * u, true, c1, c2, gx, gy)) continue;
+                len = std::hypot(gx - fx[middle], gy - fy[middle]) * (at(hi) - at(lo)) / du;
+                found = 2;
+                break;
+            }
+            if (found < 2) return false;
+        }
+        // Whether it folds, seen from the face's point of the middle point.
+        EdgeEye seen_from;
+        seen_from.origin = Vec3f(cf.v0 + cf.e1 * bb1[middle] + cf.e2 * bb2[middle]);
+        if (!is_fold(seen_from, m, e) && e.kind == EdgeKind::Smooth) {
+            fe.weight = smooth_weights[size_t(index)];
+            if (!(fe.weight > 0.0)) return false;
+        }
+        fe.u0 = at(lo);
+        fe.u1 = at(hi);
+        // The barycentrics found nearest the part's ends: the guesses of its samples' solves
+        // (along a line between them).
+        int near_lo = hi, near_hi = lo;
+        for (int k = hi; k >= lo; --k)
+            if (ok[k]) near_lo = k;
+        for (int k = lo; k <= hi; ++k)
+            if (ok[k]) near_hi = k;
+        if (!ok[near_lo]) near_lo = near_hi = middle;
+        fe.ax = bb1[near_lo], fe.ay = bb2[near_lo], fe.bx = bb1[near_hi], fe.by = bb2[near_hi];
+        fe.len = len * fe.weight;
+        fe.curved = int(&cf - curved.data());
+        return fe.len > 0.0 && fe.u1 > fe.u0;
+    };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     // Each edge directly, then reflected in each plane of smooth faces, then refracted by each,
-    // then seen through each chain.
+    // then seen through each chain, then in or through each curved face.
     const int64_t num_planes = int64_t(smooth_planes.planes.size());
     const int64_t num_chains = int64_t(chains.size());
     const int64_t num_setups = num_edges * (1 + 2 * num_planes + num_chains);
@@ -1287,6 +1739,25 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         chunk_edges[size_t(begin / kSetupChunk)] = std::move(film_edges);
     });
+    // Then the edges seen in or through curved faces, in chunks of their own after those.
+    {
+        constexpr int64_t kCurvedChunk = 256;
+        const int64_t count = int64_t(curved_setups.size());
+        const size_t first = chunk_edges.size();
+        chunk_edges.resize(first + size_t((count + kCurvedChunk - 1) / kCurvedChunk));
+        for_each_chunk(opt, count, kCurvedChunk, [&](int64_t begin, int64_t end) {
+            std::vector<FilmEdge> film_edges;
+            for (int64_t k = begin; k < end; ++k) {
+                const auto [face, index] = curved_setups[size_t(k)];
+                const Edge& e = all_edges[size_t(index)];
+                FilmEdge fe;
+                if (!curved_film_edge(curved[size_t(face)], scene.meshes[size_t(e.mesh)], e, index, fe)) continue;
+                fe.edge = size_t(index);
+                film_edges.push_back(fe);
+            }
+            chunk_edges[first + size_t(begin / kCurvedChunk)] = std::move(film_edges);
+        });
+    }
     // The edges on the film, k = 0, 1, ... in the list's order, stay in their chunks (not copied
     // into one array): chunk c holds k from starts[c] on.
     std::vector<size_t> starts(chunk_edges.size() + 1, 0);
@@ -1310,7 +1781,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // meet no face of their plane where there are many small ones, takes none from the first.
     size_t num_direct = 0;
     for (const std::vector<FilmEdge>& chunk : chunk_edges)
-        for (const FilmEdge& fe : chunk) num_direct += fe.plane < 0;
+        for (const FilmEdge& fe : chunk) num_direct += fe.plane < 0 && fe.curved < 0;
     const double total_direct = cumulative[num_direct], total_smooth = cumulative[num_film] - total_direct;
     const int64_t n_direct = total_direct > 0.0 ? n : 0, n_smooth = total_smooth > 0.0 ? n : 0;
     // Every point of every edge is drawn with density 1 / total (its group's) per unit film length
@@ -1355,6 +1826,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             int32_t tri[3] = {-1, -1, -1};
             Vec3f dv[3];
             float deta = 0.f;
+            // A curved face's: its shading normals' indices and the adjoints of g for them.
+            bool normals = false;
+            int32_t normal_tri[3] = {-1, -1, -1};
+            Vec3f dn[3];
         };
         Face faces[2];
     };
@@ -1394,6 +1869,13 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 }
                 if (ior_wanted(face.material))
                     sink.add(slots.materials[size_t(face.material)].ior, 0, s * face.deta);
+                if (face.normals && normals_wanted(face.mesh)) {
+                    const GradSlot& ns = slots.meshes[size_t(face.mesh)].normals;
+                    for (int c = 0; c < 3; ++c) {
+                        const Vec3f a = face.dn[c] * s;
+                        sink.add3(ns, face.normal_tri[c], a.x, a.y, a.z);
+                    }
+                }
             }
         };
         // The jump of pending sample pd (its side paths' radiance difference L) and its splat.
@@ -1734,6 +2216,84 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp[1],
                           closest_on_segment(p0, p1, from[2], dir[2]), dir[2], lobe[0] * lobe[1], false, chained_opt);
         };
+        // The boundary term of the edge `edge` seen in or through curved face cf at film point
+        // (x, y) (CurvedFace, above): where the camera ray meets that face first and is turned
+        // there past the edge, as the renderer turns it (the interpolated normal, normalised and
+        // bent, the lobe, delta_side). The side function is the turned ray's; its gradient
+        // reaches the camera ray through the face's point (its distance and barycentrics) and the
+        // turning, and the face's vertices, shading normals and index likewise.
+        auto splat_curved = [&](int64_t i, const Eye& eye, const Edge& edge, const CurvedFace& cf, float x, float y,
+                                double point_weight) {
+            Vec3f o, d;
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            const FirstHit hit = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
+            if (!hit.found || hit.hit.mesh != cf.mesh || hit.hit.prim != cf.prim) return;
+            const SurfacePoint sp = scene.surface_point(hit.hit);
+            const BsdfParams bp = scene.bsdf_params(sp);
+            if (bp.kind == MaterialKind::Standard || bp.rough) return;
+            if (cf.refract && bp.kind != MaterialKind::Dielectric) return;
+            const Mesh& fm = scene.meshes[size_t(cf.mesh)];
+            Pending pd;
+            Pending::Face& face = pd.faces[0];
+            face.mesh = cf.mesh;
+            face.normals = true;
+            Vec3f tv[3], N[3];
+            for (int c = 0; c < 3; ++c) {
+                face.tri[c] = fm.indices[3 * cf.prim + c];
+                face.normal_tri[c] = fm.normal_indices[3 * cf.prim + c];
+                tv[c] = fm.vertex(face.tri[c]);
+                N[c] = Vec3f::load(fm.normals + 3 * face.normal_tri[c]);
+            }
+            // The face's point, its normal and the turned ray.
+            TriangleHit<float> th;
+            if (!intersect_triangle(o, d, tv[0], tv[1], tv[2], th)) return;
+            const Vec3f xh = o + d * th.t;
+            const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], ng = cross_normal(u, v), wo = -d;
+            const Vec3f Ns = N[0] * (1.f - th.b1 - th.b2) + N[1] * th.b1 + N[2] * th.b2;
+            if (!(length(Ns) > 0.f)) return;
+            const Vec3f ns = normalize(Ns), nb = bend_normal(ns, ng, wo);
+            const DeltaParams<float> dp = delta_params(bp);
+            Vec3f turned, lobe;
+            if (!delta_scatter(dp, nb, wo, cf.refract, 1.f, turned, lobe)) return;
+            const float side = delta_side_sign(wo, ng, cf.refract);
+            const Vec3f dir = delta_side(turned, ng, side);
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            EdgeSideGradient g = edge_side_gradient(p0, p1, xh, dir);
+            // Back through delta_side, the lobe, the bend and the normalised interpolation.
+            Vec3f a_turned(0.f), a_ng(0.f), a_ns(0.f);
+            d_delta_side(turned, ng, side, g.d_d, a_turned, a_ng);
+            DDelta<float> dd;
+            dd.specular = dd.n = dd.wo = Vec3f(0.f);
+            dd.eta = 0.f;
+            d_delta_scatter(dp, nb, wo, cf.refract, 1.f, a_turned, Vec3f(0.f), dd);
+            Vec3f a_wo = dd.wo;
+            d_bend_normal(ns, ng, wo, dd.n, a_ns, a_wo);
+            const Vec3f a_N = d_normalize(Ns, a_ns);
+            face.dn[0] = a_N * (1.f - th.b1 - th.b2);
+            face.dn[1] = a_N * th.b1;
+            face.dn[2] = a_N * th.b2;
+            // x = o + t d and (t, b1, b2) from the camera ray and the face (d_intersect_triangle).
+            DTriangle<float> dt;
+            d_intersect_triangle(o, d, tv[0], tv[1], tv[2], th, dot(g.d_o, d), dot(a_N, N[1] - N[0]),
+                                 dot(a_N, N[2] - N[0]), dt);
+            const Vec3f a_o = g.d_o + dt.o, a_d = g.d_o * th.t - a_wo + dt.d;
+            // The geometric normal's adjoint (delta_side's) to the vertices through its cross
+            // product, beside the point's.
+            set_face_adjoints(face, u, v, Vec3f(0.f), a_ng);
+            face.dv[0] += dt.v0;
+            face.dv[1] += dt.v1;
+            face.dv[2] += dt.v2;
+            face.deta = dd.eta;
+            face.material = cf.refract ? fm.material : -1;
+            g.d_o = a_o;
+            g.d_d = a_d;
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
+                          closest_on_segment(p0, p1, xh, dir), dir, lobe, false, reflected_opt);
+        };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
             const bool direct = i < n_direct;
@@ -1754,17 +2314,27 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
-            if (fe.chain >= 0 || fe.refracted) {
-                // At parameter u of the edge (its part beyond the plane, or past the chain's
-                // second plane), as the eye sees it through the plane or the chain, weighted by
+            if (fe.chain >= 0 || fe.refracted || fe.curved >= 0) {
+                // At parameter u of the edge (its part beyond the plane, past the chain's second
+                // plane, or the curved face's part), as the eye sees it through the plane, the
+                // chain or the curved face, weighted by
                 // the film length per unit of t there: a central difference quotient 1e-4 wide.
                 // (Through a chain each solve near t starts from t's.)
                 const Vec3d a(p0), b(p1);
                 const double span = fe.u1 - fe.u0;
                 const Chain* ch = fe.chain >= 0 ? &chains[size_t(fe.chain)] : nullptr;
+                const CurvedFace* cf = fe.curved >= 0 ? &curved[size_t(fe.curved)] : nullptr;
                 Vec3d at_t, x1, x2;
                 auto film_at = [&](double tt, bool near_t, double& fx, double& fy) {
                     const Vec3d e = a + (b - a) * (fe.u0 + span * tt);
+                    if (cf) {
+                        // (From the line between the part's ends' points, near t from t's point.)
+                        double b1 = near_t ? at_t.x : fe.ax + (fe.bx - fe.ax) * tt;
+                        double b2 = near_t ? at_t.y : fe.ay + (fe.by - fe.ay) * tt;
+                        if (!curved_film(*cf, eye, e, true, b1, b2, fx, fy)) return false;
+                        if (!near_t) at_t = Vec3d(b1, b2, 0.0);
+                        return true;
+                    }
                     if (!ch) return refracted_film(smooth_planes.planes[size_t(fe.plane)], eye, e, fx, fy);
                     x1 = at_t;
                     if (!chain_film(*ch, eye, e, near_t, x1, x2, fx, fy)) return false;
@@ -1777,7 +2347,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 if (!film_at(lo_t, true, lx, ly) || !film_at(hi_t, true, hx, hy)) continue;
                 const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
                 const double w = sample_weight * per_t / fe.len;
-                if (ch)
+                if (cf)
+                    splat_curved(i, eye, edge, *cf, float(fx), float(fy), w);
+                else if (ch)
                     splat_chained(i, eye, edge, *ch, float(fx), float(fy), w);
                 else
                     splat_refracted(i, eye, edge, fe.plane, float(fx), float(fy), w);
