@@ -33,6 +33,7 @@ struct FilmEdge {
     bool refracted = false;  // through the plane (else reflected in it)
     int chain = -1;          // seen through this chain of two planes (Chains; plane: its first)
     int curved = -1;         // seen in or through this curved face (CurvedFace)
+    double kept = 1.0;       // curved: the probability its set-up was kept with (its samples count 1 / kept)
     double u0 = 0.0, u1 = 1.0;  // refracted, chained, curved: the part of the edge sampled (its ends' parameters)
 };
 
@@ -776,8 +777,10 @@ struct CurvedFace : Beam {
     }
 };
 
-// At most this many edge set-ups over all curved faces.
+// At most this many edge set-ups over all curved faces, and this many edges tested against their
+// beams in choosing them (faces without a beam test every edge).
 constexpr size_t kCurvedSetups = size_t(1) << 16;
+constexpr double kCurvedTests = double(1 << 20);
 
 // The scene's edges that are not flat in a tree of balls, for finding those a beam may see: each
 // node's ball holds its edges' (segments'), a leaf's up to 8 edges; split at the median of the
@@ -912,10 +915,11 @@ void curved_guess(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
 // The point x of curved face cf (its barycentrics b1, b2; in: the guess) where the ray from the
 // eye (a point, or parallel rays along `forward`) is turned to pass e. Beyond the face its normals
 // are extrapolated, and may turn rays to e at other points too: where the solve from the guess
-// ends outside the face, it starts again from the face's centre and from points near its
-// corners, and keeps the first point found inside (else the one found outside).
+// ends outside the face (or fails), it starts again from up to `restart` (at most 4) points, the
+// face's centre first, then points near its corners, and keeps the first point found inside
+// (else the one found outside).
 bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
-                  double& b1, double& b2, Vec3d& x) {
+                  int restart, double& b1, double& b2, Vec3d& x) {
     auto follow = [&](double a, double b, Vec3d& r, Vec3d& p) {
         p = cf.v0 + cf.e1 * a + cf.e2 * b;
         Vec3d dir;
@@ -927,10 +931,10 @@ bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
         return solve_2d([&](double u, double v, Vec3d& res) { return follow(u, v, res, p); }, 1.0, a, b);
     };
     const bool found = solve(b1, b2);
-    if (!found || !inside(b1, b2)) {
+    if (restart > 0 && (!found || !inside(b1, b2))) {
         constexpr double kStarts[4][2] = {{1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8}};
-        for (const auto& start : kStarts) {
-            double a = start[0], b = start[1];
+        for (int k = 0; k < restart; ++k) {
+            double a = kStarts[k][0], b = kStarts[k][1];
             if (solve(a, b) && inside(a, b)) {
                 b1 = a, b2 = b;
                 return follow(b1, b2, r, x);
@@ -1244,7 +1248,24 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
     // rays from (a one-sided mirror's front), with each lobe, those covering the most film first
     // (faces seen from behind count a thousandth: inside a closed mesh others hide them), each
-    // with the edges its beam may see, up to kCurvedSetups set-ups. No beam with a thin lens.
+    // with the edges its beam may see, up to kCurvedSetups set-ups.
+    // The probability a curved face keeps its set-up of edge `index`: 1 for an edge that folds
+    // seen from the face's centre, or is not smooth; otherwise (a smooth edge between faces both
+    // seen from one side, whose shading steps only where the mesh shadows itself along it) the
+    // share of samples the direct edges give it (its weight), drawn once per call and edge for
+    // each face: kept with that probability, its samples count its inverse. (Inside a smooth
+    // glass ball every edge seen through its faces is such an edge.)
+    const uint64_t keep_seed = mix64(opt.seed ^ 0x6b65657065646765ull);
+    auto keep_probability = [&](const CurvedFace& cf, const Edge& e, int32_t index) {
+        if (e.kind != EdgeKind::Smooth) return 1.0;
+        EdgeEye from;
+        from.origin = Vec3f(cf.v0 + (cf.e1 + cf.e2) / 3.0);
+        if (is_fold(from, scene.meshes[size_t(e.mesh)], e)) return 1.0;
+        return std::min(1.0, smooth_weights[size_t(index)]);
+    };
+    auto kept_draw = [&](int32_t face_rank, int32_t index) {
+        return double(mix64(keep_seed ^ mix64(uint64_t(uint32_t(face_rank)) << 32 | uint32_t(index))) >> 11) * 0x1p-53;
+    };
     std::vector<CurvedFace> curved;
     std::vector<std::pair<int32_t, int32_t>> curved_setups;  // (face in `curved`, edge)
     if (planes_seen) {
@@ -1298,7 +1319,19 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     CurvedFace lobe = cf;
                     lobe.refract = r == 1;
                     Vec3d d[3];
-                    bool bounded = !lens;
+                    // A thin lens's points see the face from directions within the angle its
+                    // aperture subtends there (from the camera's position: the cone's axis); a
+                    // reflection, or a refraction into the denser side, turns them apart by no
+                    // more (into the thinner side it may spread them: no bound).
+                    bool bounded = true;
+                    double extra = 1e-6;
+                    if (lens) {
+                        double nearest = std::numeric_limits<double>::infinity();
+                        for (int c = 0; c < 3; ++c) nearest = std::min(nearest, length(v[c] - eye));
+                        const double eta = cf.behind ? 1.0 / lobe.delta.eta : lobe.delta.eta;
+                        bounded = !(lobe.refract && eta < 1.0) && nearest > double(cam.aperture);
+                        if (bounded) extra += std::asin(double(cam.aperture) / nearest);
+                    }
                     for (int c = 0; c < 3 && bounded; ++c) {
                         const Vec3d to = v[c] - eye;
                         bounded = (parallel || dot(to, forward) > 0.0) &&
@@ -1307,7 +1340,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                         lobe.origin_radius = std::max(lobe.origin_radius, length(v[c] - centre) * (1.0 + 1e-6));
                     }
                     lobe.origin = centre;
-                    lobe.bounded = bounded && lobe.bound_directions(d, 3, 1.25, 1e-6) && std::isfinite(lobe.origin_radius);
+                    lobe.bounded = bounded && lobe.bound_directions(d, 3, 1.25, extra) && std::isfinite(lobe.origin_radius);
+                    // (Without a beam it tests every edge: after those with one.)
+                    if (!lobe.bounded) lobe.film_area *= 1e-3;
                     candidates.push_back(lobe);
                 }
             }
@@ -1320,20 +1355,28 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const EdgeBalls balls = candidates.empty() ? EdgeBalls() : EdgeBalls(scene);
         constexpr size_t kBlock = 64;
         std::vector<std::vector<int32_t>> seen(kBlock);
-        for (size_t begin = 0; begin < candidates.size() && curved_setups.size() < kCurvedSetups; begin += kBlock) {
+        std::vector<int64_t> visited(kBlock);
+        double tests = 0.0;
+        for (size_t begin = 0; begin < candidates.size() && curved_setups.size() < kCurvedSetups && tests < kCurvedTests;
+             begin += kBlock) {
             const size_t block = std::min(kBlock, candidates.size() - begin);
             parallel_indices(opt, int64_t(block), [&](int64_t j) {
                 const CurvedFace& cf = candidates[begin + size_t(j)];
                 std::vector<int32_t>& found = seen[size_t(j)];
                 found.clear();
+                visited[size_t(j)] = 0;
                 balls.visit(cf, [&](int32_t index) {
+                    ++visited[size_t(j)];
                     const Edge& e = all_edges[size_t(index)];
                     const Mesh& m = scene.meshes[size_t(e.mesh)];
                     double u0, u1;
-                    if (cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), u0, u1)) found.push_back(index);
+                    if (cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), u0, u1) &&
+                        kept_draw(int32_t(begin + size_t(j)), index) < keep_probability(cf, e, index))
+                        found.push_back(index);
                 });
             });
-            for (size_t j = 0; j < block && curved_setups.size() < kCurvedSetups; ++j) {
+            for (size_t j = 0; j < block && curved_setups.size() < kCurvedSetups && tests < kCurvedTests; ++j) {
+                tests += double(visited[j]);
                 if (seen[j].empty()) continue;
                 for (const int32_t index : seen[j]) curved_setups.push_back({int32_t(curved.size()), index});
                 curved.push_back(candidates[begin + j]);
@@ -1539,20 +1582,23 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     // The film point that `eye` sees point e at in or through curved face cf; (b1, b2) (in: a
     // guess) the barycentrics of its point there.
-    auto curved_film = [&](const CurvedFace& cf, const Eye& eye, const Vec3d& e, bool guessed, double& b1, double& b2,
-                           double& fx, double& fy) {
+    auto curved_film = [&](const CurvedFace& cf, const Eye& eye, const Vec3d& e, bool guessed, int restart,
+                           double& b1, double& b2, double& fx, double& fy) {
         const Vec3d from(eye.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type);
         if (!guessed) curved_guess(cf, from, parallel, forward, e, b1, b2);
         Vec3d x;
-        return curved_point(cf, from, parallel, forward, e, b1, b2, x) && point_film(eye, x, Vec3f(cf.ng), fx, fy);
+        return curved_point(cf, from, parallel, forward, e, restart, b1, b2, x) &&
+               point_film(eye, x, Vec3f(cf.ng), fx, fy);
     };
     // The edge e of mesh m seen in or through curved face cf: its part on the side of the face
     // the lobe sends rays to, and of that the sixteenths the face's beam may see, sampled by the
     // film length of the polyline through the film points of five of its points (from the last
     // of them outside the face before the first inside to the first outside after the last
-    // inside; where one point only is found, a short chord beside it). Left out where no point
-    // found lies near the face.
+    // inside; where one point only is found, a short chord beside it). Each solve starts from
+    // the last point's, and where it ends outside the face, again from the face's centre (more
+    // restarts change nothing measurable there; the samples' solves make four). Left out where no
+    // point found lies near the face.
     auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
             !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
@@ -1583,7 +1629,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         double box[4] = {1e300, 1e300, -1e300, -1e300};
         for (int k = 0; k < kPoints; ++k) {
             const double u = u0 + (u1 - u0) * double(k) / double(kPoints - 1);
-            guessed = ok[k] = curved_film(cf, centre, p0 + (p1 - p0) * u, guessed, b1, b2, fx[k], fy[k]);
+            guessed = ok[k] = curved_film(cf, centre, p0 + (p1 - p0) * u, guessed, 1, b1, b2, fx[k], fy[k]);
             if (!ok[k]) {
                 inside[k] = false;
                 continue;
@@ -1619,20 +1665,17 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             for (const double u : {at(middle) + du, at(middle) - du}) {
                 if (u < u0 || u > u1) continue;
                 double c1 = bb1[middle], c2 = bb2[middle], gx, gy;
-                if (!curved_film(cf, centre, p0 + (p1 - p0) * u, true, c1, c2, gx, gy)) continue;
+                if (!curved_film(cf, centre, p0 + (p1 - p0) * u, true, 1, c1, c2, gx, gy)) continue;
                 len = std::hypot(gx - fx[middle], gy - fy[middle]) * (at(hi) - at(lo)) / du;
                 found = 2;
                 break;
             }
             if (found < 2) return false;
         }
-        // Whether it folds, seen from the face's point of the middle point.
-        EdgeEye seen_from;
-        seen_from.origin = Vec3f(cf.v0 + cf.e1 * bb1[middle] + cf.e2 * bb2[middle]);
-        if (!is_fold(seen_from, m, e) && e.kind == EdgeKind::Smooth) {
-            fe.weight = smooth_weights[size_t(index)];
-            if (!(fe.weight > 0.0)) return false;
-        }
+        // (A smooth edge that does not fold, seen from the face's centre, was kept with a
+        // probability: its samples count its inverse.)
+        fe.kept = keep_probability(cf, e, int32_t(index));
+        if (!(fe.kept > 0.0)) return false;
         fe.u0 = at(lo);
         fe.u1 = at(hi);
         // The barycentrics found nearest the part's ends: the guesses of its samples' solves
@@ -2331,7 +2374,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                         // (From the line between the part's ends' points, near t from t's point.)
                         double b1 = near_t ? at_t.x : fe.ax + (fe.bx - fe.ax) * tt;
                         double b2 = near_t ? at_t.y : fe.ay + (fe.by - fe.ay) * tt;
-                        if (!curved_film(*cf, eye, e, true, b1, b2, fx, fy)) return false;
+                        if (!curved_film(*cf, eye, e, true, near_t ? 0 : 4, b1, b2, fx, fy)) return false;
                         if (!near_t) at_t = Vec3d(b1, b2, 0.0);
                         return true;
                     }
@@ -2346,7 +2389,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const double lo_t = std::max(0.0, t - 1e-4), hi_t = std::min(1.0, t + 1e-4);
                 if (!film_at(lo_t, true, lx, ly) || !film_at(hi_t, true, hx, hy)) continue;
                 const double per_t = std::hypot(hx - lx, hy - ly) / (hi_t - lo_t);
-                const double w = sample_weight * per_t / fe.len;
+                const double w = sample_weight * per_t / fe.len / fe.kept;
                 if (cf)
                     splat_curved(i, eye, edge, *cf, float(fx), float(fy), w);
                 else if (ch)

@@ -32,14 +32,17 @@ def _mirror_frame(placement):
     return turn, torch.stack([zero, placement[0], zero])
 
 
-def _mirror_floor(placement, material):
-    """A large square mirror (facing +y at no tilt) placed by _mirror_frame(placement)."""
+def _mirror_floor(placement, material, shading_normals=False):
+    """A large square mirror (facing +y at no tilt) placed by _mirror_frame(placement); with
+    `shading_normals`, its vertices' normals given (its plane's, turned with it)."""
     v = torch.tensor([[-50., 0., -50.], [50., 0., -50.], [50., 0., 50.], [-50., 0., 50.]])
     turn, point = _mirror_frame(placement)
-    return ep.Mesh(v @ turn.T + point, torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32), material=material)
+    normals = turn[:, 1].expand(4, 3) if shading_normals else None
+    return ep.Mesh(v @ turn.T + point, torch.tensor([[0, 2, 1], [0, 3, 2]], dtype=torch.int32), normals=normals,
+                   material=material)
 
 
-def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=(0., 0., 0.)):
+def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=(0., 0., 0.), shading_normals=False):
     """A mirror floor (placed by a height and a tilt, both 0) seen from above (the camera sees
     nothing else), two black boxes above it under a white sky: one out of the camera's view but
     seen in the mirror, one in view that hides part of the mirror and shows in it. Returns the
@@ -48,7 +51,8 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
     placement and the camera's offset. The orthographic camera looks down at a slant: it sees
     the boxes and their images side by side; the thin lens keeps the pinhole's place, out of
     focus. `glowing`: the far box emits (on both sides: the mirror image's faces point
-    inwards). `far_offset`: the far box's offset's value."""
+    inwards). `far_offset`: the far box's offset's value. `shading_normals`: the mirror's
+    vertices carry normals (then it is a curved face to the renderer, test_curved_edges.py)."""
     placement = torch.zeros(2, requires_grad=True)
     offsets = [torch.tensor(far_offset, requires_grad=True), torch.zeros(3, requires_grad=True)]
     camera_t = torch.zeros((), requires_grad=True)
@@ -69,7 +73,7 @@ def _scenes(material=None, camera_type="perspective", glowing=False, far_offset=
     def sky():
         return ep.EnvironmentMap(torch.full((1, 1, 3), 1.))
 
-    mirror = _mirror_floor(placement, material or ep.Material(kind="conductor", specular=1.0))
+    mirror = _mirror_floor(placement, material or ep.Material(kind="conductor", specular=1.0), shading_normals)
     def mesh(v, i, k):
         if glowing and k == 0:
             return ep.Mesh(v, i, material=BLACK, emission=torch.tensor([2., 3., 1.]), two_sided_emission=True)
