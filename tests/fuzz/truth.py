@@ -9,8 +9,10 @@ norm): a lead to check with more samples (--replay, with --seeds and --spp).
 
 What it cannot tell from a bug, by design of the estimators (docs/gradients.md): the point
 lights' hard shadows have no boundary term (the scene keeps none here), and the edges seen
-through glass or in a curved mirror from the camera (their outlines there) are missing, and
-so are those seen in a mirror from a later vertex; a case that moves geometry seen in a
+from the camera after two smooth faces where one is curved (through both sides of a glass
+ball) are missing, and so are those seen in a mirror from a later vertex (the outlines seen in
+one curved face have their term since it was written; the classification below still counts
+them as limited); a case that moves geometry seen in a
 smooth material may be off for that reason (reported apart, as "limited"), unless the only
 smooth surface is the floor made a flat mirror or flat glass, at one bounce, seen by a pinhole,
 thin lens or orthographic camera (the outlines in it and through it have their term).
