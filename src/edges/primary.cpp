@@ -751,9 +751,13 @@ struct CurvedFace : Beam {
     Vec3d n[3];            // its vertices' shading normals, as given (interpolated, then normalised)
     double film_area = 0.0;
 
-    // The face's unit shading normal, bent for the viewer wo, at barycentrics (b1, b2) (of its
-    // plane, outside the face too), and the ray leaving point x there.
+    // The direction `dir` the face turns a ray of direction d into at barycentrics (b1, b2) of its
+    // plane; false where the lobe does not exist. Outside the face the normal is that of the
+    // face's point clamp_into_triangle gives: extrapolated normals turn rays so far that solves
+    // for the points seen in a neighbouring face fail, and a part seen in a small face between
+    // two points of an edge's set-up was lost (an 8-ring mirror ball's reflection 2.5% short).
     bool turn(double b1, double b2, const Vec3d& d, Vec3d& dir) const {
+        clamp_into_triangle(b1, b2);
         const Vec3d N = n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2;
         const double l = length(N);
         const Vec3d wo = -d, ns = bend_normal(l > 0.0 ? N / l : ng, ng, wo);
@@ -913,11 +917,11 @@ void curved_guess(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
 }
 
 // The point x of curved face cf (its barycentrics b1, b2; in: the guess) where the ray from the
-// eye (a point, or parallel rays along `forward`) is turned to pass e. Beyond the face its normals
-// are extrapolated, and may turn rays to e at other points too: where the solve from the guess
-// ends outside the face (or fails), it starts again from up to `restart` (at most 4) points, the
-// face's centre first, then points near its corners, and keeps the first point found inside
-// (else the one found outside).
+// eye (a point, or parallel rays along `forward`) is turned to pass e. Beyond the face (CurvedFace::
+// turn) rays may be turned to e at other points too: where the solve from the guess ends outside
+// the face (or fails), and `restart` > 0, it starts again from the face's point nearest the one
+// found outside (where one was), then from up to `restart` (at most 4) more: its centre, then
+// points near its corners; it keeps the first point found inside (else the one found outside).
 bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
                   int restart, double& b1, double& b2, Vec3d& x) {
     auto follow = [&](double a, double b, Vec3d& r, Vec3d& p) {
@@ -932,9 +936,12 @@ bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
     };
     const bool found = solve(b1, b2);
     if (restart > 0 && (!found || !inside(b1, b2))) {
-        constexpr double kStarts[4][2] = {{1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8}};
-        for (int k = 0; k < restart; ++k) {
-            double a = kStarts[k][0], b = kStarts[k][1];
+        // (First the point of the face nearest the one found outside, where one was.)
+        double near1 = b1, near2 = b2;
+        clamp_into_triangle(near1, near2);
+        const double starts[5][2] = {{near1, near2}, {1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8}};
+        for (int k = found ? 0 : 1; k <= restart; ++k) {
+            double a = starts[k][0], b = starts[k][1];
             if (solve(a, b) && inside(a, b)) {
                 b1 = a, b2 = b;
                 return follow(b1, b2, r, x);
@@ -1244,11 +1251,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         keep_seen(candidates.size(), [&](size_t j) -> const Beam& { return candidates[j].second; }, kChainSetups,
                   kChainTests, [&](size_t j) { chains.push_back(candidates[j].second); });
     }
-    // Curved faces (CurvedFace, above), where paths scatter at least once: each face of a mesh
-    // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
-    // rays from (a one-sided mirror's front), with each lobe, those covering the most film first
-    // (faces seen from behind count a thousandth: inside a closed mesh others hide them), each
-    // with the edges its beam may see, up to kCurvedSetups set-ups.
     // The probability a curved face keeps its set-up of edge `index`: 1 for an edge that folds
     // seen from the face's centre, or is not smooth; otherwise (a smooth edge between faces both
     // seen from one side, whose shading steps only where the mesh shadows itself along it) the
@@ -1266,6 +1268,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     auto kept_draw = [&](int32_t face_rank, int32_t index) {
         return double(mix64(keep_seed ^ mix64(uint64_t(uint32_t(face_rank)) << 32 | uint32_t(index))) >> 11) * 0x1p-53;
     };
+    // Curved faces (CurvedFace, above), where paths scatter at least once: each face of a mesh
+    // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
+    // rays from (a one-sided mirror's front), with each lobe, those covering the most film first
+    // (faces seen from behind count a thousandth: inside a closed mesh others hide them), each
+    // with the edges its beam may see, up to kCurvedSetups set-ups.
     std::vector<CurvedFace> curved;
     std::vector<std::pair<int32_t, int32_t>> curved_setups;  // (face in `curved`, edge)
     if (planes_seen) {
@@ -1618,8 +1625,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const double span = u1 - u0;
         u1 = u0 + span * double(last + 1) / kPieces;
         u0 = u0 + span * double(first) / kPieces;
-        // Five points' film points, each solve starting from the last's (the first from the
-        // face's centre).
+        // Five points' film points, each solve starting from the last's (the first from
+        // curved_guess).
         constexpr int kPoints = 5;
         double fx[kPoints], fy[kPoints], bb1[kPoints], bb2[kPoints];
         bool ok[kPoints], inside[kPoints];
@@ -1644,8 +1651,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // between the points bends), meets the face's.
         const double wx = 0.5 * (box[2] - box[0]) + 1e-9, wy = 0.5 * (box[3] - box[1]) + 1e-9;
         if (!(box[2] + wx >= 0.0 && box[3] + wy >= 0.0 && box[0] - wx + box[1] - wy <= 1.0)) return false;
+        // (A point whose solve failed may lie inside: the part runs on to the next one found
+        // outside.)
         int lo = 0, hi = kPoints - 1;
-        if (first_in >= 0) lo = std::max(first_in - 1, 0), hi = std::min(last_in + 1, kPoints - 1);
+        if (first_in >= 0) {
+            lo = first_in, hi = last_in;
+            while (lo > 0 && !(ok[lo] && !inside[lo] && lo < first_in)) --lo;
+            while (hi < kPoints - 1 && !(ok[hi] && !inside[hi] && hi > last_in)) ++hi;
+        }
         auto at = [&](int k) { return u0 + (u1 - u0) * double(k) / double(kPoints - 1); };
         double len = 0.0;
         int found = 0, middle = -1;
