@@ -44,7 +44,7 @@ def test_a_flat_mirror_with_shading_normals_shows_the_mirror_images(param, camer
 
 def test_a_thin_lens_sees_the_mirror_images_in_a_flat_mirror_with_shading_normals():
     """The thin lens's points see each face from directions within the angle its aperture spans
-    there (the faces' beams widened by it): the mirror's tilt (its outline, both boxes' images and
+    there (the faces' beams widened by it): the mirror's tilt (both boxes' images and
     its normals turning), at 4x the edge samples, to 2% of the L1 norm (measured 0.07-0.4% for
     every parameter of the test above)."""
     seen, direct, _, placement, _ = _scenes(camera_type="thinlens", shading_normals=True)
