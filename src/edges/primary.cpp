@@ -33,9 +33,31 @@ struct FilmEdge {
     bool refracted = false;  // through the plane (else reflected in it)
     int chain = -1;          // seen through this chain of two planes (Chains; plane: its first)
     int curved = -1;         // seen in or through this curved face (CurvedFace)
-    double kept = 1.0;       // curved: the probability its set-up was kept with (its samples count 1 / kept)
+    double kept = 1.0;       // chained, curved: the probability its set-up was kept with (its samples count 1 / kept)
     double u0 = 0.0, u1 = 1.0;  // refracted, chained, curved: the part of the edge sampled (its ends' parameters)
 };
+
+// An edge's set-up through a chain or a curved face, chosen before the set-ups run: the chain or
+// face (its index in the call's list) and the edge; for a curved face also the part of the edge
+// on the side its lobe sends rays to, and the probability its choice kept it with.
+struct ViaSetup {
+    int32_t via = -1, edge = -1;
+    double u0 = 0.0, u1 = 1.0, kept = 1.0;
+};
+
+// Where an edge's part (parameters [lo, hi], `span` long) was found seen at one point only, at
+// parameter u and film point (fx, fy): its film length, from the chord to the film point of a
+// point du beside it (film_at(v, gx, gy) finds that of parameter v), on either side within the
+// part; 0 where neither is found.
+template <class FilmAt>
+double chord_length(double u, double du, double lo, double hi, double fx, double fy, double span, FilmAt&& film_at) {
+    for (const double v : {u + du, u - du}) {
+        if (v < lo || v > hi) continue;
+        double gx, gy;
+        if (film_at(v, gx, gy)) return std::hypot(gx - fx, gy - fy) * span / du;
+    }
+    return 0.0;
+}
 
 // Where one camera sample's rays start: the camera's position, or a thin lens's point of the
 // aperture. Seen from a lens point, the camera is a pinhole at that point whose film is shifted
@@ -606,7 +628,7 @@ struct Chain : Beam {
 };
 
 // At most this many edge set-ups over all chains (each costs a few Newton solves), and this many
-// tests of whether a chain's beam may see an edge (Chain::may_see) in choosing them.
+// edges tested against their beams in choosing them (chains without a beam test every edge).
 constexpr double kChainSetups = double(1 << 18);
 constexpr double kChainTests = double(1 << 24);
 
@@ -783,7 +805,7 @@ struct CurvedFace : Beam {
 
 // At most this many edge set-ups over all curved faces, and this many edges tested against their
 // beams in choosing them (faces without a beam test every edge).
-constexpr size_t kCurvedSetups = size_t(1) << 16;
+constexpr double kCurvedSetups = double(1 << 16);
 constexpr double kCurvedTests = double(1 << 20);
 
 // The scene's edges that are not flat in a tree of balls, for finding those a beam may see: each
@@ -1109,31 +1131,68 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         return sides;
     };
-    // Of `count` candidates in rank order (beam_of(j) their beams), keeps (keep(j)) the best
-    // ranked first, each with the edges its beam may see, until those edges or the tests for them
-    // reach their limits (counted in parallel, a block of candidates at a time).
-    auto keep_seen = [&](size_t count, auto&& beam_of, double max_setups, double max_tests, auto&& keep) {
-        constexpr int64_t kBlock = 64;
+    // Of `count` candidates (chains or curved faces) in rank order, keeps the best ranked first
+    // (keep(j, found)), each with the edge set-ups find(j, found) finds for it (it returns the
+    // number of edges it tested), until the set-ups kept or the tests reach their limits (found
+    // in parallel, a block of candidates at a time).
+    auto keep_seen = [&](size_t count, auto&& find, double max_setups, double max_tests, auto&& keep) {
+        constexpr size_t kBlock = 64;
         double setups = 0.0, tests = 0.0;
-        std::vector<int64_t> seen(static_cast<size_t>(kBlock));
-        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += size_t(kBlock)) {
-            const int64_t block = std::min(kBlock, int64_t(count - begin));
-            parallel_indices(opt, block, [&](int64_t j) {
-                const Beam& beam = beam_of(begin + size_t(j));
-                int64_t n = 0;
-                for (const Edge& e : all_edges) {
-                    const Mesh& m = scene.meshes[size_t(e.mesh)];
-                    n += !e.flat && beam.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)));
-                }
-                seen[size_t(j)] = n;
+        std::vector<std::vector<ViaSetup>> found(kBlock);
+        std::vector<double> tested(kBlock);
+        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += kBlock) {
+            const size_t block = std::min(kBlock, count - begin);
+            parallel_indices(opt, int64_t(block), [&](int64_t j) {
+                found[size_t(j)].clear();
+                tested[size_t(j)] = find(begin + size_t(j), found[size_t(j)]);
             });
-            for (int64_t j = 0; j < block && setups < max_setups && tests < max_tests; ++j) {
-                tests += double(all_edges.size());
-                if (seen[size_t(j)] == 0) continue;
-                setups += double(seen[size_t(j)]);
-                keep(begin + size_t(j));
+            for (size_t j = 0; j < block && setups < max_setups && tests < max_tests; ++j) {
+                tests += tested[j];
+                if (found[j].empty()) continue;
+                setups += double(found[j].size());
+                keep(begin + j, found[j]);
             }
         }
+    };
+    // The probability a chain or a curved face keeps its set-up of edge `index`, `from` (the
+    // centre of a ball of that radius) where the rays leaving it start (a curved face's ball, a
+    // chain's ball of origins; for parallel rays through a chain, their direction): 1 for an edge
+    // that is not smooth, or folds seen from the ball's centre. A smooth edge that does not (its
+    // faces seen from one side: its shading steps only where the mesh shadows itself along it)
+    // is kept with the share of samples the direct edges give it (its weight: the angle between
+    // its faces over pi) plus, for each face, the share of a disc of the ball's radius beyond a
+    // line as far from its centre as the face's plane (an estimate of the share of the ball it
+    // folds from, where it steps fully), drawn once per call, chain or face and edge (`salt`:
+    // chains' draws apart from faces'); its samples count the inverse. (Inside a smooth glass
+    // ball every edge seen through its faces is such an edge; so are most of a smooth-shaded
+    // scan's seen through a glass box. Creases step by their faces' shading wherever they are
+    // seen: drawn so, they gave the derivative of a lit faceted ball seen through a glass cube
+    // 36 times the standard error.)
+    const uint64_t keep_seed = mix64(opt.seed ^ 0x6b65657065646765ull);
+    auto keep_probability = [&](const EdgeEye& from, double radius, const Edge& e, int32_t index) {
+        const Mesh& m = scene.meshes[size_t(e.mesh)];
+        if (e.kind != EdgeKind::Smooth || is_fold(from, m, e)) return 1.0;
+        double p = smooth_weights[size_t(index)];
+        if (!from.parallel && radius > 0.0) {
+            const Vec3d to = Vec3d(from.origin) - Vec3d(m.vertex(e.v0));
+            for (const int64_t f : {e.f0, e.f1}) {
+                const double x = std::min(1.0, std::abs(dot(to, Vec3d(m.triangle_data[f].ng))) / radius);
+                p += (std::acos(x) - x * std::sqrt(1.0 - x * x)) / kPi;
+            }
+        }
+        return std::min(1.0, p);
+    };
+    auto kept_draw = [&](uint64_t salt, size_t rank, int32_t index) {
+        const uint64_t key = uint64_t(uint32_t(rank)) << 32 | uint32_t(index);
+        return double(mix64(keep_seed ^ salt ^ mix64(key)) >> 11) * 0x1p-53;
+    };
+    // The tree of the scene's edges' balls, for the beams of chains and curved faces: built when
+    // first needed (empty till then).
+    EdgeBalls balls_built;
+    bool have_balls = false;
+    auto edge_balls = [&](bool needed) -> const EdgeBalls& {
+        if (needed && !have_balls) balls_built = EdgeBalls(scene), have_balls = true;
+        return balls_built;
     };
     // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
     // pair of planes and each lobe of each (a refraction only where the plane refracts) whose
@@ -1142,6 +1201,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // rays most likely meet their planes' faces first, each with the edges its beam may see,
     // up to kChainSetups edge set-ups (below).
     std::vector<Chain> chains;
+    std::vector<ViaSetup> chain_setups;
     if (planes_seen && opt.max_bounces >= 2) {
         const std::vector<SmoothPlane>& planes = smooth_planes.planes;
         // The share of the rays from the camera through plane a's faces, turned there
@@ -1248,33 +1308,46 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
         std::stable_sort(candidates.begin(), candidates.end(),
                          [](const auto& x, const auto& y) { return x.first > y.first; });
-        keep_seen(candidates.size(), [&](size_t j) -> const Beam& { return candidates[j].second; }, kChainSetups,
-                  kChainTests, [&](size_t j) { chains.push_back(candidates[j].second); });
+        // (Found in the tree of the edges' balls; each chain's in the edges' order. Kept by
+        // keep_probability seen from its beam's origin, or without a beam from the middle of its
+        // second plane's faces' box; parallel rays without a beam keep every edge.)
+        const EdgeBalls& balls = edge_balls(!candidates.empty());
+        constexpr uint64_t kChainSalt = 0x636861696e73ull;
+        auto find = [&](size_t j, std::vector<ViaSetup>& found) {
+            const Chain& ch = candidates[j].second;
+            const SmoothPlane& b = planes[size_t(ch.plane[1])];
+            EdgeEye from;
+            from.origin = Vec3f(ch.bounded ? ch.origin : (b.corner(0) + b.corner(3)) * 0.5);
+            const double radius = ch.bounded ? ch.origin_radius : 0.5 * length(b.corner(3) - b.corner(0));
+            from.parallel = parallel;
+            from.dir = Vec3f(ch.axis);
+            const bool roulette = ch.bounded || !parallel;
+            double visited = 0.0;
+            balls.visit(ch, [&](int32_t index) {
+                ++visited;
+                ViaSetup setup;
+                setup.edge = index;
+                if (roulette) setup.kept = keep_probability(from, radius, all_edges[size_t(index)], index);
+                if (setup.kept >= 1.0 || kept_draw(kChainSalt, j, index) < setup.kept) found.push_back(setup);
+            });
+            std::sort(found.begin(), found.end(), [](const ViaSetup& a, const ViaSetup& b) { return a.edge < b.edge; });
+            return visited;
+        };
+        keep_seen(candidates.size(), find, kChainSetups, kChainTests, [&](size_t j, const std::vector<ViaSetup>& found) {
+            for (ViaSetup setup : found) {
+                setup.via = int32_t(chains.size());
+                chain_setups.push_back(setup);
+            }
+            chains.push_back(candidates[j].second);
+        });
     }
-    // The probability a curved face keeps its set-up of edge `index`: 1 for an edge that folds
-    // seen from the face's centre, or is not smooth; otherwise (a smooth edge between faces both
-    // seen from one side, whose shading steps only where the mesh shadows itself along it) the
-    // share of samples the direct edges give it (its weight), drawn once per call and edge for
-    // each face: kept with that probability, its samples count its inverse. (Inside a smooth
-    // glass ball every edge seen through its faces is such an edge.)
-    const uint64_t keep_seed = mix64(opt.seed ^ 0x6b65657065646765ull);
-    auto keep_probability = [&](const CurvedFace& cf, const Edge& e, int32_t index) {
-        if (e.kind != EdgeKind::Smooth) return 1.0;
-        EdgeEye from;
-        from.origin = Vec3f(cf.v0 + (cf.e1 + cf.e2) / 3.0);
-        if (is_fold(from, scene.meshes[size_t(e.mesh)], e)) return 1.0;
-        return std::min(1.0, smooth_weights[size_t(index)]);
-    };
-    auto kept_draw = [&](int32_t face_rank, int32_t index) {
-        return double(mix64(keep_seed ^ mix64(uint64_t(uint32_t(face_rank)) << 32 | uint32_t(index))) >> 11) * 0x1p-53;
-    };
     // Curved faces (CurvedFace, above), where paths scatter at least once: each face of a mesh
     // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
     // rays from (a one-sided mirror's front), with each lobe, those covering the most film first
     // (faces seen from behind count a thousandth: inside a closed mesh others hide them), each
     // with the edges its beam may see, up to kCurvedSetups set-ups.
     std::vector<CurvedFace> curved;
-    std::vector<std::pair<int32_t, int32_t>> curved_setups;  // (face in `curved`, edge)
+    std::vector<ViaSetup> curved_setups;
     if (planes_seen) {
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type), lens = cam.type == CameraType::ThinLens;
@@ -1357,38 +1430,36 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         std::stable_sort(candidates.begin(), candidates.end(),
                          [](const CurvedFace& a, const CurvedFace& b) { return a.film_area > b.film_area; });
         // The best ranked first, each with the edges its beam may see on the side its lobe
-        // sends rays to (found in a tree of the edges' balls, a block of faces at a time in
-        // parallel), until those reach kCurvedSetups.
-        const EdgeBalls balls = candidates.empty() ? EdgeBalls() : EdgeBalls(scene);
-        constexpr size_t kBlock = 64;
-        std::vector<std::vector<int32_t>> seen(kBlock);
-        std::vector<int64_t> visited(kBlock);
-        double tests = 0.0;
-        for (size_t begin = 0; begin < candidates.size() && curved_setups.size() < kCurvedSetups && tests < kCurvedTests;
-             begin += kBlock) {
-            const size_t block = std::min(kBlock, candidates.size() - begin);
-            parallel_indices(opt, int64_t(block), [&](int64_t j) {
-                const CurvedFace& cf = candidates[begin + size_t(j)];
-                std::vector<int32_t>& found = seen[size_t(j)];
-                found.clear();
-                visited[size_t(j)] = 0;
-                balls.visit(cf, [&](int32_t index) {
-                    ++visited[size_t(j)];
-                    const Edge& e = all_edges[size_t(index)];
-                    const Mesh& m = scene.meshes[size_t(e.mesh)];
-                    double u0, u1;
-                    if (cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), u0, u1) &&
-                        kept_draw(int32_t(begin + size_t(j)), index) < keep_probability(cf, e, index))
-                        found.push_back(index);
-                });
+        // sends rays to (found in a tree of the edges' balls), until those reach kCurvedSetups.
+        const EdgeBalls& balls = edge_balls(!candidates.empty());
+        auto find = [&](size_t j, std::vector<ViaSetup>& found) {
+            const CurvedFace& cf = candidates[j];
+            EdgeEye from;
+            const Vec3d centre = cf.v0 + (cf.e1 + cf.e2) / 3.0;
+            from.origin = Vec3f(centre);
+            const double radius = std::max({length(cf.v0 - centre), length(cf.v0 + cf.e1 - centre),
+                                            length(cf.v0 + cf.e2 - centre)});
+            double visited = 0.0;
+            balls.visit(cf, [&](int32_t index) {
+                ++visited;
+                const Edge& e = all_edges[size_t(index)];
+                const Mesh& m = scene.meshes[size_t(e.mesh)];
+                ViaSetup setup;
+                setup.edge = index;
+                if (!cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
+                setup.kept = keep_probability(from, radius, e, index);
+                if (kept_draw(0, j, index) < setup.kept) found.push_back(setup);
             });
-            for (size_t j = 0; j < block && curved_setups.size() < kCurvedSetups && tests < kCurvedTests; ++j) {
-                tests += double(visited[j]);
-                if (seen[j].empty()) continue;
-                for (const int32_t index : seen[j]) curved_setups.push_back({int32_t(curved.size()), index});
-                curved.push_back(candidates[begin + j]);
-            }
-        }
+            return visited;
+        };
+        keep_seen(candidates.size(), find, kCurvedSetups, kCurvedTests,
+                  [&](size_t j, const std::vector<ViaSetup>& found) {
+                      for (ViaSetup setup : found) {
+                          setup.via = int32_t(curved.size());
+                          curved_setups.push_back(setup);
+                      }
+                      curved.push_back(candidates[j]);
+                  });
     }
     // The film point that `eye` sees point e at through chain ch; x1 (in: a guess where `guessed`)
     // and x2 its planes' points.
@@ -1478,16 +1549,15 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // The edge e of mesh m seen through chain ch: its part on the side of the second plane the
     // rays leave it to (the parameters u0, u1 of its ends), sampled by the film length of the
     // polyline through the film points of five of its points (those the chain sees; where one
-    // is, a short chord beside it). Left out outside the chain's beam, and where no first-plane
-    // or second-plane point found comes near the faces of its plane.
-    auto chained_film_edge = [&](const Chain& ch, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+    // is, a short chord beside it). Left out where no first-plane or second-plane point found
+    // comes near the faces of its plane (the chain's beam was tested in choosing the set-up).
+    auto chained_film_edge = [&](const Chain& ch, const Mesh& m, const Edge& e, const ViaSetup& setup, FilmEdge& fe) {
         const SmoothPlane& a = smooth_planes.planes[size_t(ch.plane[0])];
         const SmoothPlane& b = smooth_planes.planes[size_t(ch.plane[1])];
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, a.mesh) &&
             !vertices_wanted(slots, b.mesh) && !(ch.refract[0] && ior_wanted(a.material)) &&
             !(ch.refract[1] && ior_wanted(b.material)))
             return false;
-        if (!ch.may_see(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)))) return false;
         // The sides of the second plane rays arrive from (where the first plane's faces are),
         // and leave to.
         const int in = sides_reached(a, b);
@@ -1539,19 +1609,17 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const int j = int(std::find(ok, ok + kPoints, true) - ok);
             const double uj = fe.u0 + (fe.u1 - fe.u0) * double(j) / double(kPoints - 1);
             const double du = (fe.u1 - fe.u0) / double(8 * (kPoints - 1));
-            for (const double u : {uj + du, uj - du}) {
-                if (u < fe.u0 || u > fe.u1) continue;
+            len = chord_length(uj, du, fe.u0, fe.u1, fx[j], fy[j], fe.u1 - fe.u0, [&](double u, double& gx, double& gy) {
                 Vec3d y1 = found_x1[j], y2;
-                double gx, gy;
-                if (!chain_film(ch, centre, p0 + (p1 - p0) * u, true, y1, y2, gx, gy)) continue;
-                len = std::hypot(gx - fx[j], gy - fy[j]) * (fe.u1 - fe.u0) / du;
+                if (!chain_film(ch, centre, p0 + (p1 - p0) * u, true, y1, y2, gx, gy)) return false;
                 hold(box1, a, y1);
                 hold(box2, b, y2);
-                found = 2;
-                break;
-            }
+                return true;
+            });
+            if (!(len > 0.0)) return false;
+        } else if (found < 2) {
+            return false;
         }
-        if (found < 2) return false;
         // The points found, and the faces' boxes, each widened by half the points' spread (the
         // curve between the points bends).
         auto near = [](const double* box, const SmoothPlane& mp) {
@@ -1575,8 +1643,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             seen_from.parallel = true;
             seen_from.dir = Vec3f(dir);
         }
-        if (!is_fold(seen_from, m, e) && e.kind == EdgeKind::Smooth) {
-            fe.weight = smooth_weights[size_t(index)];
+        // (A smooth edge that does not fold seen from the beam's origin was kept with a
+        // probability: its samples count its inverse, at a fold's density.)
+        if (setup.kept < 1.0) {
+            fe.kept = setup.kept;
+        } else if (!is_fold(seen_from, m, e) && e.kind == EdgeKind::Smooth) {
+            fe.weight = smooth_weights[size_t(setup.edge)];
             if (!(fe.weight > 0.0)) return false;
         }
         fe.len = len * fe.weight;
@@ -1598,21 +1670,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return curved_point(cf, from, parallel, forward, e, restart, b1, b2, x) &&
                point_film(eye, x, Vec3f(cf.ng), fx, fy);
     };
-    // The edge e of mesh m seen in or through curved face cf: its part on the side of the face
-    // the lobe sends rays to, and of that the sixteenths the face's beam may see, sampled by the
+    // The edge e of mesh m seen in or through curved face cf (`setup`: its part on the side of the
+    // face the lobe sends rays to), of that part the sixteenths the face's beam may see, sampled by the
     // film length of the polyline through the film points of five of its points (from the last
     // of them outside the face before the first inside to the first outside after the last
     // inside; where one point only is found, a short chord beside it). Each solve starts from
     // the last point's, and where it ends outside the face, again from the face's centre (more
     // restarts change nothing measurable there; the samples' solves make four). Left out where no
     // point found lies near the face.
-    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, int64_t index, FilmEdge& fe) {
+    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup, FilmEdge& fe) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
             !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
             return false;
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
-        double u0, u1;
-        if (!cf.may_see(p0, p1) || !cf.out_side(p0, p1, u0, u1)) return false;
+        double u0 = setup.u0, u1 = setup.u1;
         constexpr int kPieces = 16;
         int first = -1, last = -1;
         for (int k = 0; k < kPieces; ++k) {
@@ -1674,21 +1745,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             // Seen near one point only: the film length there, per unit parameter, from a point
             // an eighth of the spacing on either side, stands for the part's.
             const double du = (u1 - u0) / double(8 * (kPoints - 1));
-            found = 0;
-            for (const double u : {at(middle) + du, at(middle) - du}) {
-                if (u < u0 || u > u1) continue;
-                double c1 = bb1[middle], c2 = bb2[middle], gx, gy;
-                if (!curved_film(cf, centre, p0 + (p1 - p0) * u, true, 1, c1, c2, gx, gy)) continue;
-                len = std::hypot(gx - fx[middle], gy - fy[middle]) * (at(hi) - at(lo)) / du;
-                found = 2;
-                break;
-            }
-            if (found < 2) return false;
+            len = chord_length(at(middle), du, u0, u1, fx[middle], fy[middle], at(hi) - at(lo),
+                               [&](double u, double& gx, double& gy) {
+                                   double c1 = bb1[middle], c2 = bb2[middle];
+                                   return curved_film(cf, centre, p0 + (p1 - p0) * u, true, 1, c1, c2, gx, gy);
+                               });
+            if (!(len > 0.0)) return false;
         }
         // (A smooth edge that does not fold, seen from the face's centre, was kept with a
         // probability: its samples count its inverse.)
-        fe.kept = keep_probability(cf, e, int32_t(index));
-        if (!(fe.kept > 0.0)) return false;
+        fe.kept = setup.kept;
         fe.u0 = at(lo);
         fe.u1 = at(hi);
         // The barycentrics found nearest the part's ends: the guesses of its samples' solves
@@ -1700,17 +1766,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (ok[k]) near_hi = k;
         if (!ok[near_lo]) near_lo = near_hi = middle;
         fe.ax = bb1[near_lo], fe.ay = bb2[near_lo], fe.bx = bb1[near_hi], fe.by = bb2[near_hi];
-        fe.len = len * fe.weight;
+        fe.len = len;  // (weight 1: its density factor is `kept`)
         fe.curved = int(&cf - curved.data());
         return fe.len > 0.0 && fe.u1 > fe.u0;
     };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
     // Each edge directly, then reflected in each plane of smooth faces, then refracted by each,
-    // then seen through each chain, then in or through each curved face.
+    // then (after these) through each chain, then in or through each curved face, as chosen.
     const int64_t num_planes = int64_t(smooth_planes.planes.size());
-    const int64_t num_chains = int64_t(chains.size());
-    const int64_t num_setups = num_edges * (1 + 2 * num_planes + num_chains);
+    const int64_t num_setups = num_edges * (1 + 2 * num_planes);
     std::vector<std::vector<FilmEdge>> chunk_edges(size_t((num_setups + kSetupChunk - 1) / kSetupChunk));
     for_each_chunk(opt, num_setups, kSetupChunk, [&](int64_t begin, int64_t end) {
         // Filled here and moved into place at the end: the chunks' vectors lie side by side, and
@@ -1721,14 +1786,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const int64_t index = setup % num_edges, slot = setup / num_edges - 1;
             const Edge& e = all_edges[size_t(index)];
             if (e.flat) continue;
-            if (slot >= 2 * num_planes) {
-                FilmEdge fe;
-                if (!chained_film_edge(chains[size_t(slot - 2 * num_planes)], scene.meshes[size_t(e.mesh)], e, index, fe))
-                    continue;
-                fe.edge = size_t(index);
-                film_edges.push_back(fe);
-                continue;
-            }
             if (slot >= 0) {
                 FilmEdge fe;
                 const int64_t plane = slot % num_planes;
@@ -1795,23 +1852,29 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         chunk_edges[size_t(begin / kSetupChunk)] = std::move(film_edges);
     });
-    // Then the edges seen in or through curved faces, in chunks of their own after those.
+    // Then the edges seen through chains and in or through curved faces (their set-ups chosen
+    // above), in chunks of their own after those.
     {
-        constexpr int64_t kCurvedChunk = 256;
-        const int64_t count = int64_t(curved_setups.size());
+        constexpr int64_t kViaChunk = 256;
+        const int64_t num_chained = int64_t(chain_setups.size());
+        const int64_t count = num_chained + int64_t(curved_setups.size());
         const size_t first = chunk_edges.size();
-        chunk_edges.resize(first + size_t((count + kCurvedChunk - 1) / kCurvedChunk));
-        for_each_chunk(opt, count, kCurvedChunk, [&](int64_t begin, int64_t end) {
+        chunk_edges.resize(first + size_t((count + kViaChunk - 1) / kViaChunk));
+        for_each_chunk(opt, count, kViaChunk, [&](int64_t begin, int64_t end) {
             std::vector<FilmEdge> film_edges;
             for (int64_t k = begin; k < end; ++k) {
-                const auto [face, index] = curved_setups[size_t(k)];
-                const Edge& e = all_edges[size_t(index)];
+                const bool chained = k < num_chained;
+                const ViaSetup& setup = chained ? chain_setups[size_t(k)] : curved_setups[size_t(k - num_chained)];
+                const Edge& e = all_edges[size_t(setup.edge)];
+                const Mesh& m = scene.meshes[size_t(e.mesh)];
                 FilmEdge fe;
-                if (!curved_film_edge(curved[size_t(face)], scene.meshes[size_t(e.mesh)], e, index, fe)) continue;
-                fe.edge = size_t(index);
+                if (!(chained ? chained_film_edge(chains[size_t(setup.via)], m, e, setup, fe)
+                              : curved_film_edge(curved[size_t(setup.via)], m, e, setup, fe)))
+                    continue;
+                fe.edge = size_t(setup.edge);
                 film_edges.push_back(fe);
             }
-            chunk_edges[first + size_t(begin / kCurvedChunk)] = std::move(film_edges);
+            chunk_edges[first + size_t(begin / kViaChunk)] = std::move(film_edges);
         });
     }
     // The edges on the film, k = 0, 1, ... in the list's order, stay in their chunks (not copied
