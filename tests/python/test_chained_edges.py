@@ -14,8 +14,9 @@ Closed forms:
   without mirrors, and so the same derivative images. The copy across both planes is seen only
   through chains of two planes.
 
-A pinhole's rays through a pane, and a glass cube's reflections inside it, are checked against
-finite differences.
+A pinhole's rays through a pane, a glass cube's reflections inside it, and a smooth-shaded scan
+seen through a glass cube (many edges in every chain's beam) are checked against finite
+differences.
 """
 
 import math
