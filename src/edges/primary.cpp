@@ -1136,12 +1136,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // number of edges it tested), until the set-ups kept or the tests reach their limits (found
     // in parallel, a block of candidates at a time).
     auto keep_seen = [&](size_t count, auto&& find, double max_setups, double max_tests, auto&& keep) {
-        constexpr size_t kBlock = 64;
+        // (A candidate without a beam finds every edge: a block holds at most 64 candidates and
+        // room for about 2^20 set-ups, or four. Which are kept does not depend on it.)
+        const size_t per_block = std::clamp((size_t(1) << 20) / std::max<size_t>(all_edges.size(), 1), size_t(4), size_t(64));
         double setups = 0.0, tests = 0.0;
-        std::vector<std::vector<ViaSetup>> found(kBlock);
-        std::vector<double> tested(kBlock);
-        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += kBlock) {
-            const size_t block = std::min(kBlock, count - begin);
+        std::vector<std::vector<ViaSetup>> found(per_block);
+        std::vector<double> tested(per_block);
+        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += per_block) {
+            const size_t block = std::min(per_block, count - begin);
             parallel_indices(opt, int64_t(block), [&](int64_t j) {
                 found[size_t(j)].clear();
                 tested[size_t(j)] = find(begin + size_t(j), found[size_t(j)]);
