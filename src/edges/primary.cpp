@@ -1211,35 +1211,49 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // (`refract`), that may meet plane b's faces: where they meet b's plane, the box of the
         // rays through the corners of a's faces' box (widened by a quarter, for a refraction's
         // bending), the part of it within b's faces' box. (Exact but for the widening: a
-        // reflection's rays come from one point, and parallel rays refract into one direction.)
-        // All with a thin lens or a corner behind the camera, a thousandth (any, but unlikely)
+        // reflection's rays come from one point, and parallel rays refract into one direction;
+        // a thin lens's from its centre, which ranks its chains.) All with a corner behind the
+        // camera, a thousandth (any, but unlikely)
         // where a corner's ray is not turned (total internal reflection) or does not reach the
         // plane.
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type);
         // The bounds of a chain's beam (Chain::may_see): the four rays from the camera through
-        // the corners of its first plane's faces' box, followed through both planes; the cone of
-        // their directions, widened by a quarter (the rays between the corners' bend), from the
-        // ball of their origins (below). None with a thin lens, or where a corner's ray misses a
-        // plane.
+        // the corners of its first plane's faces' box (with a thin lens, from its centre and
+        // from eight points of its aperture's rim: its rays through a corner spread between
+        // those), followed through both planes; the cone of their directions, widened by a
+        // quarter (the rays between the corners' bend), from the ball of their origins (below).
+        // None where a corner's ray misses a plane. (Without the lens's bound, a glass cube's
+        // chains each set up every edge of a scan behind it, the budget took the first few,
+        // which saw nothing of it, and its derivative seen through the cube was 0.)
+        const int num_eyes = cam.type == CameraType::ThinLens ? 9 : 1;
+        Vec3d eyes[9];
+        eyes[0] = eye;
+        for (int k = 1; k < num_eyes; ++k) {
+            const double t = 0.25 * kPi * double(k - 1);
+            eyes[k] = eye + (Vec3d(cam.right) * std::cos(t) + Vec3d(cam.up) * std::sin(t)) * double(cam.aperture);
+        }
         auto bound_beam = [&](Chain& ch) {
-            if (cam.type == CameraType::ThinLens) return;
             const SmoothPlane& a = planes[size_t(ch.plane[0])];
-            Vec3d o[4], d[4];
+            Vec3d o[36], d[36];
+            int n = 0;
             const double back = std::abs(a.hi[0] - a.lo[0]) + std::abs(a.hi[1] - a.lo[1]);
             for (int k = 0; k < 4; ++k) {
                 const Vec3d c = a.corner(k);
-                if (!parallel && !(dot(c - eye, forward) > 0.0)) return;
-                const Vec3d from = parallel ? c - forward * (back > 0.0 ? back : 1.0) : eye;
-                Vec3d x1;
-                if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eye), x1, o[k], d[k])) return;
-                d[k] = normalize(d[k]);
+                for (int j = 0; j < num_eyes; ++j, ++n) {
+                    if (!parallel && !(dot(c - eyes[j], forward) > 0.0)) return;
+                    const Vec3d from = parallel ? c - forward * (back > 0.0 ? back : 1.0) : eyes[j];
+                    Vec3d x1;
+                    if (!follow_chain(planes, ch, from, parallel ? forward : normalize(c - eyes[j]), x1, o[n], d[n]))
+                        return;
+                    d[n] = normalize(d[n]);
+                }
             }
             // The origins lie on the second plane's faces too: their box (widened) within those
             // faces' box, in the second plane's axes.
             const SmoothPlane& b = planes[size_t(ch.plane[1])];
             double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
-            for (int j = 0; j < 4; ++j) {
+            for (int j = 0; j < n; ++j) {
                 const Vec3d l = b.axes.to_local(o[j] - Vec3d(b.q));
                 lo[0] = std::min(lo[0], l.x), hi[0] = std::max(hi[0], l.x);
                 lo[1] = std::min(lo[1], l.y), hi[1] = std::max(hi[1], l.y);
@@ -1251,11 +1265,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             ch.origin = Vec3d(b.q) + b.axes.s * (0.5 * (lo[0] + hi[0])) + b.axes.t * (0.5 * (lo[1] + hi[1]));
             ch.origin_radius = 0.5 * std::hypot(hi[0] - lo[0], hi[1] - lo[1]) * (1.0 + 1e-6);
-            ch.bounded = ch.bound_directions(d, 4, 1.25, 0.0) && std::isfinite(ch.origin_radius);
+            ch.bounded = ch.bound_directions(d, n, 1.25, 0.0) && std::isfinite(ch.origin_radius);
         };
         constexpr double kUnlikely = 1e-3;
         auto beam_share = [&](const SmoothPlane& a, bool refract, const SmoothPlane& b) {
-            if (cam.type == CameraType::ThinLens) return 1.0;
             double lo[2] = {1e300, 1e300}, hi[2] = {-1e300, -1e300};
             for (int k = 0; k < 4; ++k) {
                 const Vec3d c = a.corner(k);
