@@ -1213,9 +1213,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // bending), the part of it within b's faces' box. (Exact but for the widening: a
         // reflection's rays come from one point, and parallel rays refract into one direction;
         // a thin lens's from its centre, which ranks its chains.) All with a corner behind the
-        // camera, a thousandth (any, but unlikely)
-        // where a corner's ray is not turned (total internal reflection) or does not reach the
-        // plane.
+        // camera, a thousandth (any, but unlikely) where a corner's ray is not turned (total
+        // internal reflection) or does not reach the plane.
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type);
         // The bounds of a chain's beam (Chain::may_see): the four rays from the camera through
