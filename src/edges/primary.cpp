@@ -1132,27 +1132,36 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return sides;
     };
     // Of `count` candidates (chains or curved faces) in rank order, keeps the best ranked first
-    // (keep(j, found)), each with the edge set-ups find(j, found) finds for it (it returns the
-    // number of edges it tested), until the set-ups kept or the tests reach their limits (found
-    // in parallel, a block of candidates at a time).
-    auto keep_seen = [&](size_t count, auto&& find, double max_setups, double max_tests, auto&& keep) {
+    // (keep(j) adds candidate j to its list), each with the edge set-ups find(j, found) finds for
+    // it (it returns the number of edges it tested), added to `setups` (empty before) with their
+    // candidate's place in that list, until the set-ups or the tests reach their limits (found in
+    // parallel, a block of candidates at a time).
+    auto keep_seen = [&](size_t count, auto&& find, double max_setups, double max_tests, std::vector<ViaSetup>& setups,
+                         auto&& keep) {
         // (A candidate without a beam finds every edge: a block holds at most 64 candidates and
         // room for about 2^20 set-ups, or four. Which are kept does not depend on it.)
-        const size_t per_block = std::clamp((size_t(1) << 20) / std::max<size_t>(all_edges.size(), 1), size_t(4), size_t(64));
-        double setups = 0.0, tests = 0.0;
+        const size_t per_block =
+            std::clamp((size_t(1) << 20) / std::max<size_t>(all_edges.size(), 1), size_t(4), size_t(64));
+        double tests = 0.0;
+        int32_t kept = 0;
         std::vector<std::vector<ViaSetup>> found(per_block);
         std::vector<double> tested(per_block);
-        for (size_t begin = 0; begin < count && setups < max_setups && tests < max_tests; begin += per_block) {
+        auto open = [&] { return double(setups.size()) < max_setups && tests < max_tests; };
+        for (size_t begin = 0; begin < count && open(); begin += per_block) {
             const size_t block = std::min(per_block, count - begin);
             parallel_indices(opt, int64_t(block), [&](int64_t j) {
                 found[size_t(j)].clear();
                 tested[size_t(j)] = find(begin + size_t(j), found[size_t(j)]);
             });
-            for (size_t j = 0; j < block && setups < max_setups && tests < max_tests; ++j) {
+            for (size_t j = 0; j < block && open(); ++j) {
                 tests += tested[j];
                 if (found[j].empty()) continue;
-                setups += double(found[j].size());
-                keep(begin + j, found[j]);
+                for (ViaSetup setup : found[j]) {
+                    setup.via = kept;
+                    setups.push_back(setup);
+                }
+                ++kept;
+                keep(begin + j);
             }
         }
     };
@@ -1166,11 +1175,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // radius beyond a line as far from its centre as the face's plane (an estimate of the share
     // of the ball it folds from, where it steps fully: without it, the smooth bunny behind a
     // glass cube's derivative had 3 times the standard error), drawn once per call, chain or
-    // face and edge (`salt`: chains' draws apart from faces'); its samples count the inverse. (Inside a smooth glass
-    // ball every edge seen through its faces is such an edge; so are most of a smooth-shaded
-    // scan's seen through a glass box. Creases step by their faces' shading wherever they are
-    // seen: drawn so, they gave the derivative of a lit faceted ball seen through a glass cube
-    // 36 times the standard error.)
+    // face and edge (`keeps`; `salt` sets chains' draws apart from faces'); its samples count the
+    // inverse. (Inside a smooth glass ball every edge seen through its faces is such an edge; so
+    // are most of a smooth-shaded scan's seen through a glass box. Creases step by their faces'
+    // shading wherever they are seen: drawn so, they gave the derivative of a lit faceted ball
+    // seen through a glass cube 36 times the standard error.)
     const uint64_t keep_seed = mix64(opt.seed ^ 0x6b65657065646765ull);
     auto keep_probability = [&](const EdgeEye& from, double radius, const Edge& e, int32_t index) {
         const Mesh& m = scene.meshes[size_t(e.mesh)];
@@ -1185,9 +1194,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         return std::min(1.0, p);
     };
-    auto kept_draw = [&](uint64_t salt, size_t rank, int32_t index) {
+    auto keeps = [&](uint64_t salt, size_t rank, int32_t index, double probability) {
+        if (probability >= 1.0) return true;
         const uint64_t key = uint64_t(uint32_t(rank)) << 32 | uint32_t(index);
-        return double(mix64(keep_seed ^ salt ^ mix64(key)) >> 11) * 0x1p-53;
+        return double(mix64(keep_seed ^ salt ^ mix64(key)) >> 11) * 0x1p-53 < probability;
     };
     // The tree of the scene's edges' balls, for the beams of chains and curved faces: built when
     // first needed (empty till then).
@@ -1343,18 +1353,13 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 ViaSetup setup;
                 setup.edge = index;
                 if (roulette) setup.kept = keep_probability(from, radius, all_edges[size_t(index)], index);
-                if (setup.kept >= 1.0 || kept_draw(kChainSalt, j, index) < setup.kept) found.push_back(setup);
+                if (keeps(kChainSalt, j, index, setup.kept)) found.push_back(setup);
             });
             std::sort(found.begin(), found.end(), [](const ViaSetup& a, const ViaSetup& b) { return a.edge < b.edge; });
             return visited;
         };
-        keep_seen(candidates.size(), find, kChainSetups, kChainTests, [&](size_t j, const std::vector<ViaSetup>& found) {
-            for (ViaSetup setup : found) {
-                setup.via = int32_t(chains.size());
-                chain_setups.push_back(setup);
-            }
-            chains.push_back(candidates[j].second);
-        });
+        keep_seen(candidates.size(), find, kChainSetups, kChainTests, chain_setups,
+                  [&](size_t j) { chains.push_back(candidates[j].second); });
     }
     // Curved faces (CurvedFace, above), where paths scatter at least once: each face of a mesh
     // with shading normals and a smooth lobe that the camera may see from a side the lobe turns
@@ -1462,18 +1467,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 setup.edge = index;
                 if (!cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
                 setup.kept = keep_probability(from, 0.0, e, index);
-                if (kept_draw(0, j, index) < setup.kept) found.push_back(setup);
+                if (keeps(0, j, index, setup.kept)) found.push_back(setup);
             });
             return visited;
         };
-        keep_seen(candidates.size(), find, kCurvedSetups, kCurvedTests,
-                  [&](size_t j, const std::vector<ViaSetup>& found) {
-                      for (ViaSetup setup : found) {
-                          setup.via = int32_t(curved.size());
-                          curved_setups.push_back(setup);
-                      }
-                      curved.push_back(candidates[j]);
-                  });
+        keep_seen(candidates.size(), find, kCurvedSetups, kCurvedTests, curved_setups,
+                  [&](size_t j) { curved.push_back(candidates[j]); });
     }
     // The film point that `eye` sees point e at through chain ch; x1 (in: a guess where `guessed`)
     // and x2 its planes' points.
@@ -1623,13 +1622,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const int j = int(std::find(ok, ok + kPoints, true) - ok);
             const double uj = fe.u0 + (fe.u1 - fe.u0) * double(j) / double(kPoints - 1);
             const double du = (fe.u1 - fe.u0) / double(8 * (kPoints - 1));
-            len = chord_length(uj, du, fe.u0, fe.u1, fx[j], fy[j], fe.u1 - fe.u0, [&](double u, double& gx, double& gy) {
+            auto film_at = [&](double u, double& gx, double& gy) {
                 Vec3d y1 = found_x1[j], y2;
                 if (!chain_film(ch, centre, p0 + (p1 - p0) * u, true, y1, y2, gx, gy)) return false;
                 hold(box1, a, y1);
                 hold(box2, b, y2);
                 return true;
-            });
+            };
+            len = chord_length(uj, du, fe.u0, fe.u1, fx[j], fy[j], fe.u1 - fe.u0, film_at);
             if (!(len > 0.0)) return false;
         } else if (found < 2) {
             return false;
@@ -1684,15 +1684,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return curved_point(cf, from, parallel, forward, e, restart, b1, b2, x) &&
                point_film(eye, x, Vec3f(cf.ng), fx, fy);
     };
-    // The edge e of mesh m seen in or through curved face cf (`setup`: its part on the side of the
-    // face the lobe sends rays to), of that part the sixteenths the face's beam may see, sampled by the
-    // film length of the polyline through the film points of five of its points (from the last
-    // of them outside the face before the first inside to the first outside after the last
-    // inside; where one point only is found, a short chord beside it). Each solve starts from
-    // the last point's, and where it ends outside the face, again from the face's centre (more
-    // restarts change nothing measurable there; the samples' solves make four). Left out where no
-    // point found lies near the face.
-    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup, FilmEdge& fe) {
+    // The edge e of mesh m seen in or through curved face cf (`setup`: its part on the side of
+    // the face the lobe sends rays to), of that part the sixteenths the face's beam may see,
+    // sampled by the film length of the polyline through the film points of five of its points
+    // (from the last of them outside the face before the first inside to the first outside after
+    // the last inside; where one point only is found, a short chord beside it). Each solve starts
+    // from the last point's, and where it ends outside the face, again from the face's centre
+    // (more restarts change nothing measurable there; the samples' solves make four). Left out
+    // where no point found lies near the face.
+    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup,
+                                FilmEdge& fe) {
         if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
             !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
             return false;
