@@ -25,7 +25,7 @@ namespace {
 // An edge's part on the film: the edge and the clipped segment (full-film pixels).
 struct FilmEdge {
     size_t edge;  // in Scene::edges()
-    double ax, ay, bx, by;  // (curved: the barycentrics of its part's ends on the face, the solves' guesses)
+    double ax, ay, bx, by;  // (curved, pair: the barycentrics of its part's ends on the (first) face, the solves' guesses)
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
@@ -33,6 +33,7 @@ struct FilmEdge {
     bool refracted = false;  // through the plane (else reflected in it)
     int chain = -1;          // seen through this chain of two planes (Chains; plane: its first)
     int curved = -1;         // seen in or through this curved face (CurvedFace)
+    int pair = -1;           // seen through this pair of curved faces (CurvedPair)
     double kept = 1.0;       // chained, curved: the probability its set-up was kept with (its samples count 1 / kept)
     double u0 = 0.0, u1 = 1.0;  // refracted, chained, curved: the part of the edge sampled (its ends' parameters)
 };
@@ -773,12 +774,50 @@ struct CurvedFace : Beam {
     Vec3d n[3];            // its vertices' shading normals, as given (interpolated, then normalised)
     double film_area = 0.0;
 
+    // How far p lies on the side of the face's plane its lobe sends rays to, and the tolerance
+    // beyond which it counts as there (a millionth of the face's size).
+    double out_height(const Vec3d& p) const { return (behind != refract ? -1.0 : 1.0) * dot(p - v0, ng); }
+    double out_tol() const { return 1e-6 * (length(e1) + length(e2)); }
+
+    CurvedFace() = default;
+    // Face f of mesh `mesh` (one with shading normals and a smooth lobe): its corners, normals and
+    // lobe (reflected; its sides, beam and rank unset).
+    CurvedFace(const Scene& scene, int mesh_index, int64_t f) : mesh(mesh_index), prim(f) {
+        const Mesh& m = scene.meshes[size_t(mesh_index)];
+        const int32_t *t = m.indices + 3 * f, *ni = m.normal_indices + 3 * f;
+        Vec3d v[3];
+        for (int c = 0; c < 3; ++c) {
+            v[c] = Vec3d(m.vertex(t[c]));
+            n[c] = Vec3d(Vec3f::load(m.normals + 3 * ni[c]));
+        }
+        v0 = v[0], e1 = v[1] - v[0], e2 = v[2] - v[0];
+        ng = Vec3d(m.unit_face_normal(f));
+        delta = delta_turn(scene.materials[size_t(m.material)]);
+    }
+    Vec3d centre() const { return v0 + (e1 + e2) / 3.0; }
+    // The radius of its ball about its centre.
+    double radius() const {
+        const Vec3d c = centre();
+        return std::max({length(v0 - c), length(v0 + e1 - c), length(v0 + e2 - c)}) * (1.0 + 1e-6);
+    }
+    // The barycentrics of its plane's point nearest x (least squares); false where not finite.
+    bool barycentrics(const Vec3d& x, double& b1, double& b2) const {
+        const Vec3d w = x - v0;
+        const double a11 = dot(e1, e1), a12 = dot(e1, e2), a22 = dot(e2, e2);
+        const double r1 = dot(w, e1), r2 = dot(w, e2), det = a11 * a22 - a12 * a12;
+        const double g1 = (a22 * r1 - a12 * r2) / det, g2 = (a11 * r2 - a12 * r1) / det;
+        if (!std::isfinite(g1) || !std::isfinite(g2)) return false;
+        b1 = g1, b2 = g2;
+        return true;
+    }
+
     // The direction `dir` the face turns a ray of direction d into at barycentrics (b1, b2) of its
     // plane; false where the lobe does not exist. Outside the face the normal is that of the
     // face's point clamp_into_triangle gives: extrapolated normals turn rays so far that solves
     // for the points seen in a neighbouring face fail, and a part seen in a small face between
     // two points of an edge's set-up was lost (an 8-ring mirror ball's reflection 2.5% short).
-    bool turn(double b1, double b2, const Vec3d& d, Vec3d& dir) const {
+    // (`lobe`, where given: the mean of the lobe's weight there.)
+    bool turn(double b1, double b2, const Vec3d& d, Vec3d& dir, double* lobe = nullptr) const {
         clamp_into_triangle(b1, b2);
         const Vec3d N = n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2;
         const double l = length(N);
@@ -786,6 +825,7 @@ struct CurvedFace : Beam {
         Vec3d weight;
         if (!delta_scatter(delta, ns, wo, refract, 1.0, dir, weight)) return false;
         dir = delta_side(dir, ng, delta_side_sign(wo, ng, refract));
+        if (lobe) *lobe = (weight.x + weight.y + weight.z) / 3.0;
         return true;
     }
 
@@ -793,9 +833,8 @@ struct CurvedFace : Beam {
     // rays to (reflected rays leave on the camera's side, refracted ones on the other); false
     // where none is (beyond a millionth of the face's size).
     bool out_side(const Vec3d& p0, const Vec3d& p1, double& u0, double& u1) const {
-        const double sign = behind != refract ? -1.0 : 1.0;
-        const double h0 = sign * dot(p0 - v0, ng), h1 = sign * dot(p1 - v0, ng);
-        const double tol = 1e-6 * (length(e1) + length(e2));
+        const double h0 = out_height(p0), h1 = out_height(p1);
+        const double tol = out_tol();
         if (!(h0 > tol || h1 > tol)) return false;
         u0 = h0 < 0.0 ? h0 / (h0 - h1) : 0.0;
         u1 = h1 < 0.0 ? h0 / (h0 - h1) : 1.0;
@@ -807,34 +846,28 @@ struct CurvedFace : Beam {
 // beams in choosing them (faces without a beam test every edge).
 constexpr double kCurvedSetups = double(1 << 16);
 constexpr double kCurvedTests = double(1 << 20);
+// The same for pairs of curved faces (the faces' beams' faces tested in choosing the pairs count
+// too, apart).
+constexpr double kPairSetups = double(1 << 20);
+constexpr double kPairTests = double(1 << 20);
 
-// The scene's edges that are not flat in a tree of balls, for finding those a beam may see: each
-// node's ball holds its edges' (segments'), a leaf's up to 8 edges; split at the median of the
-// longest side of its edges' midpoints' box.
-class EdgeBalls {
+// Balls (a centre and a radius, each with an id) in a tree of balls, for finding those a beam may
+// see: each node's ball holds its items', a leaf's up to 8; split at the median of the longest
+// side of its items' centres' box.
+class BallTree {
 public:
-    EdgeBalls() = default;
-    explicit EdgeBalls(const Scene& scene) {
-        const std::vector<Edge>& edges = scene.edges();
-        for (size_t i = 0; i < edges.size(); ++i) {
-            const Edge& e = edges[i];
-            if (e.flat) continue;
-            const Mesh& m = scene.meshes[size_t(e.mesh)];
-            const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
-            order_.push_back(int32_t(i));
-            mid_.push_back((p0 + p1) * 0.5);
-            half_.push_back(0.5 * length(p1 - p0));
-        }
+    BallTree() = default;
+    BallTree(std::vector<Vec3d> mid, std::vector<double> half, std::vector<int32_t> ids)
+        : order_(std::move(ids)), mid_(std::move(mid)), half_(std::move(half)) {
         std::vector<int32_t> items(order_.size());
         for (size_t k = 0; k < items.size(); ++k) items[k] = int32_t(k);
         if (!items.empty()) build(items, 0, int32_t(items.size()));
-        std::vector<int32_t> edge_of(items.size());
-        for (size_t k = 0; k < items.size(); ++k) edge_of[k] = order_[size_t(items[k])];
+        std::vector<int32_t> id_of(items.size());
+        for (size_t k = 0; k < items.size(); ++k) id_of[k] = order_[size_t(items[k])];
         leaf_items_ = std::move(items);
-        order_ = std::move(edge_of);
+        order_ = std::move(id_of);
     }
-    // Calls fn(edge) for each edge (index into scene.edges()) whose segment `beam` may see, in
-    // the tree's order.
+    // Calls fn(id) for each item whose ball `beam` may see, in the tree's order.
     template <class Fn>
     void visit(const Beam& beam, Fn&& fn) const {
         if (nodes_.empty()) return;
@@ -862,8 +895,8 @@ private:
         double r = 0.0;
         int32_t begin = 0, end = 0, left = -1, right = -1;
     };
-    std::vector<int32_t> order_, leaf_items_;  // by position in the tree: the edge, its item
-    std::vector<Vec3d> mid_;                   // by item: the edge's midpoint and half length
+    std::vector<int32_t> order_, leaf_items_;  // by position in the tree: the id, its item
+    std::vector<Vec3d> mid_;                   // by item: the ball's centre and radius
     std::vector<double> half_;
     std::vector<Node> nodes_;
 
@@ -903,6 +936,25 @@ private:
     }
 };
 
+// The scene's edges that are not flat as balls (their midpoints, half their lengths), each by
+// its index in scene.edges().
+BallTree edge_balls_of(const Scene& scene) {
+    const std::vector<Edge>& edges = scene.edges();
+    std::vector<Vec3d> mid;
+    std::vector<double> half;
+    std::vector<int32_t> ids;
+    for (size_t i = 0; i < edges.size(); ++i) {
+        const Edge& e = edges[i];
+        if (e.flat) continue;
+        const Mesh& m = scene.meshes[size_t(e.mesh)];
+        const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
+        ids.push_back(int32_t(i));
+        mid.push_back((p0 + p1) * 0.5);
+        half.push_back(0.5 * length(p1 - p0));
+    }
+    return BallTree(std::move(mid), std::move(half), std::move(ids));
+}
+
 // A first guess of the barycentrics (b1, b2) of curved face cf's point for edge point e, seen
 // from the eye (a point, or parallel rays along `forward`): as if the face were the plane through
 // its centre whose normal is its corners' normals' mean, e mirrored across it and seen from the
@@ -931,19 +983,42 @@ void curved_guess(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
         }
     }
     // Its barycentrics (least squares in the face's plane).
-    const Vec3d w = x - cf.v0;
-    const double a11 = dot(cf.e1, cf.e1), a12 = dot(cf.e1, cf.e2), a22 = dot(cf.e2, cf.e2);
-    const double r1 = dot(w, cf.e1), r2 = dot(w, cf.e2), det = a11 * a22 - a12 * a12;
-    const double g1 = (a22 * r1 - a12 * r2) / det, g2 = (a11 * r2 - a12 * r1) / det;
-    if (std::isfinite(g1) && std::isfinite(g2)) b1 = g1, b2 = g2;
+    cf.barycentrics(x, b1, b2);
+}
+
+bool inside_triangle(double b1, double b2) { return b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0; }
+
+// Gauss-Newton steps (solve_2d) on a face's barycentrics (b1, b2; in: the guess) towards a zero
+// of residual(b1, b2, r). Where they end outside the face (inside(b1, b2) false) or fail, and
+// `restart` > 0, they start again from the face's point nearest the one found outside (where one
+// was), then from up to `restart` (at most 9) more: its centre, points near its corners, then
+// points between those; the first point found inside is kept (else the one found outside). False
+// where none was found (with `restart` 0: never; the steps' last point is kept).
+template <class Residual, class Inside>
+bool solve_in_face(Residual&& residual, Inside&& inside, int restart, double& b1, double& b2) {
+    const bool found = solve_2d(residual, 1.0, b1, b2);
+    if (restart > 0 && (!found || !inside(b1, b2))) {
+        // (First the point of the face nearest the one found outside, where one was.)
+        double near1 = b1, near2 = b2;
+        clamp_into_triangle(near1, near2);
+        const double starts[10][2] = {{near1, near2}, {1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8},
+                                      {0.45, 0.1}, {0.1, 0.45}, {0.45, 0.45}, {0.2, 0.6}, {0.6, 0.2}};
+        for (int k = found ? 0 : 1; k <= restart; ++k) {
+            double a = starts[k][0], b = starts[k][1];
+            if (solve_2d(residual, 1.0, a, b) && inside(a, b)) {
+                b1 = a, b2 = b;
+                return true;
+            }
+        }
+        return found;
+    }
+    return true;
 }
 
 // The point x of curved face cf (its barycentrics b1, b2; in: the guess) where the ray from the
 // eye (a point, or parallel rays along `forward`) is turned to pass e. Beyond the face (CurvedFace::
-// turn) rays may be turned to e at other points too: where the solve from the guess ends outside
-// the face (or fails), and `restart` > 0, it starts again from the face's point nearest the one
-// found outside (where one was), then from up to `restart` (at most 4) more: its centre, then
-// points near its corners; it keeps the first point found inside (else the one found outside).
+// turn) rays may be turned to e at other points too: the solve restarts (solve_in_face) where it
+// ends outside the face.
 bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
                   int restart, double& b1, double& b2, Vec3d& x) {
     auto follow = [&](double a, double b, Vec3d& r, Vec3d& p) {
@@ -951,28 +1026,67 @@ bool curved_point(const CurvedFace& cf, const Vec3d& eye, bool parallel, const V
         Vec3d dir;
         return cf.turn(a, b, parallel ? forward : normalize(p - eye), dir) && towards(p, dir, e, r);
     };
-    auto inside = [](double a, double b) { return a >= 0.0 && b >= 0.0 && a + b <= 1.0; };
     Vec3d r, p;
-    auto solve = [&](double& a, double& b) {
-        return solve_2d([&](double u, double v, Vec3d& res) { return follow(u, v, res, p); }, 1.0, a, b);
-    };
-    const bool found = solve(b1, b2);
-    if (restart > 0 && (!found || !inside(b1, b2))) {
-        // (First the point of the face nearest the one found outside, where one was.)
-        double near1 = b1, near2 = b2;
-        clamp_into_triangle(near1, near2);
-        const double starts[5][2] = {{near1, near2}, {1.0 / 3.0, 1.0 / 3.0}, {0.1, 0.1}, {0.8, 0.1}, {0.1, 0.8}};
-        for (int k = found ? 0 : 1; k <= restart; ++k) {
-            double a = starts[k][0], b = starts[k][1];
-            if (solve(a, b) && inside(a, b)) {
-                b1 = a, b2 = b;
-                return follow(b1, b2, r, x);
-            }
-        }
-        if (!found) return false;
-    }
+    if (!solve_in_face([&](double u, double v, Vec3d& res) { return follow(u, v, res, p); }, inside_triangle, restart,
+                       b1, b2))
+        return false;
     return follow(b1, b2, r, x);
 }
+
+// Two curved faces in a row: the camera ray meets the first, is turned there, meets the second,
+// and is turned there (in at a glass ball's near side and out at its far side, or in a curved
+// mirror seen in another). The film point through which the camera sees an edge point e is solved
+// for on the first face's barycentrics, the second face's point being where the turned ray meets
+// its plane. Its beam bounds the rays leaving the second face.
+struct CurvedPair : Beam {
+    CurvedFace face[2];  // (the second's `behind`: the rays from the first reach it from behind, by its winding)
+
+    // From the first face's point at barycentrics (a, b), which the ray along d meets: the second
+    // face's point x2 (its barycentrics c1, c2) and the direction `dir` leaving it. False where the
+    // turned ray does not meet the second face's plane ahead or a lobe does not exist.
+    bool follow(double a, double b, const Vec3d& d, Vec3d& x2, double& c1, double& c2, Vec3d& dir) const {
+        const CurvedFace &f = face[0], &g = face[1];
+        const Vec3d x1 = f.v0 + f.e1 * a + f.e2 * b;
+        Vec3d mid;
+        if (!f.turn(a, b, d, mid)) return false;
+        const double t = dot(g.v0 - x1, g.ng) / dot(mid, g.ng);
+        if (!(t > 0.0) || !std::isfinite(t)) return false;
+        x2 = x1 + mid * t;
+        return g.barycentrics(x2, c1, c2) && g.turn(c1, c2, mid, dir);
+    }
+};
+
+// The point x of the pair's first face (its barycentrics b1, b2; in: the guess) where the ray from
+// the eye (a point, or parallel rays along `forward`) is turned by both faces to pass e; (c1, c2):
+// the barycentrics of the second face's point; `inside`: whether both faces' points lie in their
+// faces (solve_in_face restarts where they do not).
+bool pair_point(const CurvedPair& cp, const Vec3d& eye, bool parallel, const Vec3d& forward, const Vec3d& e,
+                int restart, double& b1, double& b2, Vec3d& x, double& c1, double& c2, bool& inside) {
+    const CurvedFace& f = cp.face[0];
+    auto follow = [&](double a, double b, Vec3d& r) {
+        const Vec3d p = f.v0 + f.e1 * a + f.e2 * b;
+        Vec3d x2, dir;
+        return cp.follow(a, b, parallel ? forward : normalize(p - eye), x2, c1, c2, dir) && towards(x2, dir, e, r);
+    };
+    auto both_inside = [&](double a, double b) {
+        Vec3d r;
+        return inside_triangle(a, b) && follow(a, b, r) && inside_triangle(c1, c2);
+    };
+    if (!solve_in_face(follow, both_inside, restart, b1, b2)) return false;
+    x = f.v0 + f.e1 * b1 + f.e2 * b2;
+    inside = both_inside(b1, b2);
+    return true;
+}
+
+// The rays from the eye through a grid of a pair's first face's points (barycentrics in
+// eighths), followed through both faces: where each leaves the second face, its direction, and
+// whether that point lies in the second face (within 5%); of the pair `pair` (-1: none yet).
+struct PairRays {
+    static constexpr int kGrid = 8;
+    int pair = -1;
+    Vec3d at[kGrid + 1][kGrid + 1], dir[kGrid + 1][kGrid + 1];
+    bool valid[kGrid + 1][kGrid + 1] = {};
+};
 
 bool vertices_wanted(const SceneGradients& slots, int mesh) {
     return size_t(mesh) < slots.meshes.size() && slots.meshes[size_t(mesh)].vertices.wanted();
@@ -1201,10 +1315,10 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     // The tree of the scene's edges' balls, for the beams of chains and curved faces: built when
     // first needed (empty till then).
-    EdgeBalls balls_built;
+    BallTree balls_built;
     bool have_balls = false;
-    auto edge_balls = [&](bool needed) -> const EdgeBalls& {
-        if (needed && !have_balls) balls_built = EdgeBalls(scene), have_balls = true;
+    auto edge_balls = [&](bool needed) -> const BallTree& {
+        if (needed && !have_balls) balls_built = edge_balls_of(scene), have_balls = true;
         return balls_built;
     };
     // Chains of two planes (Chain, above): where the paths scatter at least twice, every ordered
@@ -1336,7 +1450,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // (Found in the tree of the edges' balls; each chain's in the edges' order. Kept by
         // keep_probability seen from its beam's origin, or without a beam from the middle of its
         // second plane's faces' box; parallel rays without a beam keep every edge.)
-        const EdgeBalls& balls = edge_balls(!candidates.empty());
+        const BallTree& balls = edge_balls(!candidates.empty());
         constexpr uint64_t kChainSalt = 0x636861696e73ull;
         auto find = [&](size_t j, std::vector<ViaSetup>& found) {
             const Chain& ch = candidates[j].second;
@@ -1368,6 +1482,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // with the edges its beam may see, up to kCurvedSetups set-ups.
     std::vector<CurvedFace> curved;
     std::vector<ViaSetup> curved_setups;
+    std::vector<CurvedPair> pairs;
+    std::vector<ViaSetup> pair_setups;
     if (planes_seen) {
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type), lens = cam.type == CameraType::ThinLens;
@@ -1380,21 +1496,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
             for (int64_t f = 0; f < m.num_triangles; ++f) {
                 if (m.is_degenerate(f)) continue;
-                const int32_t *t = m.indices + 3 * f, *ni = m.normal_indices + 3 * f;
-                CurvedFace cf;
-                cf.mesh = int(i);
-                cf.prim = f;
-                Vec3d v[3];
-                for (int c = 0; c < 3; ++c) {
-                    v[c] = Vec3d(m.vertex(t[c]));
-                    cf.n[c] = Vec3d(Vec3f::load(m.normals + 3 * ni[c]));
-                }
-                cf.v0 = v[0], cf.e1 = v[1] - v[0], cf.e2 = v[2] - v[0];
-                cf.ng = Vec3d(m.unit_face_normal(f));
+                CurvedFace cf(scene, int(i), f);
+                const Vec3d v[3] = {cf.v0, cf.v0 + cf.e1, cf.v0 + cf.e2};
                 const double side = parallel ? -dot(cf.ng, forward) : dot(cf.ng, eye - v[0]);
                 if ((front_only && !(side > 0.0)) || !(side != 0.0)) continue;
                 cf.behind = side < 0.0;
-                cf.delta = delta_turn(mat);
                 // The film box its corners span (the whole window where one reaches behind the
                 // camera, or with a thin lens), within the window.
                 double x0 = wx0, y0 = wy0, x1 = wx1, y1 = wy1;
@@ -1451,7 +1557,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                          [](const CurvedFace& a, const CurvedFace& b) { return a.film_area > b.film_area; });
         // The best ranked first, each with the edges its beam may see on the side its lobe
         // sends rays to (found in a tree of the edges' balls), until those reach kCurvedSetups.
-        const EdgeBalls& balls = edge_balls(!candidates.empty());
+        const BallTree& balls = edge_balls(!candidates.empty());
         auto find = [&](size_t j, std::vector<ViaSetup>& found) {
             const CurvedFace& cf = candidates[j];
             // (From the face's centre alone: its ball is small, and with its radius the glass
@@ -1473,6 +1579,184 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         };
         keep_seen(candidates.size(), find, kCurvedSetups, kCurvedTests, curved_setups,
                   [&](size_t j) { curved.push_back(candidates[j]); });
+        // Pairs of curved faces (CurvedPair), where the paths scatter at least twice, seen by a
+        // pinhole or parallel rays (a thin lens's rays through a face spread, and through a
+        // second no bound of them is known): each face above, taken in their order, with each
+        // curved face its beam may see (found in a tree of the curved faces' balls) that rays
+        // through it meet (below), with each of that face's lobes, until the faces tested reach
+        // kPairTests. The pairs whose rank is highest first, each with the edges its beam may see
+        // on the side its second lobe sends rays to, up to kPairSetups set-ups.
+        if (opt.max_bounces >= 2 && !lens && !candidates.empty()) {
+            std::vector<CurvedFace> faces;
+            std::vector<Vec3d> mid;
+            std::vector<double> half;
+            std::vector<int32_t> ids;
+            for (size_t i = 0; i < scene.meshes.size(); ++i) {
+                const Mesh& m = scene.meshes[i];
+                if (!m.normals || !smooth_lobe(scene.materials[size_t(m.material)])) continue;
+                for (int64_t f = 0; f < m.num_triangles; ++f) {
+                    if (m.is_degenerate(f)) continue;
+                    faces.emplace_back(scene, int(i), f);
+                    ids.push_back(int32_t(faces.size() - 1));
+                    mid.push_back(faces.back().centre());
+                    half.push_back(faces.back().radius());
+                }
+            }
+            const BallTree face_balls(std::move(mid), std::move(half), std::move(ids));
+            // A candidate pair: the first face (in `candidates`), the second (in `faces`) with its
+            // lobe and side, its beam and rank (the faces themselves copied for those kept only).
+            struct PairChoice : Beam {
+                int32_t first = -1, second = -1;
+                bool refract = false, behind = false;
+                double rank = 0.0;
+            };
+            auto second_face = [&](const PairChoice& pc) {
+                CurvedFace g = faces[size_t(pc.second)];
+                g.refract = pc.refract;
+                g.behind = pc.behind;
+                return g;
+            };
+            std::vector<PairChoice> pair_candidates;
+            double tested = 0.0;
+            // A grid of the first face's points (barycentrics i / kRayGrid, j / kRayGrid): the rays
+            // from the eye through them, turned there. A second face is paired with it where
+            // some of these meet its plane inside it (or within a quarter of it); the pair's beam
+            // holds those rays turned by the second face, from the ball of the points they meet
+            // it at (widened by two grid steps), in their cone widened by a half and 0.05 rad (the
+            // rays between them); its rank is the first face's film area times the share of the
+            // grid's rays that meet the second face and both lobes' weights. (A ray reflected
+            // wholly there: the rays refracted near it leave along the face, in the limit along
+            // its part in the tangent plane.)
+            constexpr int kRayGrid = 4, kRays = (kRayGrid + 1) * (kRayGrid + 2) / 2;
+            // (The first faces' pairs found in parallel, a block at a time, and kept in order
+            // until the faces tested reach kPairTests.)
+            auto choose = [&](size_t first_index, std::vector<PairChoice>& out) {
+                double visits = 0.0;
+                const CurvedFace& first = candidates[first_index];
+                Vec3d x1[kRays], mid[kRays];
+                double lobe1[kRays];
+                bool turned[kRays];
+                int num_turned = 0;
+                for (int i = 0, k = 0; i <= kRayGrid; ++i)
+                    for (int j = 0; i + j <= kRayGrid; ++j, ++k) {
+                        const double b1 = double(i) / kRayGrid, b2 = double(j) / kRayGrid;
+                        x1[k] = first.v0 + first.e1 * b1 + first.e2 * b2;
+                        turned[k] = (parallel || dot(x1[k] - eye, forward) > 0.0) &&
+                                    first.turn(b1, b2, parallel ? forward : normalize(x1[k] - eye), mid[k], &lobe1[k]);
+                        if (turned[k]) mid[k] = normalize(mid[k]), ++num_turned;
+                    }
+                if (num_turned == 0) return 0.0;
+                const double near_t = 1e-3 * (length(first.e1) + length(first.e2));
+                face_balls.visit(first, [&](int32_t id) {
+                    ++visits;
+                    const CurvedFace& g = faces[size_t(id)];
+                    if (g.mesh == first.mesh && g.prim == first.prim) return;
+                    const Material& mat = scene.materials[size_t(scene.meshes[size_t(g.mesh)].material)];
+                    const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
+                    const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
+                    // The grid's rays that meet the second face (within a quarter of it).
+                    constexpr double kNear = 0.25;
+                    int met[kRays], num_met = 0;
+                    Vec3d at[kRays];
+                    double c1[kRays], c2[kRays];
+                    for (int k = 0; k < kRays; ++k) {
+                        if (!turned[k]) continue;
+                        // (Not from the first face's own border: a ray leaving it where it meets
+                        // the second face there meets that face nowhere else.)
+                        const double t = dot(g.v0 - x1[k], g.ng) / dot(mid[k], g.ng);
+                        if (!(t > near_t) || !std::isfinite(t)) continue;
+                        at[k] = x1[k] + mid[k] * t;
+                        if (!g.barycentrics(at[k], c1[k], c2[k]) || c1[k] < -kNear || c2[k] < -kNear ||
+                            c1[k] + c2[k] > 1.0 + kNear)
+                            continue;
+                        // (From the second face's front only, for a one-sided mirror.)
+                        if (front_only && !(dot(mid[k], g.ng) < 0.0)) continue;
+                        met[num_met++] = k;
+                    }
+                    if (num_met == 0) return;
+                    const double step = std::max(length(first.e1), length(first.e2)) / kRayGrid;
+                    for (int r = 0; r < (refracts ? 2 : 1); ++r) {
+                        PairChoice cp;
+                        cp.first = int32_t(first_index);
+                        cp.second = id;
+                        cp.behind = dot(mid[met[0]], g.ng) > 0.0;
+                        cp.refract = r == 1;
+                        const CurvedFace second = second_face(cp);
+                        Vec3d dirs[kRays], centre_at(0.0);
+                        double lobe = 0.0;
+                        bool ok = true;
+                        for (int q = 0; q < num_met && ok; ++q) {
+                            const int k = met[q];
+                            double lobe2 = 0.0;
+                            if (second.turn(c1[k], c2[k], mid[k], dirs[q], &lobe2)) {
+                                dirs[q] = normalize(dirs[q]);
+                            } else {
+                                double n1 = c1[k], n2 = c2[k];
+                                clamp_into_triangle(n1, n2);
+                                const Vec3d n = normalize(g.n[0] * (1.0 - n1 - n2) + g.n[1] * n1 + g.n[2] * n2);
+                                dirs[q] = normalize(mid[k] - n * dot(mid[k], n));
+                                ok = cp.refract && std::isfinite(dirs[q].x);
+                            }
+                            lobe += lobe1[k] * lobe2;
+                            centre_at = centre_at + at[k];
+                        }
+                        if (!ok) continue;
+                        cp.origin = centre_at / double(num_met);
+                        for (int q = 0; q < num_met; ++q)
+                            cp.origin_radius = std::max(cp.origin_radius, length(at[met[q]] - cp.origin));
+                        cp.origin_radius = (cp.origin_radius + 2.0 * step) * (1.0 + 1e-6);
+                        cp.bounded = cp.bound_directions(dirs, num_met, 1.5, 0.05) && std::isfinite(cp.origin_radius);
+                        // (Without a beam it tests every edge: after those with one.)
+                        cp.rank = first.film_area * lobe / double(num_turned) * (cp.bounded ? 1.0 : 1e-3);
+                        out.push_back(cp);
+                    }
+                });
+                return visits;
+            };
+            constexpr size_t kChooseBlock = 64;
+            std::vector<std::vector<PairChoice>> chosen(kChooseBlock);
+            std::vector<double> visits(kChooseBlock);
+            for (size_t begin = 0; begin < candidates.size() && tested < kPairTests; begin += kChooseBlock) {
+                const size_t block = std::min(kChooseBlock, candidates.size() - begin);
+                parallel_indices(opt, int64_t(block), [&](int64_t j) {
+                    chosen[size_t(j)].clear();
+                    visits[size_t(j)] = choose(begin + size_t(j), chosen[size_t(j)]);
+                });
+                for (size_t j = 0; j < block && tested < kPairTests; ++j) {
+                    tested += visits[j];
+                    pair_candidates.insert(pair_candidates.end(), chosen[j].begin(), chosen[j].end());
+                }
+            }
+            std::stable_sort(pair_candidates.begin(), pair_candidates.end(),
+                             [](const PairChoice& a, const PairChoice& b) { return a.rank > b.rank; });
+            constexpr uint64_t kPairSalt = 0x7061697273ull;
+            auto find_seen = [&](size_t j, std::vector<ViaSetup>& found) {
+                const PairChoice& cp = pair_candidates[j];
+                const CurvedFace second = second_face(cp);
+                EdgeEye from;
+                from.origin = Vec3f(second.centre());
+                double visited = 0.0;
+                balls.visit(cp, [&](int32_t index) {
+                    ++visited;
+                    const Edge& e = all_edges[size_t(index)];
+                    const Mesh& m = scene.meshes[size_t(e.mesh)];
+                    ViaSetup setup;
+                    setup.edge = index;
+                    if (!second.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
+                    setup.kept = keep_probability(from, 0.0, e, index);
+                    if (keeps(kPairSalt, j, index, setup.kept)) found.push_back(setup);
+                });
+                return visited;
+            };
+            keep_seen(pair_candidates.size(), find_seen, kPairSetups, kPairTests, pair_setups, [&](size_t j) {
+                const PairChoice& pc = pair_candidates[j];
+                CurvedPair cp;
+                static_cast<Beam&>(cp) = pc;
+                cp.face[0] = candidates[size_t(pc.first)];
+                cp.face[1] = second_face(pc);
+                pairs.push_back(cp);
+            });
+        }
     }
     // The film point that `eye` sees point e at through chain ch; x1 (in: a guess where `guessed`)
     // and x2 its planes' points.
@@ -1684,26 +1968,38 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         return curved_point(cf, from, parallel, forward, e, restart, b1, b2, x) &&
                point_film(eye, x, Vec3f(cf.ng), fx, fy);
     };
-    // The edge e of mesh m seen in or through curved face cf (`setup`: its part on the side of
-    // the face the lobe sends rays to), of that part the sixteenths the face's beam may see,
-    // sampled by the film length of the polyline through the film points of five of its points
-    // (from the last of them outside the face before the first inside to the first outside after
-    // the last inside; where one point only is found, a short chord beside it). Each solve starts
-    // from the last point's, and where it ends outside the face, again from the face's centre
-    // (more restarts change nothing measurable there; the samples' solves make four). Left out
-    // where no point found lies near the face.
-    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup,
-                                FilmEdge& fe) {
-        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
-            !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
-            return false;
+    // The same through the pair of curved faces cp, (b1, b2) those of its first face's point (in:
+    // the guess), (c1, c2) its second's; `inside`: whether both lie inside their faces.
+    auto pair_film = [&](const CurvedPair& cp, const Eye& eye, const Vec3d& e, int restart, double& b1, double& b2,
+                         double& fx, double& fy, double& c1, double& c2, bool& inside) {
+        const Vec3d from(eye.position), forward(cam.forward);
+        const bool parallel = !has_eye(cam.type);
+        Vec3d x;
+        return pair_point(cp, from, parallel, forward, e, restart, b1, b2, x, c1, c2, inside) &&
+               point_film(eye, x, Vec3f(cp.face[0].ng), fx, fy);
+    };
+    // The edge e of mesh m seen in or through a curved face, or a pair of them, whose beam is
+    // `beam` (`setup`: its part on the side of the (last) face the lobe sends rays to), of that
+    // part the sixteenths the beam may see, sampled by the film length of the polyline through the
+    // film points of `points` (at most 33) of its points spread evenly (from the last of them
+    // outside the face before the first inside to the first outside after the last inside; where
+    // one point only is found, a short chord beside it). film(p, guessed, restart, b1, b2, fx, fy,
+    // c1, c2, inside) finds edge point p's film point and the (first) face's barycentrics there
+    // (in: the guess, where `guessed`), the second face's (c1, c2; a single face's own again) and
+    // whether they lie inside the face (both faces). Each solve starts from the last point's, and
+    // where it ends outside the face, again from the face's centre (more restarts change nothing
+    // measurable for one face; the samples' solves make four, through a pair nine). Left out where
+    // no point found lies near the face (each face), or with `inside_needed` where none lies
+    // inside.
+    auto face_film_edge = [&](const Beam& beam, const Mesh& m, const Edge& e, const ViaSetup& setup, auto&& film,
+                              int points, bool inside_needed, FilmEdge& fe) {
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
         double u0 = setup.u0, u1 = setup.u1;
         constexpr int kPieces = 16;
         int first = -1, last = -1;
         for (int k = 0; k < kPieces; ++k) {
             const double a = u0 + (u1 - u0) * double(k) / kPieces, b = u0 + (u1 - u0) * double(k + 1) / kPieces;
-            if (!cf.may_see(p0 + (p1 - p0) * a, p0 + (p1 - p0) * b)) continue;
+            if (!beam.may_see(p0 + (p1 - p0) * a, p0 + (p1 - p0) * b)) continue;
             if (first < 0) first = k;
             last = k;
         }
@@ -1711,34 +2007,41 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const double span = u1 - u0;
         u1 = u0 + span * double(last + 1) / kPieces;
         u0 = u0 + span * double(first) / kPieces;
-        // Five points' film points, each solve starting from the last's (the first from
-        // curved_guess).
-        constexpr int kPoints = 5;
-        double fx[kPoints], fy[kPoints], bb1[kPoints], bb2[kPoints];
-        bool ok[kPoints], inside[kPoints];
+        // The points' film points, each solve starting from the last's (the first from the
+        // face's guess).
+        constexpr int kMaxPoints = 33;
+        const int kPoints = std::min(points, kMaxPoints);
+        double fx[kMaxPoints], fy[kMaxPoints], bb1[kMaxPoints], bb2[kMaxPoints];
+        bool ok[kMaxPoints], inside[kMaxPoints];
         double b1 = 0.0, b2 = 0.0;
         bool guessed = false;
         int first_in = -1, last_in = -1;
-        double box[4] = {1e300, 1e300, -1e300, -1e300};
+        double box[2][4] = {{1e300, 1e300, -1e300, -1e300}, {1e300, 1e300, -1e300, -1e300}};
         for (int k = 0; k < kPoints; ++k) {
             const double u = u0 + (u1 - u0) * double(k) / double(kPoints - 1);
-            guessed = ok[k] = curved_film(cf, centre, p0 + (p1 - p0) * u, guessed, 1, b1, b2, fx[k], fy[k]);
+            double c[2];
+            guessed = ok[k] = film(p0 + (p1 - p0) * u, guessed, 1, b1, b2, fx[k], fy[k], c[0], c[1], inside[k]);
             if (!ok[k]) {
                 inside[k] = false;
                 continue;
             }
             bb1[k] = b1, bb2[k] = b2;
-            inside[k] = b1 >= 0.0 && b2 >= 0.0 && b1 + b2 <= 1.0;
             if (inside[k]) last_in = k, first_in = first_in < 0 ? k : first_in;
-            box[0] = std::min(box[0], b1), box[1] = std::min(box[1], b2);
-            box[2] = std::max(box[2], b1), box[3] = std::max(box[3], b2);
+            const double at_face[2][2] = {{b1, b2}, {c[0], c[1]}};
+            for (int f = 0; f < 2; ++f) {
+                box[f][0] = std::min(box[f][0], at_face[f][0]), box[f][1] = std::min(box[f][1], at_face[f][1]);
+                box[f][2] = std::max(box[f][2], at_face[f][0]), box[f][3] = std::max(box[f][3], at_face[f][1]);
+            }
         }
-        // Near the face: the points' box of barycentrics, widened by half its size (the curve
-        // between the points bends), meets the face's.
-        const double wx = 0.5 * (box[2] - box[0]) + 1e-9, wy = 0.5 * (box[3] - box[1]) + 1e-9;
-        if (!(box[2] + wx >= 0.0 && box[3] + wy >= 0.0 && box[0] - wx + box[1] - wy <= 1.0)) return false;
+        // Near the face (each face): the points' box of barycentrics, widened by half its size
+        // (the curve between the points bends), meets the face's.
+        for (const double* bx : box) {
+            const double wx = 0.5 * (bx[2] - bx[0]) + 1e-9, wy = 0.5 * (bx[3] - bx[1]) + 1e-9;
+            if (!(bx[2] + wx >= 0.0 && bx[3] + wy >= 0.0 && bx[0] - wx + bx[1] - wy <= 1.0)) return false;
+        }
         // (A point whose solve failed may lie inside: the part runs on to the next one found
         // outside.)
+        if (first_in < 0 && inside_needed) return false;
         int lo = 0, hi = kPoints - 1;
         if (first_in >= 0) {
             lo = first_in, hi = last_in;
@@ -1762,8 +2065,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const double du = (u1 - u0) / double(8 * (kPoints - 1));
             len = chord_length(at(middle), du, u0, u1, fx[middle], fy[middle], at(hi) - at(lo),
                                [&](double u, double& gx, double& gy) {
-                                   double c1 = bb1[middle], c2 = bb2[middle];
-                                   return curved_film(cf, centre, p0 + (p1 - p0) * u, true, 1, c1, c2, gx, gy);
+                                   double a1 = bb1[middle], a2 = bb2[middle], c1, c2;
+                                   bool in;
+                                   return film(p0 + (p1 - p0) * u, true, 1, a1, a2, gx, gy, c1, c2, in);
                                });
             if (!(len > 0.0)) return false;
         }
@@ -1782,8 +2086,101 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (!ok[near_lo]) near_lo = near_hi = middle;
         fe.ax = bb1[near_lo], fe.ay = bb2[near_lo], fe.bx = bb1[near_hi], fe.by = bb2[near_hi];
         fe.len = len;  // (weight 1: its density factor is `kept`)
-        fe.curved = int(&cf - curved.data());
         return fe.len > 0.0 && fe.u1 > fe.u0;
+    };
+    auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup,
+                                FilmEdge& fe) {
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
+            !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
+            return false;
+        fe.curved = int(&cf - curved.data());
+        auto film = [&](const Vec3d& p, bool guessed, int restart, double& b1, double& b2, double& fx, double& fy,
+                        double& c1, double& c2, bool& inside) {
+            if (!curved_film(cf, centre, p, guessed, restart, b1, b2, fx, fy)) return false;
+            c1 = b1, c2 = b2;
+            inside = inside_triangle(b1, b2);
+            return true;
+        };
+        return face_film_edge(cf, m, e, setup, film, 5, false, fe);
+    };
+    auto pair_film_edge = [&](const CurvedPair& cp, const Mesh& m, const Edge& e, const ViaSetup& setup,
+                              PairRays& rays, FilmEdge& fe) {
+        bool wanted = camera_wanted || vertices_wanted(slots, e.mesh);
+        for (const CurvedFace& cf : cp.face)
+            wanted = wanted || vertices_wanted(slots, cf.mesh) || normals_wanted(cf.mesh) ||
+                     (cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material));
+        if (!wanted) return false;
+        fe.pair = int(&cp - pairs.data());
+        // The rays from the eye through a grid of the first face's points, followed through both
+        // faces (those that meet the second face inside it, within 5%; found once for the pair's
+        // set-ups in a row): where two neighbours pass the edge's line on either side, the edge
+        // is seen between them. The edge's parameters nearest those rays (each with its grid
+        // point) bound the part seen; its solves start from the grid point whose parameter is
+        // nearest theirs. (The faces' normals are clamped beyond them, so a solve continued from
+        // the last point's root may follow a root outside them past a part inside, too short
+        // for the points to land in.)
+        constexpr int kGrid = PairRays::kGrid;
+        if (rays.pair != fe.pair) {
+            rays.pair = fe.pair;
+            const Vec3d from(centre.position), forward(cam.forward);
+            const bool parallel = !has_eye(cam.type);
+            const CurvedFace& f = cp.face[0];
+            for (int i = 0; i <= kGrid; ++i)
+                for (int j = 0; i + j <= kGrid; ++j) {
+                    const double b1 = double(i) / kGrid, b2 = double(j) / kGrid;
+                    const Vec3d x = f.v0 + f.e1 * b1 + f.e2 * b2;
+                    double c1, c2;
+                    rays.valid[i][j] =
+                        cp.follow(b1, b2, parallel ? forward : normalize(x - from), rays.at[i][j], c1, c2, rays.dir[i][j]) &&
+                        c1 >= -0.05 && c2 >= -0.05 && c1 + c2 <= 1.05;
+                }
+        }
+        const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1)), along = p1 - p0;
+        double side[kGrid + 1][kGrid + 1], at_u[kGrid + 1][kGrid + 1];
+        const auto& valid = rays.valid;
+        for (int i = 0; i <= kGrid; ++i)
+            for (int j = 0; i + j <= kGrid; ++j) {
+                if (!valid[i][j]) continue;
+                const Vec3d &x2 = rays.at[i][j], &dir = rays.dir[i][j];
+                side[i][j] = dot(cross(p0 - x2, p1 - x2), dir);
+                // The edge's parameter nearest the ray (x2, dir).
+                const Vec3d w = p0 - x2;
+                const double a = dot(along, along), b = dot(along, dir), c = dot(dir, dir), d = dot(along, w),
+                             g = dot(dir, w), den = a * c - b * b;
+                at_u[i][j] = den > 0.0 ? (b * g - c * d) / den : 0.5;
+            }
+        double lo = std::numeric_limits<double>::infinity(), hi = -lo;
+        std::vector<std::array<double, 3>> starts;  // (u, b1, b2)
+        auto pair_up = [&](int i, int j, int k, int l) {
+            if (k < 0 || l < 0 || k + l > kGrid || !valid[i][j] || !valid[k][l]) return;
+            if ((side[i][j] > 0.0) == (side[k][l] > 0.0)) return;
+            for (const auto& [a, b] : {std::pair<int, int>{i, j}, std::pair<int, int>{k, l}}) {
+                lo = std::min(lo, at_u[a][b]), hi = std::max(hi, at_u[a][b]);
+                starts.push_back({at_u[a][b], double(a) / kGrid, double(b) / kGrid});
+            }
+        };
+        for (int i = 0; i <= kGrid; ++i)
+            for (int j = 0; i + j <= kGrid; ++j) {
+                pair_up(i, j, i + 1, j);
+                pair_up(i, j, i, j + 1);
+                pair_up(i, j, i + 1, j - 1);
+            }
+        if (!(lo <= hi)) return false;
+        ViaSetup narrowed = setup;
+        const double w = 0.5 * (hi - lo) + 0.02 * (setup.u1 - setup.u0);
+        narrowed.u0 = std::max(setup.u0, lo - w), narrowed.u1 = std::min(setup.u1, hi + w);
+        if (!(narrowed.u0 < narrowed.u1)) return false;
+        auto film = [&](const Vec3d& p, bool guessed, int restart, double& b1, double& b2, double& fx, double& fy,
+                        double& c1, double& c2, bool& inside) {
+            if (!guessed) {
+                const double u = dot(p - p0, along) / dot(along, along);
+                double best = std::numeric_limits<double>::infinity();
+                for (const auto& st : starts)
+                    if (std::abs(st[0] - u) < best) best = std::abs(st[0] - u), b1 = st[1], b2 = st[2];
+            }
+            return pair_film(cp, centre, p, restart, b1, b2, fx, fy, c1, c2, inside);
+        };
+        return face_film_edge(cp, m, e, narrowed, film, 33, true, fe);
     };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());
@@ -1867,24 +2264,28 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         chunk_edges[size_t(begin / kSetupChunk)] = std::move(film_edges);
     });
-    // Then the edges seen through chains and in or through curved faces (their set-ups chosen
-    // above), in chunks of their own after those.
+    // Then the edges seen through chains, in or through curved faces and through pairs of them
+    // (their set-ups chosen above), in chunks of their own after those.
     {
         constexpr int64_t kViaChunk = 256;
         const int64_t num_chained = int64_t(chain_setups.size());
-        const int64_t count = num_chained + int64_t(curved_setups.size());
+        const int64_t num_curved = num_chained + int64_t(curved_setups.size());
+        const int64_t count = num_curved + int64_t(pair_setups.size());
         const size_t first = chunk_edges.size();
         chunk_edges.resize(first + size_t((count + kViaChunk - 1) / kViaChunk));
         for_each_chunk(opt, count, kViaChunk, [&](int64_t begin, int64_t end) {
             std::vector<FilmEdge> film_edges;
+            PairRays rays;
             for (int64_t k = begin; k < end; ++k) {
-                const bool chained = k < num_chained;
-                const ViaSetup& setup = chained ? chain_setups[size_t(k)] : curved_setups[size_t(k - num_chained)];
+                const ViaSetup& setup = k < num_chained  ? chain_setups[size_t(k)]
+                                        : k < num_curved ? curved_setups[size_t(k - num_chained)]
+                                                         : pair_setups[size_t(k - num_curved)];
                 const Edge& e = all_edges[size_t(setup.edge)];
                 const Mesh& m = scene.meshes[size_t(e.mesh)];
                 FilmEdge fe;
-                if (!(chained ? chained_film_edge(chains[size_t(setup.via)], m, e, setup, fe)
-                              : curved_film_edge(curved[size_t(setup.via)], m, e, setup, fe)))
+                if (!(k < num_chained  ? chained_film_edge(chains[size_t(setup.via)], m, e, setup, fe)
+                      : k < num_curved ? curved_film_edge(curved[size_t(setup.via)], m, e, setup, fe)
+                                       : pair_film_edge(pairs[size_t(setup.via)], m, e, setup, rays, fe)))
                     continue;
                 fe.edge = size_t(setup.edge);
                 film_edges.push_back(fe);
@@ -1915,7 +2316,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // meet no face of their plane where there are many small ones, takes none from the first.
     size_t num_direct = 0;
     for (const std::vector<FilmEdge>& chunk : chunk_edges)
-        for (const FilmEdge& fe : chunk) num_direct += fe.plane < 0 && fe.curved < 0;
+        for (const FilmEdge& fe : chunk) num_direct += fe.plane < 0 && fe.curved < 0 && fe.pair < 0;
     const double total_direct = cumulative[num_direct], total_smooth = cumulative[num_film] - total_direct;
     const int64_t n_direct = total_direct > 0.0 ? n : 0, n_smooth = total_smooth > 0.0 ? n : 0;
     // Every point of every edge is drawn with density 1 / total (its group's) per unit film length
@@ -2350,12 +2751,90 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp[1],
                           closest_on_segment(p0, p1, from[2], dir[2]), dir[2], lobe[0] * lobe[1], false, chained_opt);
         };
+        // A ray (o, d) met by curved face cf and turned there as the renderer turns it (the
+        // interpolated normal, normalised and bent, the lobe, delta_side): the face's corners and
+        // normals, the point x met, the bent normal and the turned direction `dir`, with what
+        // turn_back needs.
+        struct Turn {
+            Vec3f tv[3], N[3], o, d, u, v, ng, wo, Ns, ns, nb, turned, x, dir, lobe;
+            TriangleHit<float> th;
+            DeltaParams<float> dp;
+            float side = 1.f;
+        };
+        // Turns (o, d) at face cf met there (material bp), its indices into `face`; false where the
+        // ray misses the face's triangle or the lobe does not exist.
+        auto turn_at = [&](const CurvedFace& cf, const BsdfParams& bp, const Vec3f& o, const Vec3f& d, Turn& tr,
+                           Pending::Face& face) {
+            const Mesh& fm = scene.meshes[size_t(cf.mesh)];
+            face.mesh = cf.mesh;
+            face.normals = true;
+            for (int c = 0; c < 3; ++c) {
+                face.tri[c] = fm.indices[3 * cf.prim + c];
+                face.normal_tri[c] = fm.normal_indices[3 * cf.prim + c];
+                tr.tv[c] = fm.vertex(face.tri[c]);
+                tr.N[c] = Vec3f::load(fm.normals + 3 * face.normal_tri[c]);
+            }
+            // The face's point, its normal and the turned ray.
+            if (!intersect_triangle(o, d, tr.tv[0], tr.tv[1], tr.tv[2], tr.th)) return false;
+            tr.o = o, tr.d = d;
+            tr.x = o + d * tr.th.t;
+            tr.u = tr.tv[1] - tr.tv[0], tr.v = tr.tv[2] - tr.tv[0], tr.ng = cross_normal(tr.u, tr.v), tr.wo = -d;
+            tr.Ns = tr.N[0] * (1.f - tr.th.b1 - tr.th.b2) + tr.N[1] * tr.th.b1 + tr.N[2] * tr.th.b2;
+            if (!(length(tr.Ns) > 0.f)) return false;
+            tr.ns = normalize(tr.Ns), tr.nb = bend_normal(tr.ns, tr.ng, tr.wo);
+            tr.dp = delta_params(bp);
+            if (!delta_scatter(tr.dp, tr.nb, tr.wo, cf.refract, 1.f, tr.turned, tr.lobe)) return false;
+            tr.side = delta_side_sign(tr.wo, tr.ng, cf.refract);
+            tr.dir = delta_side(tr.turned, tr.ng, tr.side);
+            face.material = cf.refract ? fm.material : -1;
+            return true;
+        };
+        // The adjoints of the ray (a_o, a_d) and of the face's vertices, normals and index (into
+        // `face`) for the adjoints a_x of the point met and a_dir of the turned direction: back
+        // through delta_side, the lobe, the bend and the normalised interpolation, and x = o + t d
+        // with (t, b1, b2) from the ray and the face (d_intersect_triangle).
+        auto turn_back = [&](const CurvedFace& cf, const Turn& tr, Vec3f a_x, Vec3f a_dir, Pending::Face& face,
+                             Vec3f& a_o, Vec3f& a_d) {
+            Vec3f a_turned(0.f), a_ng(0.f), a_ns(0.f);
+            d_delta_side(tr.turned, tr.ng, tr.side, a_dir, a_turned, a_ng);
+            DDelta<float> dd;
+            dd.specular = dd.n = dd.wo = Vec3f(0.f);
+            dd.eta = 0.f;
+            d_delta_scatter(tr.dp, tr.nb, tr.wo, cf.refract, 1.f, a_turned, Vec3f(0.f), dd);
+            Vec3f a_wo = dd.wo;
+            d_bend_normal(tr.ns, tr.ng, tr.wo, dd.n, a_ns, a_wo);
+            const Vec3f a_N = d_normalize(tr.Ns, a_ns);
+            face.dn[0] = a_N * (1.f - tr.th.b1 - tr.th.b2);
+            face.dn[1] = a_N * tr.th.b1;
+            face.dn[2] = a_N * tr.th.b2;
+            DTriangle<float> dt;
+            d_intersect_triangle(tr.o, tr.d, tr.tv[0], tr.tv[1], tr.tv[2], tr.th, dot(a_x, tr.d),
+                                 dot(a_N, tr.N[1] - tr.N[0]), dot(a_N, tr.N[2] - tr.N[0]), dt);
+            a_o = a_x + dt.o;
+            a_d = a_x * tr.th.t - a_wo + dt.d;
+            // The geometric normal's adjoint (delta_side's) to the vertices through its cross
+            // product, beside the point's.
+            set_face_adjoints(face, tr.u, tr.v, Vec3f(0.f), a_ng);
+            face.dv[0] += dt.v0;
+            face.dv[1] += dt.v1;
+            face.dv[2] += dt.v2;
+            face.deta = dd.eta;
+        };
+        // Whether `ray` meets face cf first (`hide`: past hidden emitters), smooth, with a lobe of
+        // cf's kind; its point and material.
+        auto meets_curved = [&](const Ray& ray, bool hide, const CurvedFace& cf, SurfacePoint& sp, BsdfParams& bp) {
+            const FirstHit hit = first_hit(scene, ray, hide, Tracing::Exact);
+            if (!hit.found || hit.hit.mesh != cf.mesh || hit.hit.prim != cf.prim) return false;
+            sp = scene.surface_point(hit.hit);
+            bp = scene.bsdf_params(sp);
+            return bp.kind != MaterialKind::Standard && !bp.rough && (!cf.refract || bp.kind == MaterialKind::Dielectric);
+        };
         // The boundary term of the edge `edge` seen in or through curved face cf at film point
         // (x, y) (CurvedFace, above): where the camera ray meets that face first and is turned
-        // there past the edge, as the renderer turns it (the interpolated normal, normalised and
-        // bent, the lobe, delta_side). The side function is the turned ray's; its gradient
-        // reaches the camera ray through the face's point (its distance and barycentrics) and the
-        // turning, and the face's vertices, shading normals and index likewise.
+        // there past the edge, as the renderer turns it. The side function is the turned ray's;
+        // its gradient reaches the camera ray through the face's point (its distance and
+        // barycentrics) and the turning, and the face's vertices, shading normals and index
+        // likewise.
         auto splat_curved = [&](int64_t i, const Eye& eye, const Edge& edge, const CurvedFace& cf, float x, float y,
                                 double point_weight) {
             Vec3f o, d;
@@ -2363,70 +2842,45 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             Ray ray;
             ray.origin = o;
             ray.dir = d;
-            const FirstHit hit = first_hit(scene, ray, opt.hide_emitters, Tracing::Exact);
-            if (!hit.found || hit.hit.mesh != cf.mesh || hit.hit.prim != cf.prim) return;
-            const SurfacePoint sp = scene.surface_point(hit.hit);
-            const BsdfParams bp = scene.bsdf_params(sp);
-            if (bp.kind == MaterialKind::Standard || bp.rough) return;
-            if (cf.refract && bp.kind != MaterialKind::Dielectric) return;
-            const Mesh& fm = scene.meshes[size_t(cf.mesh)];
+            SurfacePoint sp;
+            BsdfParams bp;
             Pending pd;
-            Pending::Face& face = pd.faces[0];
-            face.mesh = cf.mesh;
-            face.normals = true;
-            Vec3f tv[3], N[3];
-            for (int c = 0; c < 3; ++c) {
-                face.tri[c] = fm.indices[3 * cf.prim + c];
-                face.normal_tri[c] = fm.normal_indices[3 * cf.prim + c];
-                tv[c] = fm.vertex(face.tri[c]);
-                N[c] = Vec3f::load(fm.normals + 3 * face.normal_tri[c]);
-            }
-            // The face's point, its normal and the turned ray.
-            TriangleHit<float> th;
-            if (!intersect_triangle(o, d, tv[0], tv[1], tv[2], th)) return;
-            const Vec3f xh = o + d * th.t;
-            const Vec3f u = tv[1] - tv[0], v = tv[2] - tv[0], ng = cross_normal(u, v), wo = -d;
-            const Vec3f Ns = N[0] * (1.f - th.b1 - th.b2) + N[1] * th.b1 + N[2] * th.b2;
-            if (!(length(Ns) > 0.f)) return;
-            const Vec3f ns = normalize(Ns), nb = bend_normal(ns, ng, wo);
-            const DeltaParams<float> dp = delta_params(bp);
-            Vec3f turned, lobe;
-            if (!delta_scatter(dp, nb, wo, cf.refract, 1.f, turned, lobe)) return;
-            const float side = delta_side_sign(wo, ng, cf.refract);
-            const Vec3f dir = delta_side(turned, ng, side);
+            Turn tr;
+            if (!meets_curved(ray, opt.hide_emitters, cf, sp, bp) || !turn_at(cf, bp, o, d, tr, pd.faces[0])) return;
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
-            EdgeSideGradient g = edge_side_gradient(p0, p1, xh, dir);
-            // Back through delta_side, the lobe, the bend and the normalised interpolation.
-            Vec3f a_turned(0.f), a_ng(0.f), a_ns(0.f);
-            d_delta_side(turned, ng, side, g.d_d, a_turned, a_ng);
-            DDelta<float> dd;
-            dd.specular = dd.n = dd.wo = Vec3f(0.f);
-            dd.eta = 0.f;
-            d_delta_scatter(dp, nb, wo, cf.refract, 1.f, a_turned, Vec3f(0.f), dd);
-            Vec3f a_wo = dd.wo;
-            d_bend_normal(ns, ng, wo, dd.n, a_ns, a_wo);
-            const Vec3f a_N = d_normalize(Ns, a_ns);
-            face.dn[0] = a_N * (1.f - th.b1 - th.b2);
-            face.dn[1] = a_N * th.b1;
-            face.dn[2] = a_N * th.b2;
-            // x = o + t d and (t, b1, b2) from the camera ray and the face (d_intersect_triangle).
-            DTriangle<float> dt;
-            d_intersect_triangle(o, d, tv[0], tv[1], tv[2], th, dot(g.d_o, d), dot(a_N, N[1] - N[0]),
-                                 dot(a_N, N[2] - N[0]), dt);
-            const Vec3f a_o = g.d_o + dt.o, a_d = g.d_o * th.t - a_wo + dt.d;
-            // The geometric normal's adjoint (delta_side's) to the vertices through its cross
-            // product, beside the point's.
-            set_face_adjoints(face, u, v, Vec3f(0.f), a_ng);
-            face.dv[0] += dt.v0;
-            face.dv[1] += dt.v1;
-            face.dv[2] += dt.v2;
-            face.deta = dd.eta;
-            face.material = cf.refract ? fm.material : -1;
-            g.d_o = a_o;
-            g.d_d = a_d;
+            EdgeSideGradient g = edge_side_gradient(p0, p1, tr.x, tr.dir);
+            turn_back(cf, tr, g.d_o, g.d_d, pd.faces[0], g.d_o, g.d_d);
             finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp,
-                          closest_on_segment(p0, p1, xh, dir), dir, lobe, false, reflected_opt);
+                          closest_on_segment(p0, p1, tr.x, tr.dir), tr.dir, tr.lobe, false, reflected_opt);
+        };
+        // The same through the pair of curved faces cp (CurvedPair, above): where the camera ray
+        // meets its first face first, and the ray turned there its second face first. The
+        // gradient goes back through the second face, then the first.
+        auto splat_pair = [&](int64_t i, const Eye& eye, const Edge& edge, const CurvedPair& cp, float x, float y,
+                              double point_weight) {
+            Vec3f o, d;
+            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
+            Ray ray;
+            ray.origin = o;
+            ray.dir = d;
+            SurfacePoint sp[2];
+            BsdfParams bp;
+            Pending pd;
+            Turn tr[2];
+            if (!meets_curved(ray, opt.hide_emitters, cp.face[0], sp[0], bp) ||
+                !turn_at(cp.face[0], bp, o, d, tr[0], pd.faces[0]))
+                return;
+            if (!meets_curved(spawn_ray(sp[0], tr[0].dir), false, cp.face[1], sp[1], bp) ||
+                !turn_at(cp.face[1], bp, tr[0].x, tr[0].dir, tr[1], pd.faces[1]))
+                return;
+            const Mesh& m = scene.meshes[size_t(edge.mesh)];
+            const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
+            EdgeSideGradient g = edge_side_gradient(p0, p1, tr[1].x, tr[1].dir);
+            for (int k = 1; k >= 0; --k) turn_back(cp.face[k], tr[k], g.d_o, g.d_d, pd.faces[k], g.d_o, g.d_d);
+            finish_smooth(i, pd, edge, eye, x, y, g, point_weight, film_gradient_norm(x, y, eye, d, g), sp[1],
+                          closest_on_segment(p0, p1, tr[1].x, tr[1].dir), tr[1].dir, tr[0].lobe * tr[1].lobe, false,
+                          chained_opt);
         };
         for (int64_t i = begin; i < end; ++i) {
             Rng rng = Rng::for_sample(seed, uint64_t(i), 0);
@@ -2448,7 +2902,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             double point_weight = sample_weight / fe.weight;
             // A thin lens: this sample's lens point, the eye the sample sees the edge from.
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
-            if (fe.chain >= 0 || fe.refracted || fe.curved >= 0) {
+            if (fe.chain >= 0 || fe.refracted || fe.curved >= 0 || fe.pair >= 0) {
                 // At parameter u of the edge (its part beyond the plane, past the chain's second
                 // plane, or the curved face's part), as the eye sees it through the plane, the
                 // chain or the curved face, weighted by
@@ -2458,14 +2912,19 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const double span = fe.u1 - fe.u0;
                 const Chain* ch = fe.chain >= 0 ? &chains[size_t(fe.chain)] : nullptr;
                 const CurvedFace* cf = fe.curved >= 0 ? &curved[size_t(fe.curved)] : nullptr;
+                const CurvedPair* cp = fe.pair >= 0 ? &pairs[size_t(fe.pair)] : nullptr;
                 Vec3d at_t, x1, x2;
                 auto film_at = [&](double tt, bool near_t, double& fx, double& fy) {
                     const Vec3d e = a + (b - a) * (fe.u0 + span * tt);
-                    if (cf) {
+                    if (cf || cp) {
                         // (From the line between the part's ends' points, near t from t's point.)
                         double b1 = near_t ? at_t.x : fe.ax + (fe.bx - fe.ax) * tt;
                         double b2 = near_t ? at_t.y : fe.ay + (fe.by - fe.ay) * tt;
-                        if (!curved_film(*cf, eye, e, true, near_t ? 0 : 4, b1, b2, fx, fy)) return false;
+                        double c1, c2;
+                        bool inside;
+                        if (!(cf ? curved_film(*cf, eye, e, true, near_t ? 0 : 4, b1, b2, fx, fy)
+                                 : pair_film(*cp, eye, e, near_t ? 0 : 9, b1, b2, fx, fy, c1, c2, inside)))
+                            return false;
                         if (!near_t) at_t = Vec3d(b1, b2, 0.0);
                         return true;
                     }
@@ -2483,6 +2942,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const double w = sample_weight * per_t / fe.len / fe.kept;
                 if (cf)
                     splat_curved(i, eye, edge, *cf, float(fx), float(fy), w);
+                else if (cp)
+                    splat_pair(i, eye, edge, *cp, float(fx), float(fy), w);
                 else if (ch)
                     splat_chained(i, eye, edge, *ch, float(fx), float(fy), w);
                 else
