@@ -1558,24 +1558,29 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // The best ranked first, each with the edges its beam may see on the side its lobe
         // sends rays to (found in a tree of the edges' balls), until those reach kCurvedSetups.
         const BallTree& balls = edge_balls(!candidates.empty());
-        auto find = [&](size_t j, std::vector<ViaSetup>& found) {
-            const CurvedFace& cf = candidates[j];
-            // (From the face's centre alone: its ball is small, and with its radius the glass
-            // ball of test_specular's index recovery kept twice the set-ups.)
+        // The edges beam `beam` may see with a part on the side of face `last` its lobe sends
+        // rays to (the candidate `j`'s, drawn with `salt`), each kept by keep_probability from
+        // the face's centre alone (its ball is small, and with its radius the glass ball of
+        // test_specular's index recovery kept twice the set-ups); returns the edges tested.
+        auto find_beyond = [&](const Beam& beam, const CurvedFace& last, uint64_t salt, size_t j,
+                               std::vector<ViaSetup>& found) {
             EdgeEye from;
-            from.origin = Vec3f(cf.v0 + (cf.e1 + cf.e2) / 3.0);
+            from.origin = Vec3f(last.centre());
             double visited = 0.0;
-            balls.visit(cf, [&](int32_t index) {
+            balls.visit(beam, [&](int32_t index) {
                 ++visited;
                 const Edge& e = all_edges[size_t(index)];
                 const Mesh& m = scene.meshes[size_t(e.mesh)];
                 ViaSetup setup;
                 setup.edge = index;
-                if (!cf.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
+                if (!last.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
                 setup.kept = keep_probability(from, 0.0, e, index);
-                if (keeps(0, j, index, setup.kept)) found.push_back(setup);
+                if (keeps(salt, j, index, setup.kept)) found.push_back(setup);
             });
             return visited;
+        };
+        auto find = [&](size_t j, std::vector<ViaSetup>& found) {
+            return find_beyond(candidates[j], candidates[j], 0, j, found);
         };
         keep_seen(candidates.size(), find, kCurvedSetups, kCurvedTests, curved_setups,
                   [&](size_t j) { curved.push_back(candidates[j]); });
@@ -1731,22 +1736,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                              [](const PairChoice& a, const PairChoice& b) { return a.rank > b.rank; });
             constexpr uint64_t kPairSalt = 0x7061697273ull;
             auto find_seen = [&](size_t j, std::vector<ViaSetup>& found) {
-                const PairChoice& cp = pair_candidates[j];
-                const CurvedFace second = second_face(cp);
-                EdgeEye from;
-                from.origin = Vec3f(second.centre());
-                double visited = 0.0;
-                balls.visit(cp, [&](int32_t index) {
-                    ++visited;
-                    const Edge& e = all_edges[size_t(index)];
-                    const Mesh& m = scene.meshes[size_t(e.mesh)];
-                    ViaSetup setup;
-                    setup.edge = index;
-                    if (!second.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
-                    setup.kept = keep_probability(from, 0.0, e, index);
-                    if (keeps(kPairSalt, j, index, setup.kept)) found.push_back(setup);
-                });
-                return visited;
+                return find_beyond(pair_candidates[j], second_face(pair_candidates[j]), kPairSalt, j, found);
             };
             keep_seen(pair_candidates.size(), find_seen, kPairSetups, kPairTests, pair_setups, [&](size_t j) {
                 const PairChoice& pc = pair_candidates[j];

@@ -146,16 +146,22 @@ def test_a_mirror_ball_matches_finite_differences(param):
     _compare(scene, p, d.expand(p.shape), step=0.005, spp=64, fd_spp=2048, seeds=4, fd_seeds=4, floor=5.0, weight=w)
 
 
+def glass_ball_and_box(radius, box_centre, box_half, position, fov):
+    """A smooth glass ball (16 rings, index 1.5) of `radius` at the origin and a black box under a
+    white sky, seen at 24 x 24 from `position` looking at the ball's centre."""
+    sv, si, _, sn = shapes.sphere((0., 0., 0.), radius, rings=16)
+    ball = ep.Mesh(sv, si, normals=sn, material=ep.Material(kind="dielectric", ior=1.5))
+    bv, bi = shapes.box(box_centre, box_half)
+    camera = ep.Camera(position=torch.tensor(position), look_at=torch.tensor([0., 0., 0.]),
+                       up=torch.tensor([0., 1., 0.]), fov=fov, resolution=(24, 24))
+    return ep.Scene(camera, [ball, ep.Mesh(bv, bi, material=BLACK)], envmap=ep.EnvironmentMap(torch.ones(1, 1, 3)))
+
+
 def test_a_box_inside_a_glass_ball_matches_finite_differences():
     """A black box inside a glass ball (smooth normals), seen through its near side: each edge
     refracted once by a curved face. 24 x 24, two bounces; derivative 8 seeds x 64 spp, finite
     differences (steps 0.005) 4 seeds x 2048 spp. Measured: -68.6 +- 5.5 against -66.8 +- 5.0."""
-    sv, si, _, sn = shapes.sphere((0., 0., 0.), 0.8, rings=16)
-    ball = ep.Mesh(sv, si, normals=sn, material=ep.Material(kind="dielectric", ior=1.5))
-    bv, bi = shapes.box((0.1, 0.05, 0.0), (.2, .25, .2))
-    camera = ep.Camera(position=torch.tensor([0.3, 0.4, -2.5]), look_at=torch.tensor([0., 0., 0.]),
-                       up=torch.tensor([0., 1., 0.]), fov=40.0, resolution=(24, 24))
-    scene = ep.Scene(camera, [ball, ep.Mesh(bv, bi, material=BLACK)], envmap=ep.EnvironmentMap(torch.ones(1, 1, 3)))
+    scene = glass_ball_and_box(0.8, (0.1, 0.05, 0.0), (.2, .25, .2), (0.3, 0.4, -2.5), 40.0)
     box = scene.meshes[1].vertices
     _compare(scene, box, torch.tensor([1., 0., 0.]).expand(box.shape), step=0.005, spp=64, fd_spp=2048, seeds=8,
              fd_seeds=4, floor=20.0, bounces=2)
@@ -197,12 +203,7 @@ def test_a_box_behind_a_smooth_glass_ball_matches_finite_differences():
     differences (steps 0.005) 4 seeds x 4096 spp. Measured: 643 +- 9 (16 seeds) against 671 +- 2
     (673 +- 4 with steps of 0.002); the pixels short lie along the ball's outline, where the rays
     meet its faces at grazing angles. Before, 0: nothing but the edges moves there."""
-    sv, si, _, sn = shapes.sphere((0., 0., 0.), 0.6, rings=16)
-    ball = ep.Mesh(sv, si, normals=sn, material=ep.Material(kind="dielectric", ior=1.5))
-    bv, bi = shapes.box((0.15, 0.1, 1.4), (.25, .3, .2))
-    camera = ep.Camera(position=torch.tensor([0., 0., -2.5]), look_at=torch.tensor([0., 0., 0.]),
-                       up=torch.tensor([0., 1., 0.]), fov=30.0, resolution=(24, 24))
-    scene = ep.Scene(camera, [ball, ep.Mesh(bv, bi, material=BLACK)], envmap=ep.EnvironmentMap(torch.ones(1, 1, 3)))
+    scene = glass_ball_and_box(0.6, (0.15, 0.1, 1.4), (.25, .3, .2), (0., 0., -2.5), 30.0)
     box = scene.meshes[1].vertices
     _compare(scene, box, torch.tensor([1., 0., 0.]).expand(box.shape), step=0.005, spp=64, fd_spp=4096, seeds=12,
              fd_seeds=4, floor=100.0, bounces=2, edge_samples=24 * 24 * 64 * 4)
