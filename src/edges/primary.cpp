@@ -2573,13 +2573,17 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(ray.dir, sp.ng)) >= kMinShadingCosine;
         };
         // The same for the camera ray through film point (x, y) from `eye` (o, d), into pd's first face.
-        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
-                               BsdfParams& bp, Vec3f* tv, Pending& pd) {
+        // The camera ray (o, d) through film point (x, y) from `eye`.
+        auto eye_ray = [&](const Eye& eye, float x, float y, Vec3f& o, Vec3f& d) {
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
             Ray ray;
             ray.origin = o;
             ray.dir = d;
-            return meets_face(ray, opt.hide_emitters, plane, sp, bp, tv, pd.faces[0]);
+            return ray;
+        };
+        auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
+                               BsdfParams& bp, Vec3f* tv, Pending& pd) {
+            return meets_face(eye_ray(eye, x, y, o, d), opt.hide_emitters, plane, sp, bp, tv, pd.faces[0]);
         };
         // A face's adjoints for the adjoints dq, dn of its plane: q its first vertex, n =
         // cross_normal(u, v) of its edges u, v from there (d_cross_normal gives the adjoint of
@@ -2828,15 +2832,13 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         auto splat_curved = [&](int64_t i, const Eye& eye, const Edge& edge, const CurvedFace& cf, float x, float y,
                                 double point_weight) {
             Vec3f o, d;
-            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
-            Ray ray;
-            ray.origin = o;
-            ray.dir = d;
             SurfacePoint sp;
             BsdfParams bp;
             Pending pd;
             Turn tr;
-            if (!meets_curved(ray, opt.hide_emitters, cf, sp, bp) || !turn_at(cf, bp, o, d, tr, pd.faces[0])) return;
+            if (!meets_curved(eye_ray(eye, x, y, o, d), opt.hide_emitters, cf, sp, bp) ||
+                !turn_at(cf, bp, o, d, tr, pd.faces[0]))
+                return;
             const Mesh& m = scene.meshes[size_t(edge.mesh)];
             const Vec3f p0 = m.vertex(edge.v0), p1 = m.vertex(edge.v1);
             EdgeSideGradient g = edge_side_gradient(p0, p1, tr.x, tr.dir);
@@ -2850,15 +2852,11 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         auto splat_pair = [&](int64_t i, const Eye& eye, const Edge& edge, const CurvedPair& cp, float x, float y,
                               double point_weight) {
             Vec3f o, d;
-            camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
-            Ray ray;
-            ray.origin = o;
-            ray.dir = d;
             SurfacePoint sp[2];
             BsdfParams bp;
             Pending pd;
             Turn tr[2];
-            if (!meets_curved(ray, opt.hide_emitters, cp.face[0], sp[0], bp) ||
+            if (!meets_curved(eye_ray(eye, x, y, o, d), opt.hide_emitters, cp.face[0], sp[0], bp) ||
                 !turn_at(cp.face[0], bp, o, d, tr[0], pd.faces[0]))
                 return;
             if (!meets_curved(spawn_ray(sp[0], tr[0].dir), false, cp.face[1], sp[1], bp) ||
