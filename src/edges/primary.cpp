@@ -25,7 +25,8 @@ namespace {
 // An edge's part on the film: the edge and the clipped segment (full-film pixels).
 struct FilmEdge {
     size_t edge;  // in Scene::edges()
-    double ax, ay, bx, by;  // (curved, pair: the barycentrics of its part's ends on the (first) face, the solves' guesses)
+    // (curved, pair: the barycentrics of its part's ends on the (first) face, the solves' guesses)
+    double ax, ay, bx, by;
     double weight = 1.0;  // the edge's density per unit film length, relative to a fold's
     double world = 0.0;   // world length (fisheye and panorama, uniform sampling)
     double len = 0.0;     // its sampling length (film length times weight; see the set-up)
@@ -2120,9 +2121,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     const double b1 = double(i) / kGrid, b2 = double(j) / kGrid;
                     const Vec3d x = f.v0 + f.e1 * b1 + f.e2 * b2;
                     double c1, c2;
-                    rays.valid[i][j] =
-                        cp.follow(b1, b2, parallel ? forward : normalize(x - from), rays.at[i][j], c1, c2, rays.dir[i][j]) &&
-                        c1 >= -0.05 && c2 >= -0.05 && c1 + c2 <= 1.05;
+                    const Vec3d d = parallel ? forward : normalize(x - from);
+                    rays.valid[i][j] = cp.follow(b1, b2, d, rays.at[i][j], c1, c2, rays.dir[i][j]) && c1 >= -0.05 &&
+                                       c2 >= -0.05 && c1 + c2 <= 1.05;
                 }
         }
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1)), along = p1 - p0;
@@ -2821,7 +2822,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             if (!hit.found || hit.hit.mesh != cf.mesh || hit.hit.prim != cf.prim) return false;
             sp = scene.surface_point(hit.hit);
             bp = scene.bsdf_params(sp);
-            return bp.kind != MaterialKind::Standard && !bp.rough && (!cf.refract || bp.kind == MaterialKind::Dielectric);
+            return bp.kind != MaterialKind::Standard && !bp.rough &&
+                   (!cf.refract || bp.kind == MaterialKind::Dielectric);
         };
         // The boundary term of the edge `edge` seen in or through curved face cf at film point
         // (x, y) (CurvedFace, above): where the camera ray meets that face first and is turned
