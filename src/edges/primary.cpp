@@ -780,9 +780,18 @@ struct CurvedFace : Beam {
     double out_height(const Vec3d& p) const { return (behind != refract ? -1.0 : 1.0) * dot(p - v0, ng); }
     double out_tol() const { return 1e-6 * (length(e1) + length(e2)); }
 
+    // The normal interpolated at barycentrics (b1, b2) of its plane (beyond the face, at the
+    // face's point clamp_into_triangle gives), normalised; the geometric one where it is zero.
+    Vec3d shading_normal(double b1, double b2) const {
+        clamp_into_triangle(b1, b2);
+        const Vec3d N = n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2;
+        const double l = length(N);
+        return l > 0.0 ? N / l : ng;
+    }
+
     CurvedFace() = default;
     // Face f of mesh `mesh` (one with shading normals and a smooth lobe): its corners, normals and
-    // lobe (reflected; its sides, beam and rank unset).
+    // lobe (reflected; its sides, beam and film area unset).
     CurvedFace(const Scene& scene, int mesh_index, int64_t f) : mesh(mesh_index), prim(f) {
         const Mesh& m = scene.meshes[size_t(mesh_index)];
         const int32_t *t = m.indices + 3 * f, *ni = m.normal_indices + 3 * f;
@@ -819,10 +828,7 @@ struct CurvedFace : Beam {
     // two points of an edge's set-up was lost (an 8-ring mirror ball's reflection 2.5% short).
     // (`lobe`, where given: the mean of the lobe's weight there.)
     bool turn(double b1, double b2, const Vec3d& d, Vec3d& dir, double* lobe = nullptr) const {
-        clamp_into_triangle(b1, b2);
-        const Vec3d N = n[0] * (1.0 - b1 - b2) + n[1] * b1 + n[2] * b2;
-        const double l = length(N);
-        const Vec3d wo = -d, ns = bend_normal(l > 0.0 ? N / l : ng, ng, wo);
+        const Vec3d wo = -d, ns = bend_normal(shading_normal(b1, b2), ng, wo);
         Vec3d weight;
         if (!delta_scatter(delta, ns, wo, refract, 1.0, dir, weight)) return false;
         dir = delta_side(dir, ng, delta_side_sign(wo, ng, refract));
@@ -1246,11 +1252,21 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         return sides;
     };
-    // Of `count` candidates (chains or curved faces) in rank order, keeps the best ranked first
-    // (keep(j) adds candidate j to its list), each with the edge set-ups find(j, found) finds for
-    // it (it returns the number of edges it tested), added to `setups` (empty before) with their
-    // candidate's place in that list, until the set-ups or the tests reach their limits (found in
-    // parallel, a block of candidates at a time).
+    // Runs work(j, slot) for j = 0, 1, ... up to `count` in parallel, `per_block` at a time (slot:
+    // j's place in its block), then accept(j, slot) for each of the block in order, while open()
+    // holds: what is accepted does not depend on the threads.
+    auto in_blocks = [&](size_t count, size_t per_block, auto&& open, auto&& work, auto&& accept) {
+        for (size_t begin = 0; begin < count && open(); begin += per_block) {
+            const size_t block = std::min(per_block, count - begin);
+            parallel_indices(opt, int64_t(block), [&](int64_t j) { work(begin + size_t(j), size_t(j)); });
+            for (size_t j = 0; j < block && open(); ++j) accept(begin + j, j);
+        }
+    };
+    // Of `count` candidates (chains, curved faces or pairs of them) in rank order, keeps the best
+    // ranked first (keep(j) adds candidate j to its list), each with the edge set-ups find(j,
+    // found) finds for it (it returns the number of edges it tested), added to `setups` (empty
+    // before) with their candidate's place in that list, until the set-ups or the tests reach
+    // their limits (found in parallel, a block of candidates at a time).
     auto keep_seen = [&](size_t count, auto&& find, double max_setups, double max_tests, std::vector<ViaSetup>& setups,
                          auto&& keep) {
         // (A candidate without a beam finds every edge: a block holds at most 64 candidates and
@@ -1261,24 +1277,22 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         int32_t kept = 0;
         std::vector<std::vector<ViaSetup>> found(per_block);
         std::vector<double> tested(per_block);
-        auto open = [&] { return double(setups.size()) < max_setups && tests < max_tests; };
-        for (size_t begin = 0; begin < count && open(); begin += per_block) {
-            const size_t block = std::min(per_block, count - begin);
-            parallel_indices(opt, int64_t(block), [&](int64_t j) {
-                found[size_t(j)].clear();
-                tested[size_t(j)] = find(begin + size_t(j), found[size_t(j)]);
-            });
-            for (size_t j = 0; j < block && open(); ++j) {
-                tests += tested[j];
-                if (found[j].empty()) continue;
-                for (ViaSetup setup : found[j]) {
+        in_blocks(
+            count, per_block, [&] { return double(setups.size()) < max_setups && tests < max_tests; },
+            [&](size_t j, size_t slot) {
+                found[slot].clear();
+                tested[slot] = find(j, found[slot]);
+            },
+            [&](size_t j, size_t slot) {
+                tests += tested[slot];
+                if (found[slot].empty()) return;
+                for (ViaSetup setup : found[slot]) {
                     setup.via = kept;
                     setups.push_back(setup);
                 }
                 ++kept;
-                keep(begin + j);
-            }
-        }
+                keep(j);
+            });
     };
     // The probability a chain or a curved face keeps its set-up of edge `index`, `from` (the
     // centre of a ball of that radius) where the rays leaving it start (a chain's ball of
@@ -1488,70 +1502,83 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     if (planes_seen) {
         const Vec3d eye(cam.position), forward(cam.forward);
         const bool parallel = !has_eye(cam.type), lens = cam.type == CameraType::ThinLens;
-        std::vector<CurvedFace> candidates;
+        // Every face of a mesh with shading normals and a smooth lobe (its lobe a reflection, its
+        // side unset), and of its material whether only its front turns rays (a one-sided
+        // mirror's or coating's) and whether it refracts (glass of one index).
+        std::vector<CurvedFace> faces;
         for (size_t i = 0; i < scene.meshes.size(); ++i) {
             const Mesh& m = scene.meshes[i];
-            const Material& mat = scene.materials[size_t(m.material)];
-            if (!m.normals || !smooth_lobe(mat)) continue;
-            const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
-            const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
-            for (int64_t f = 0; f < m.num_triangles; ++f) {
-                if (m.is_degenerate(f)) continue;
-                CurvedFace cf(scene, int(i), f);
-                const Vec3d v[3] = {cf.v0, cf.v0 + cf.e1, cf.v0 + cf.e2};
-                const double side = parallel ? -dot(cf.ng, forward) : dot(cf.ng, eye - v[0]);
-                if ((front_only && !(side > 0.0)) || !(side != 0.0)) continue;
-                cf.behind = side < 0.0;
-                // The film box its corners span (the whole window where one reaches behind the
-                // camera, or with a thin lens), within the window.
-                double x0 = wx0, y0 = wy0, x1 = wx1, y1 = wy1;
-                bool whole = lens;
-                for (int c = 0; c < 3 && !whole; ++c)
-                    whole = !parallel && !(camera_axes(cam, Vec3f(v[c]) - cam.position).z > 1e-6 * length(v[c] - eye));
-                if (!whole) {
-                    x0 = y0 = std::numeric_limits<double>::infinity(), x1 = y1 = -x0;
-                    for (int c = 0; c < 3; ++c) {
-                        const Vec3d qc = camera_axes(cam, Vec3f(v[c]) - cam.position);
-                        const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z);
-                        const double y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
-                        x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
-                    }
-                    x0 = std::max(x0 - 1.0, wx0), y0 = std::max(y0 - 1.0, wy0);
-                    x1 = std::min(x1 + 1.0, wx1), y1 = std::min(y1 + 1.0, wy1);
-                    if (!(x0 < x1 && y0 < y1)) continue;
+            if (!m.normals || !smooth_lobe(scene.materials[size_t(m.material)])) continue;
+            for (int64_t f = 0; f < m.num_triangles; ++f)
+                if (!m.is_degenerate(f)) faces.emplace_back(scene, int(i), f);
+        }
+        auto material_of = [&](const CurvedFace& cf) -> const Material& {
+            return scene.materials[size_t(scene.meshes[size_t(cf.mesh)].material)];
+        };
+        auto front_only = [&](const CurvedFace& cf) {
+            const Material& mat = material_of(cf);
+            return mat.kind != MaterialKind::Dielectric && !mat.two_sided;
+        };
+        auto refracts = [&](const CurvedFace& cf) {
+            const Material& mat = material_of(cf);
+            return mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
+        };
+        std::vector<CurvedFace> candidates;
+        for (const CurvedFace& face : faces) {
+            CurvedFace cf = face;
+            const Vec3d v[3] = {cf.v0, cf.v0 + cf.e1, cf.v0 + cf.e2};
+            const double side = parallel ? -dot(cf.ng, forward) : dot(cf.ng, eye - v[0]);
+            if ((front_only(cf) && !(side > 0.0)) || !(side != 0.0)) continue;
+            cf.behind = side < 0.0;
+            // The film box its corners span (the whole window where one reaches behind the
+            // camera, or with a thin lens), within the window.
+            double x0 = wx0, y0 = wy0, x1 = wx1, y1 = wy1;
+            bool whole = lens;
+            for (int c = 0; c < 3 && !whole; ++c)
+                whole = !parallel && !(camera_axes(cam, Vec3f(v[c]) - cam.position).z > 1e-6 * length(v[c] - eye));
+            if (!whole) {
+                x0 = y0 = std::numeric_limits<double>::infinity(), x1 = y1 = -x0;
+                for (int c = 0; c < 3; ++c) {
+                    const Vec3d qc = camera_axes(cam, Vec3f(v[c]) - cam.position);
+                    const double x = film_x(cam, parallel ? qc.x : qc.x / qc.z);
+                    const double y = film_y(cam, parallel ? qc.y : qc.y / qc.z);
+                    x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y), y1 = std::max(y1, y);
                 }
-                cf.film_area = (x1 - x0) * (y1 - y0) * (cf.behind ? 1e-3 : 1.0);
-                const Vec3d centre = (v[0] + v[1] + v[2]) / 3.0;
-                for (int r = 0; r < (refracts ? 2 : 1); ++r) {
-                    CurvedFace lobe = cf;
-                    lobe.refract = r == 1;
-                    Vec3d d[3];
-                    // A thin lens's points see the face from directions within the angle its
-                    // aperture subtends there (from the camera's position: the cone's axis); a
-                    // reflection, or a refraction into the denser side, turns them apart by no
-                    // more (into the thinner side it may spread them: no bound).
-                    bool bounded = true;
-                    double extra = 1e-6;
-                    if (lens) {
-                        double nearest = std::numeric_limits<double>::infinity();
-                        for (int c = 0; c < 3; ++c) nearest = std::min(nearest, length(v[c] - eye));
-                        const double eta = cf.behind ? 1.0 / lobe.delta.eta : lobe.delta.eta;
-                        bounded = !(lobe.refract && eta < 1.0) && nearest > double(cam.aperture);
-                        if (bounded) extra += std::asin(double(cam.aperture) / nearest);
-                    }
-                    for (int c = 0; c < 3 && bounded; ++c) {
-                        const Vec3d to = v[c] - eye;
-                        bounded = (parallel || dot(to, forward) > 0.0) &&
-                                  lobe.turn(c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0, parallel ? forward : normalize(to), d[c]);
-                        d[c] = normalize(d[c]);
-                        lobe.origin_radius = std::max(lobe.origin_radius, length(v[c] - centre) * (1.0 + 1e-6));
-                    }
-                    lobe.origin = centre;
-                    lobe.bounded = bounded && lobe.bound_directions(d, 3, 1.25, extra) && std::isfinite(lobe.origin_radius);
-                    // (Without a beam it tests every edge: after those with one.)
-                    if (!lobe.bounded) lobe.film_area *= 1e-3;
-                    candidates.push_back(lobe);
+                x0 = std::max(x0 - 1.0, wx0), y0 = std::max(y0 - 1.0, wy0);
+                x1 = std::min(x1 + 1.0, wx1), y1 = std::min(y1 + 1.0, wy1);
+                if (!(x0 < x1 && y0 < y1)) continue;
+            }
+            cf.film_area = (x1 - x0) * (y1 - y0) * (cf.behind ? 1e-3 : 1.0);
+            const Vec3d centre = (v[0] + v[1] + v[2]) / 3.0;
+            for (int r = 0; r < (refracts(cf) ? 2 : 1); ++r) {
+                CurvedFace lobe = cf;
+                lobe.refract = r == 1;
+                Vec3d d[3];
+                // A thin lens's points see the face from directions within the angle its
+                // aperture subtends there (from the camera's position: the cone's axis); a
+                // reflection, or a refraction into the denser side, turns them apart by no
+                // more (into the thinner side it may spread them: no bound).
+                bool bounded = true;
+                double extra = 1e-6;
+                if (lens) {
+                    double nearest = std::numeric_limits<double>::infinity();
+                    for (int c = 0; c < 3; ++c) nearest = std::min(nearest, length(v[c] - eye));
+                    const double eta = cf.behind ? 1.0 / lobe.delta.eta : lobe.delta.eta;
+                    bounded = !(lobe.refract && eta < 1.0) && nearest > double(cam.aperture);
+                    if (bounded) extra += std::asin(double(cam.aperture) / nearest);
                 }
+                for (int c = 0; c < 3 && bounded; ++c) {
+                    const Vec3d to = v[c] - eye;
+                    bounded = (parallel || dot(to, forward) > 0.0) &&
+                              lobe.turn(c == 1 ? 1.0 : 0.0, c == 2 ? 1.0 : 0.0, parallel ? forward : normalize(to), d[c]);
+                    d[c] = normalize(d[c]);
+                    lobe.origin_radius = std::max(lobe.origin_radius, length(v[c] - centre) * (1.0 + 1e-6));
+                }
+                lobe.origin = centre;
+                lobe.bounded = bounded && lobe.bound_directions(d, 3, 1.25, extra) && std::isfinite(lobe.origin_radius);
+                // (Without a beam it tests every edge: after those with one.)
+                if (!lobe.bounded) lobe.film_area *= 1e-3;
+                candidates.push_back(lobe);
             }
         }
         std::stable_sort(candidates.begin(), candidates.end(),
@@ -1593,20 +1620,13 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // kPairTests. The pairs whose rank is highest first, each with the edges its beam may see
         // on the side its second lobe sends rays to, up to kPairSetups set-ups.
         if (opt.max_bounces >= 2 && !lens && !candidates.empty()) {
-            std::vector<CurvedFace> faces;
             std::vector<Vec3d> mid;
             std::vector<double> half;
             std::vector<int32_t> ids;
-            for (size_t i = 0; i < scene.meshes.size(); ++i) {
-                const Mesh& m = scene.meshes[i];
-                if (!m.normals || !smooth_lobe(scene.materials[size_t(m.material)])) continue;
-                for (int64_t f = 0; f < m.num_triangles; ++f) {
-                    if (m.is_degenerate(f)) continue;
-                    faces.emplace_back(scene, int(i), f);
-                    ids.push_back(int32_t(faces.size() - 1));
-                    mid.push_back(faces.back().centre());
-                    half.push_back(faces.back().radius());
-                }
+            for (const CurvedFace& face : faces) {
+                ids.push_back(int32_t(ids.size()));
+                mid.push_back(face.centre());
+                half.push_back(face.radius());
             }
             const BallTree face_balls(std::move(mid), std::move(half), std::move(ids));
             // A candidate pair: the first face (in `candidates`), the second (in `faces`) with its
@@ -1657,9 +1677,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     ++visits;
                     const CurvedFace& g = faces[size_t(id)];
                     if (g.mesh == first.mesh && g.prim == first.prim) return;
-                    const Material& mat = scene.materials[size_t(scene.meshes[size_t(g.mesh)].material)];
-                    const bool front_only = mat.kind != MaterialKind::Dielectric && !mat.two_sided;
-                    const bool refracts = mat.kind == MaterialKind::Dielectric && mat.ior.is_constant();
                     // The grid's rays that meet the second face (within a quarter of it).
                     constexpr double kNear = 0.25;
                     int met[kRays], num_met = 0;
@@ -1676,12 +1693,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                             c1[k] + c2[k] > 1.0 + kNear)
                             continue;
                         // (From the second face's front only, for a one-sided mirror.)
-                        if (front_only && !(dot(mid[k], g.ng) < 0.0)) continue;
+                        if (front_only(g) && !(dot(mid[k], g.ng) < 0.0)) continue;
                         met[num_met++] = k;
                     }
                     if (num_met == 0) return;
                     const double step = std::max(length(first.e1), length(first.e2)) / kRayGrid;
-                    for (int r = 0; r < (refracts ? 2 : 1); ++r) {
+                    for (int r = 0; r < (refracts(g) ? 2 : 1); ++r) {
                         PairChoice cp;
                         cp.first = int32_t(first_index);
                         cp.second = id;
@@ -1697,9 +1714,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                             if (second.turn(c1[k], c2[k], mid[k], dirs[q], &lobe2)) {
                                 dirs[q] = normalize(dirs[q]);
                             } else {
-                                double n1 = c1[k], n2 = c2[k];
-                                clamp_into_triangle(n1, n2);
-                                const Vec3d n = normalize(g.n[0] * (1.0 - n1 - n2) + g.n[1] * n1 + g.n[2] * n2);
+                                const Vec3d n = g.shading_normal(c1[k], c2[k]);
                                 dirs[q] = normalize(mid[k] - n * dot(mid[k], n));
                                 ok = cp.refract && std::isfinite(dirs[q].x);
                             }
@@ -1722,17 +1737,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             constexpr size_t kChooseBlock = 64;
             std::vector<std::vector<PairChoice>> chosen(kChooseBlock);
             std::vector<double> visits(kChooseBlock);
-            for (size_t begin = 0; begin < candidates.size() && tested < kPairTests; begin += kChooseBlock) {
-                const size_t block = std::min(kChooseBlock, candidates.size() - begin);
-                parallel_indices(opt, int64_t(block), [&](int64_t j) {
-                    chosen[size_t(j)].clear();
-                    visits[size_t(j)] = choose(begin + size_t(j), chosen[size_t(j)]);
+            in_blocks(
+                candidates.size(), kChooseBlock, [&] { return tested < kPairTests; },
+                [&](size_t j, size_t slot) {
+                    chosen[slot].clear();
+                    visits[slot] = choose(j, chosen[slot]);
+                },
+                [&](size_t, size_t slot) {
+                    tested += visits[slot];
+                    pair_candidates.insert(pair_candidates.end(), chosen[slot].begin(), chosen[slot].end());
                 });
-                for (size_t j = 0; j < block && tested < kPairTests; ++j) {
-                    tested += visits[j];
-                    pair_candidates.insert(pair_candidates.end(), chosen[j].begin(), chosen[j].end());
-                }
-            }
             std::stable_sort(pair_candidates.begin(), pair_candidates.end(),
                              [](const PairChoice& a, const PairChoice& b) { return a.rank > b.rank; });
             constexpr uint64_t kPairSalt = 0x7061697273ull;
@@ -2079,11 +2093,15 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         fe.len = len;  // (weight 1: its density factor is `kept`)
         return fe.len > 0.0 && fe.u1 > fe.u0;
     };
+    // Whether something wanted moves the film curve of an edge seen through face cf: its mesh's
+    // vertices or normals, or where it refracts its index.
+    auto face_wanted = [&](const CurvedFace& cf) {
+        return vertices_wanted(slots, cf.mesh) || normals_wanted(cf.mesh) ||
+               (cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material));
+    };
     auto curved_film_edge = [&](const CurvedFace& cf, const Mesh& m, const Edge& e, const ViaSetup& setup,
                                 FilmEdge& fe) {
-        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !vertices_wanted(slots, cf.mesh) &&
-            !normals_wanted(cf.mesh) && !(cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material)))
-            return false;
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !face_wanted(cf)) return false;
         fe.curved = int(&cf - curved.data());
         auto film = [&](const Vec3d& p, bool guessed, int restart, double& b1, double& b2, double& fx, double& fy,
                         double& c1, double& c2, bool& inside) {
@@ -2096,11 +2114,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     };
     auto pair_film_edge = [&](const CurvedPair& cp, const Mesh& m, const Edge& e, const ViaSetup& setup,
                               PairRays& rays, FilmEdge& fe) {
-        bool wanted = camera_wanted || vertices_wanted(slots, e.mesh);
-        for (const CurvedFace& cf : cp.face)
-            wanted = wanted || vertices_wanted(slots, cf.mesh) || normals_wanted(cf.mesh) ||
-                     (cf.refract && ior_wanted(scene.meshes[size_t(cf.mesh)].material));
-        if (!wanted) return false;
+        if (!camera_wanted && !vertices_wanted(slots, e.mesh) && !face_wanted(cp.face[0]) && !face_wanted(cp.face[1]))
+            return false;
         fe.pair = int(&cp - pairs.data());
         // The rays from the eye through a grid of the first face's points, followed through both
         // faces (those that meet the second face inside it, within 5%; found once for the pair's
@@ -2573,7 +2588,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             return bp.kind != MaterialKind::Standard && !bp.rough && std::abs(dot(ray.dir, sp.ng)) >= kMinShadingCosine;
         };
-        // The same for the camera ray through film point (x, y) from `eye` (o, d), into pd's first face.
         // The camera ray (o, d) through film point (x, y) from `eye`.
         auto eye_ray = [&](const Eye& eye, float x, float y, Vec3f& o, Vec3f& d) {
             camera_ray(scene.camera_params, x, y, eye.lu, eye.lv, o, d);
@@ -2582,6 +2596,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             ray.dir = d;
             return ray;
         };
+        // The same as meets_face for the camera ray through film point (x, y) from `eye` (o, d),
+        // into pd's first face.
         auto meets_plane = [&](const Eye& eye, float x, float y, int plane, Vec3f& o, Vec3f& d, SurfacePoint& sp,
                                BsdfParams& bp, Vec3f* tv, Pending& pd) {
             return meets_face(eye_ray(eye, x, y, o, d), opt.hide_emitters, plane, sp, bp, tv, pd.faces[0]);
@@ -2894,8 +2910,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             const Eye eye = thin_lens ? lens_eye(cam, rng.next_float(), rng.next_float()) : centre;
             if (fe.chain >= 0 || fe.refracted || fe.curved >= 0 || fe.pair >= 0) {
                 // At parameter u of the edge (its part beyond the plane, past the chain's second
-                // plane, or the curved face's part), as the eye sees it through the plane, the
-                // chain or the curved face, weighted by
+                // plane, or the curved face's or pair's part), as the eye sees it through the plane,
+                // the chain, the curved face or the pair, weighted by
                 // the film length per unit of t there: a central difference quotient 1e-4 wide.
                 // (Through a chain each solve near t starts from t's.)
                 const Vec3d a(p0), b(p1);
