@@ -770,6 +770,7 @@ struct CurvedFace : Beam {
     int64_t prim = -1;
     bool refract = false;
     bool behind = false;  // the camera behind the face (by its winding)
+    int32_t solid = -1;    // the solid its closed mesh bounds (solids_of), or -1
     DeltaParams<double> delta;
     Vec3d v0, e1, e2, ng;  // its first vertex, edges from there, unit geometric normal
     Vec3d n[3];            // its vertices' shading normals, as given (interpolated, then normalised)
@@ -777,7 +778,8 @@ struct CurvedFace : Beam {
 
     // How far p lies on the side of the face's plane its lobe sends rays to, and the tolerance
     // beyond which it counts as there (a millionth of the face's size).
-    double out_height(const Vec3d& p) const { return (behind != refract ? -1.0 : 1.0) * dot(p - v0, ng); }
+    int out_sign() const { return behind != refract ? -1 : 1; }
+    double out_height(const Vec3d& p) const { return out_sign() * dot(p - v0, ng); }
     double out_tol() const { return 1e-6 * (length(e1) + length(e2)); }
 
     // The normal interpolated at barycentrics (b1, b2) of its plane (beyond the face, at the
@@ -834,6 +836,26 @@ struct CurvedFace : Beam {
         dir = delta_side(dir, ng, delta_side_sign(wo, ng, refract));
         if (lobe) *lobe = (weight.x + weight.y + weight.z) / 3.0;
         return true;
+    }
+
+    // Whether a smooth edge (faces' unit normals n0, n1, a point q of it) may fold seen from
+    // some point of the face: false where each of the two planes has the face's three corners on
+    // one side or on the plane (within a billionth of the face's size), the same side for both
+    // (the sides are linear over the face: it folds at most from a part of no area). From a face
+    // of a convex closed mesh (a glass ball's refractions and internal reflections, its faces'
+    // neighbours included) none of its edges folds: they were set up, and their samples found
+    // nothing. (A plane that holds all three corners: the face's own, or one of its plane.)
+    bool may_fold(const Vec3d& q, const Vec3d& n0, const Vec3d& n1) const {
+        const double tol = 1e-9 * (length(e1) + length(e2));
+        int sides[2] = {0, 0};
+        for (int k = 0; k < 2; ++k)
+            for (const Vec3d& c : {v0, v0 + e1, v0 + e2}) {
+                const double h = dot(c - q, k == 0 ? n0 : n1);
+                const int side = h > tol ? 1 : h < -tol ? -1 : 0;
+                if (side != 0 && sides[k] != 0 && side != sides[k]) return true;
+                if (side != 0) sides[k] = side;
+            }
+        return sides[0] == 0 || sides[0] != sides[1];
     }
 
     // The part (u0, u1) of the segment (p0, p1) on the side of the face's plane its lobe sends
@@ -1497,6 +1519,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // with the edges its beam may see, up to kCurvedSetups set-ups.
     std::vector<CurvedFace> curved;
     std::vector<ViaSetup> curved_setups;
+    std::vector<Solid> solids;
     std::vector<CurvedPair> pairs;
     std::vector<ViaSetup> pair_setups;
     if (planes_seen) {
@@ -1506,11 +1529,29 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // side unset), and of its material whether only its front turns rays (a one-sided
         // mirror's or coating's) and whether it refracts (glass of one index).
         std::vector<CurvedFace> faces;
+        std::vector<bool> curved_mesh(scene.meshes.size(), false);
         for (size_t i = 0; i < scene.meshes.size(); ++i) {
             const Mesh& m = scene.meshes[i];
-            if (!m.normals || !smooth_lobe(scene.materials[size_t(m.material)])) continue;
+            curved_mesh[i] = m.normals && smooth_lobe(scene.materials[size_t(m.material)]);
+        }
+        // The solids the closed curved meshes bound (faces' solids by mesh; empty: none).
+        std::vector<std::vector<int32_t>> solid_of(scene.meshes.size());
+        for (size_t i = 0; i < scene.meshes.size(); ++i) {
+            if (!curved_mesh[i]) continue;
+            const Mesh& m = scene.meshes[i];
+            MeshDesc desc;
+            desc.vertices = m.vertices, desc.num_vertices = m.num_vertices;
+            desc.indices = m.indices, desc.num_triangles = m.num_triangles;
+            if (!mesh_solids(desc, int32_t(i), all_edges, solids, solid_of[i])) solid_of[i].clear();
+        }
+        for (size_t i = 0; i < scene.meshes.size(); ++i) {
+            if (!curved_mesh[i]) continue;
+            const Mesh& m = scene.meshes[i];
             for (int64_t f = 0; f < m.num_triangles; ++f)
-                if (!m.is_degenerate(f)) faces.emplace_back(scene, int(i), f);
+                if (!m.is_degenerate(f)) {
+                    faces.emplace_back(scene, int(i), f);
+                    if (!solid_of[i].empty()) faces.back().solid = solid_of[i][size_t(f)];
+                }
         }
         auto material_of = [&](const CurvedFace& cf) -> const Material& {
             return scene.materials[size_t(scene.meshes[size_t(cf.mesh)].material)];
@@ -1586,6 +1627,16 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // The best ranked first, each with the edges its beam may see on the side its lobe
         // sends rays to (found in a tree of the edges' balls), until those reach kCurvedSetups.
         const BallTree& balls = edge_balls(!candidates.empty());
+        // Per mesh, whether its material reads a texture, or its emission one (by the uvs: a
+        // seam of uvs alone steps nowhere on a mesh that reads none).
+        std::vector<bool> reads_uvs(scene.meshes.size());
+        for (size_t i = 0; i < scene.meshes.size(); ++i) {
+            const Mesh& m = scene.meshes[i];
+            const Material& mat = scene.materials[size_t(m.material)];
+            auto textured = [](const Texture& t) { return !t.empty() && !t.is_constant(); };
+            reads_uvs[i] = textured(mat.diffuse) || textured(mat.specular) || textured(mat.roughness) ||
+                           textured(mat.ior) || !mat.normal_map.empty() || textured(m.emission);
+        }
         // The edges beam `beam` may see with a part on the side of face `last` its lobe sends
         // rays to (the candidate `j`'s, drawn with `salt`), each kept by keep_probability from
         // the face's centre alone (its ball is small, and with its radius the glass ball of
@@ -1601,7 +1652,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 const Mesh& m = scene.meshes[size_t(e.mesh)];
                 ViaSetup setup;
                 setup.edge = index;
-                if (!last.out_side(Vec3d(m.vertex(e.v0)), Vec3d(m.vertex(e.v1)), setup.u0, setup.u1)) return;
+                const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
+                if (!last.out_side(p0, p1, setup.u0, setup.u1)) return;
+                if (last.solid >= 0 && last.out_sign() == solids[size_t(last.solid)].side) {
+                    // (Into its solid: an edge wholly outside the solid's box is hidden.)
+                    const Solid& sd = solids[size_t(last.solid)];
+                    const double tol = 1e-6 * length(sd.hi - sd.lo);
+                    const Vec3d lo = min(p0, p1), hi = max(p0, p1);
+                    if (lo.x > sd.hi.x + tol || lo.y > sd.hi.y + tol || lo.z > sd.hi.z + tol ||
+                        hi.x < sd.lo.x - tol || hi.y < sd.lo.y - tol || hi.z < sd.lo.z - tol)
+                        return;
+                }
+                if ((e.kind == EdgeKind::Smooth || (e.uv_only && !reads_uvs[size_t(e.mesh)])) &&
+                    !last.may_fold(p0, Vec3d(m.unit_face_normal(e.f0)), Vec3d(m.unit_face_normal(e.f1))))
+                    return;
                 setup.kept = keep_probability(from, 0.0, e, index);
                 if (keeps(salt, j, index, setup.kept)) found.push_back(setup);
             });
@@ -1620,15 +1684,34 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // kPairTests. The pairs whose rank is highest first, each with the edges its beam may see
         // on the side its second lobe sends rays to, up to kPairSetups set-ups.
         if (opt.max_bounces >= 2 && !lens && !candidates.empty()) {
-            std::vector<Vec3d> mid;
-            std::vector<double> half;
-            std::vector<int32_t> ids;
-            for (const CurvedFace& face : faces) {
-                ids.push_back(int32_t(ids.size()));
-                mid.push_back(face.centre());
-                half.push_back(face.radius());
+            // Each curved face's place in `faces` (-1: none), by mesh and triangle, and its
+            // neighbours there (sharing an edge; in `neighbours` from first[f] to first[f + 1]).
+            std::vector<std::vector<int32_t>> face_at(scene.meshes.size());
+            for (size_t f = 0; f < faces.size(); ++f) {
+                std::vector<int32_t>& at = face_at[size_t(faces[f].mesh)];
+                if (at.empty()) at.assign(size_t(scene.meshes[size_t(faces[f].mesh)].num_triangles), -1);
+                at[size_t(faces[f].prim)] = int32_t(f);
             }
-            const BallTree face_balls(std::move(mid), std::move(half), std::move(ids));
+            auto face_index = [&](int mesh, int64_t prim) {
+                const std::vector<int32_t>& at = face_at[size_t(mesh)];
+                return at.empty() || prim < 0 ? int32_t(-1) : at[size_t(prim)];
+            };
+            std::vector<int32_t> first_neighbour(faces.size() + 1, 0), neighbours;
+            {
+                std::vector<std::pair<int32_t, int32_t>> links;
+                for (const Edge& e : all_edges) {
+                    if (e.f1 < 0 || face_at[size_t(e.mesh)].empty()) continue;
+                    const int32_t a = face_index(e.mesh, e.f0), b = face_index(e.mesh, e.f1);
+                    if (a < 0 || b < 0) continue;
+                    links.emplace_back(a, b);
+                    links.emplace_back(b, a);
+                }
+                for (const auto& [a, b] : links) ++first_neighbour[size_t(a) + 1];
+                for (size_t f = 0; f < faces.size(); ++f) first_neighbour[f + 1] += first_neighbour[f];
+                neighbours.resize(links.size());
+                std::vector<int32_t> next(first_neighbour.begin(), first_neighbour.end() - 1);
+                for (const auto& [a, b] : links) neighbours[size_t(next[size_t(a)]++)] = b;
+            }
             // A candidate pair: the first face (in `candidates`), the second (in `faces`) with its
             // lobe and side, its beam and rank (the faces themselves copied for those kept only).
             struct PairChoice : Beam {
@@ -1672,11 +1755,33 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                         if (turned[k]) mid[k] = normalize(mid[k]), ++num_turned;
                     }
                 if (num_turned == 0) return 0.0;
+                // The curved faces the grid's rays meet first (beyond a thousandth of the first
+                // face's size: not the first face's neighbours from its own border), and their
+                // neighbours (those the rays between them may meet): the second faces tested.
                 const double near_t = 1e-3 * (length(first.e1) + length(first.e2));
-                face_balls.visit(first, [&](int32_t id) {
+                int32_t tests[4 * kRays];
+                int num_tests = 0;
+                auto test = [&](int32_t id) {
+                    if (id >= 0 && std::find(tests, tests + num_tests, id) == tests + num_tests) tests[num_tests++] = id;
+                };
+                for (int k = 0; k < kRays; ++k) {
+                    if (!turned[k]) continue;
+                    Ray ray;
+                    ray.origin = Vec3f(x1[k]);
+                    ray.dir = Vec3f(mid[k]);
+                    ray.tmin = float(near_t);
+                    Hit hit;
+                    if (scene.intersect_excluding(ray, first.mesh, first.prim, -1, hit)) test(face_index(hit.mesh, hit.prim));
+                }
+                for (int h = 0, hits = num_tests; h < hits; ++h)
+                    for (int32_t n = first_neighbour[size_t(tests[h])]; n < first_neighbour[size_t(tests[h]) + 1] &&
+                                                                         num_tests < 4 * kRays; ++n)
+                        test(neighbours[size_t(n)]);
+                for (int h = 0; h < num_tests; ++h) {
+                    const int32_t id = tests[h];
                     ++visits;
                     const CurvedFace& g = faces[size_t(id)];
-                    if (g.mesh == first.mesh && g.prim == first.prim) return;
+                    if (g.mesh == first.mesh && g.prim == first.prim) continue;
                     // The grid's rays that meet the second face (within a quarter of it).
                     constexpr double kNear = 0.25;
                     int met[kRays], num_met = 0;
@@ -1696,7 +1801,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                         if (front_only(g) && !(dot(mid[k], g.ng) < 0.0)) continue;
                         met[num_met++] = k;
                     }
-                    if (num_met == 0) return;
+                    if (num_met == 0) continue;
                     const double step = std::max(length(first.e1), length(first.e2)) / kRayGrid;
                     for (int r = 0; r < (refracts(g) ? 2 : 1); ++r) {
                         PairChoice cp;
@@ -1731,7 +1836,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                         cp.rank = first.film_area * lobe / double(num_turned) * (cp.bounded ? 1.0 : 1e-3);
                         out.push_back(cp);
                     }
-                });
+                }
                 return visits;
             };
             constexpr size_t kChooseBlock = 64;
@@ -1986,18 +2091,22 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
     // The edge e of mesh m seen in or through a curved face, or a pair of them, whose beam is
     // `beam` (`setup`: its part on the side of the (last) face the lobe sends rays to), of that
     // part the sixteenths the beam may see, sampled by the film length of the polyline through the
-    // film points of `points` (at most 33) of its points spread evenly (from the last of them
-    // outside the face before the first inside to the first outside after the last inside; where
-    // one point only is found, a short chord beside it). film(p, guessed, restart, b1, b2, fx, fy,
-    // c1, c2, inside) finds edge point p's film point and the (first) face's barycentrics there
-    // (in: the guess, where `guessed`), the second face's (c1, c2; a single face's own again) and
-    // whether they lie inside the face (both faces). Each solve starts from the last point's, and
-    // where it ends outside the face, again from the face's centre (more restarts change nothing
-    // measurable for one face; the samples' solves make four, through a pair nine). Left out where
-    // no point found lies near the face (each face), or with `inside_needed` where none lies
-    // inside.
+    // film points of `points` (at most 33) of its points spread evenly, and of the `crossings`
+    // (parameters with the barycentrics of the first face to solve from; at most 32 of them) in
+    // the part (from the last of them outside the face before the first inside to the first
+    // outside after the last inside; where one point only is found, a short chord beside it).
+    // film(p, guessed, restart, b1, b2, fx, fy, c1, c2, inside) finds edge point p's film point
+    // and the (first) face's barycentrics there (in: the guess, where `guessed`), the second
+    // face's (c1, c2; a single face's own again) and whether they lie inside the face (both
+    // faces). Through one face each solve starts from the last point's, and where it ends outside
+    // the face, again from the face's centre (more restarts change nothing measurable for one
+    // face; the samples' solves make four, through a pair nine). Left out where no point found
+    // lies near the face (each face), or `through_pair` where none lies inside both; through a
+    // pair each solve starts from film's own guess or its crossing's point, then grows the parts
+    // found inside (below).
     auto face_film_edge = [&](const Beam& beam, const Mesh& m, const Edge& e, const ViaSetup& setup, auto&& film,
-                              int points, bool inside_needed, FilmEdge& fe) {
+                              int points, bool through_pair, FilmEdge& fe,
+                              const std::vector<std::array<double, 3>>* crossings = nullptr) {
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1));
         double u0 = setup.u0, u1 = setup.u1;
         constexpr int kPieces = 16;
@@ -2012,27 +2121,81 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         const double span = u1 - u0;
         u1 = u0 + span * double(last + 1) / kPieces;
         u0 = u0 + span * double(first) / kPieces;
-        // The points' film points, each solve starting from the last's (the first from the
-        // face's guess).
-        constexpr int kMaxPoints = 33;
-        const int kPoints = std::min(points, kMaxPoints);
+        // The points' film points (through one face each solve starting from the last's, the
+        // first from the face's guess).
+        constexpr int kEven = 33, kCrossings = 32, kMaxPoints = kEven + kCrossings;
+        // (Each point's parameter, and for a crossing its solve's start.)
+        std::array<double, 3> points_at[kMaxPoints];
+        double us[kMaxPoints];
+        const int num_even = std::min(points, kEven);
+        int num_points = num_even;
+        for (int k = 0; k < num_points; ++k) points_at[k] = {u0 + (u1 - u0) * double(k) / double(num_points - 1), -1.0, -1.0};
+        if (crossings && !crossings->empty()) {
+            // (Up to kCrossings of them, spread over the list, inside the part.)
+            const size_t n = crossings->size(), take = std::min<size_t>(n, kCrossings);
+            for (size_t q = 0; q < take; ++q) {
+                const std::array<double, 3>& c = (*crossings)[take == n ? q : q * (n - 1) / (take - 1)];
+                if (c[0] > u0 && c[0] < u1) points_at[num_points++] = c;
+            }
+            std::sort(points_at, points_at + num_points);
+        }
+        for (int k = 0; k < num_points; ++k) us[k] = points_at[k][0];
         double fx[kMaxPoints], fy[kMaxPoints], bb1[kMaxPoints], bb2[kMaxPoints];
         bool ok[kMaxPoints], inside[kMaxPoints];
         double b1 = 0.0, b2 = 0.0;
         bool guessed = false;
         int first_in = -1, last_in = -1;
         double box[2][4] = {{1e300, 1e300, -1e300, -1e300}, {1e300, 1e300, -1e300, -1e300}};
-        for (int k = 0; k < kPoints; ++k) {
-            const double u = u0 + (u1 - u0) * double(k) / double(kPoints - 1);
-            double c[2];
-            guessed = ok[k] = film(p0 + (p1 - p0) * u, guessed, 1, b1, b2, fx[k], fy[k], c[0], c[1], inside[k]);
-            if (!ok[k]) {
-                inside[k] = false;
-                continue;
-            }
+        double cc1[kMaxPoints], cc2[kMaxPoints];
+        auto solve_point = [&](int k, bool from_guess, int restart) {
+            if (!from_guess && points_at[k][1] >= 0.0) b1 = points_at[k][1], b2 = points_at[k][2], from_guess = true;
+            ok[k] = film(p0 + (p1 - p0) * us[k], from_guess, restart, b1, b2, fx[k], fy[k], cc1[k], cc2[k], inside[k]);
+            if (!ok[k]) inside[k] = false;
             bb1[k] = b1, bb2[k] = b2;
+            return ok[k];
+        };
+        for (int k = 0; k < num_points; ++k) guessed = solve_point(k, guessed && !through_pair, 1);
+        if (through_pair) {
+            // Through a pair a point's solve may end at a root outside the faces where one
+            // inside lies near a neighbour's: a point beside one found inside is solved again
+            // from that one's point, until no more are found (else the part ends early). Where
+            // none is inside, the crossings are solved again with every restart first (the
+            // faces' clamped normals fold the map near their borders: Gauss-Newton steps from
+            // a grid point beside a small part seen through a corner of the pair often fail).
+            bool tried[kMaxPoints][2] = {};
+            auto grow = [&] {
+                for (bool grown = true; grown;) {
+                    grown = false;
+                    for (int k = 0; k < num_points; ++k)
+                        for (int side = 0; side < 2 && !inside[k]; ++side) {
+                            const int j = side == 0 ? k - 1 : k + 1;
+                            if (j < 0 || j >= num_points || !inside[j] || tried[k][side]) continue;
+                            tried[k][side] = true;
+                            const double keep[6] = {fx[k], fy[k], bb1[k], bb2[k], cc1[k], cc2[k]};
+                            const bool kept_ok = ok[k];
+                            b1 = bb1[j], b2 = bb2[j];
+                            if (solve_point(k, true, 1) && inside[k]) {
+                                grown = true;
+                            } else {
+                                // (Not inside from there either: the first solve's point stays.)
+                                fx[k] = keep[0], fy[k] = keep[1], bb1[k] = keep[2], bb2[k] = keep[3];
+                                cc1[k] = keep[4], cc2[k] = keep[5], ok[k] = kept_ok, inside[k] = false;
+                            }
+                        }
+                }
+            };
+            grow();
+            if (std::find(inside, inside + num_points, true) == inside + num_points) {
+                bool any = false;
+                for (int k = 0; k < num_points; ++k)
+                    if (points_at[k][1] >= 0.0 && solve_point(k, false, 9) && inside[k]) any = true;
+                if (any) grow();
+            }
+        }
+        for (int k = 0; k < num_points; ++k) {
+            if (!ok[k]) continue;
             if (inside[k]) last_in = k, first_in = first_in < 0 ? k : first_in;
-            const double at_face[2][2] = {{b1, b2}, {c[0], c[1]}};
+            const double at_face[2][2] = {{bb1[k], bb2[k]}, {cc1[k], cc2[k]}};
             for (int f = 0; f < 2; ++f) {
                 box[f][0] = std::min(box[f][0], at_face[f][0]), box[f][1] = std::min(box[f][1], at_face[f][1]);
                 box[f][2] = std::max(box[f][2], at_face[f][0]), box[f][3] = std::max(box[f][3], at_face[f][1]);
@@ -2046,14 +2209,14 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         }
         // (A point whose solve failed may lie inside: the part runs on to the next one found
         // outside.)
-        if (first_in < 0 && inside_needed) return false;
-        int lo = 0, hi = kPoints - 1;
+        if (first_in < 0 && through_pair) return false;
+        int lo = 0, hi = num_points - 1;
         if (first_in >= 0) {
             lo = first_in, hi = last_in;
             while (lo > 0 && !(ok[lo] && !inside[lo] && lo < first_in)) --lo;
-            while (hi < kPoints - 1 && !(ok[hi] && !inside[hi] && hi > last_in)) ++hi;
+            while (hi < num_points - 1 && !(ok[hi] && !inside[hi] && hi > last_in)) ++hi;
         }
-        auto at = [&](int k) { return u0 + (u1 - u0) * double(k) / double(kPoints - 1); };
+        auto at = [&](int k) { return us[k]; };
         double len = 0.0;
         int found = 0, middle = -1;
         for (int k = lo, prev = -1; k <= hi; ++k) {
@@ -2067,7 +2230,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         if (found == 1) {
             // Seen near one point only: the film length there, per unit parameter, from a point
             // an eighth of the spacing on either side, stands for the part's.
-            const double du = (u1 - u0) / double(8 * (kPoints - 1));
+            const double du = (u1 - u0) / double(8 * (num_even - 1));
             len = chord_length(at(middle), du, u0, u1, fx[middle], fy[middle], at(hi) - at(lo),
                                [&](double u, double& gx, double& gy) {
                                    double a1 = bb1[middle], a2 = bb2[middle], c1, c2;
@@ -2186,7 +2349,12 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             return pair_film(cp, centre, p, restart, b1, b2, fx, fy, c1, c2, inside);
         };
-        return face_film_edge(cp, m, e, narrowed, film, 33, true, fe);
+        // (Also at the parameters where the grid's rays pass the edge: a part seen through a
+        // small corner of the pair can lie between the evenly spread points.)
+        std::vector<std::array<double, 3>> crossings = starts;
+        std::sort(crossings.begin(), crossings.end());
+        crossings.erase(std::unique(crossings.begin(), crossings.end()), crossings.end());
+        return face_film_edge(cp, m, e, narrowed, film, 33, true, fe, &crossings);
     };
     constexpr int64_t kSetupChunk = 4096;
     const int64_t num_edges = int64_t(all_edges.size());

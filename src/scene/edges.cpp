@@ -1,7 +1,9 @@
 #include "scene/edges.h"
 
 #include <algorithm>
+#include <array>
 #include <cstring>
+#include <limits>
 
 #include "scene/chunks.h"
 #include "scene/desc.h"
@@ -156,21 +158,23 @@ void pair_faces(const MeshDesc& m, int32_t mesh_index, const std::vector<int64_t
                 }
             }
             // uvs that differ across the edge (a seam, a pole's fan): textures may jump there.
-            bool value_jump = false;
+            bool value_jump = false, uv_jump = false;
             if (m.uvs) {
                 for (int32_t v : {h0.a, h0.b}) {
                     int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
                     const Vec2f a = face_uv(m, h0.face, v), b = face_uv(m, h1.face, w);
-                    if (a.x != b.x || a.y != b.y) value_jump = true;
+                    if (a.x != b.x || a.y != b.y) value_jump = uv_jump = true;
                 }
             }
+            const bool normal_jump = shading_jump && m.normals != nullptr;
             // Vertex colours that differ across the edge (welded positions, different colours):
             // the diffuse reflectance jumps there, as at a uv seam.
+            bool colour_jump = false;
             if (m.colors)
                 for (int32_t v : {h0.a, h0.b}) {
                     int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
                     for (int c = 0; c < 3; ++c)
-                        if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c]) value_jump = true;
+                        if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c]) value_jump = colour_jump = true;
                 }
             shading_jump = shading_jump || value_jump;
             // Two faces at an angle fold where the eye lies between their planes (a scan's nearly
@@ -187,6 +191,7 @@ void pair_faces(const MeshDesc& m, int32_t mesh_index, const std::vector<int64_t
                 e.f1 = h1.face;
                 e.kind = shading_jump ? EdgeKind::Crease : EdgeKind::Smooth;
                 e.seam = value_jump || (shading_jump && m.normals != nullptr);
+                e.uv_only = uv_jump && !colour_jump && !normal_jump && m.normals != nullptr;
                 e.flat = flat;
                 out.push_back(e);
                 if (flattenable) flattenable->push_back(can_be_flat);
@@ -236,6 +241,78 @@ bool MeshEdgeList::refresh(const MeshDesc& m, const std::vector<uint8_t>& degene
             edge.flat = flattenable_[k] && nearly_coplanar(m, edge.f0, edge.f1);
         }
     });
+    return true;
+}
+
+bool mesh_solids(const MeshDesc& mesh, int32_t mesh_index, const std::vector<Edge>& edges, std::vector<Solid>& solids,
+                 std::vector<int32_t>& solid_of_face) {
+    const float* v = mesh.vertices;
+    auto same = [&](int32_t a, int32_t b) {
+        return v[3 * a] == v[3 * b] && v[3 * a + 1] == v[3 * b + 1] && v[3 * a + 2] == v[3 * b + 2];
+    };
+    for (const Edge& e : edges) {
+        if (e.mesh != mesh_index) continue;
+        if (e.kind == EdgeKind::Boundary || e.f1 < 0) return false;
+        // Each face's direction along the edge (+1: from v0's position to v1's).
+        int dir[2] = {0, 0};
+        for (int k = 0; k < 2; ++k) {
+            const int32_t* t = mesh.indices + 3 * (k == 0 ? e.f0 : e.f1);
+            for (int c = 0; c < 3; ++c) {
+                const int32_t a = t[c], b = t[(c + 1) % 3];
+                if (same(a, e.v0) && same(b, e.v1)) dir[k] = 1;
+                if (same(a, e.v1) && same(b, e.v0)) dir[k] = -1;
+            }
+        }
+        if (dir[0] == 0 || dir[0] != -dir[1]) return false;
+    }
+    // The parts: vertices joined by position, then by faces.
+    const size_t n = size_t(mesh.num_vertices);
+    std::vector<int32_t> parent(n), order(n);
+    for (size_t i = 0; i < n; ++i) parent[i] = order[i] = int32_t(i);
+    auto root = [&](int32_t i) {
+        while (parent[size_t(i)] != i) i = parent[size_t(i)] = parent[size_t(parent[size_t(i)])];
+        return i;
+    };
+    auto join = [&](int32_t a, int32_t b) {
+        a = root(a), b = root(b);
+        if (a != b) parent[size_t(std::max(a, b))] = std::min(a, b);
+    };
+    auto position = [&](int32_t i) { return std::array<float, 3>{v[3 * i], v[3 * i + 1], v[3 * i + 2]}; };
+    std::sort(order.begin(), order.end(), [&](int32_t a, int32_t b) { return position(a) < position(b); });
+    for (size_t k = 1; k < n; ++k)
+        if (same(order[k], order[k - 1])) join(order[k], order[k - 1]);
+    const std::vector<uint8_t> degenerate = degenerate_faces(mesh);
+    for (int64_t f = 0; f < mesh.num_triangles; ++f) {
+        if (degenerate[size_t(f)]) continue;
+        const int32_t* t = mesh.indices + 3 * f;
+        join(t[0], t[1]), join(t[0], t[2]);
+    }
+    const size_t base = solids.size();
+    std::vector<int32_t> part_solid(n, -1);
+    std::vector<double> volume;
+    solid_of_face.assign(size_t(mesh.num_triangles), -1);
+    for (int64_t f = 0; f < mesh.num_triangles; ++f) {
+        if (degenerate[size_t(f)]) continue;
+        const int32_t* t = mesh.indices + 3 * f;
+        int32_t& id = part_solid[size_t(root(t[0]))];
+        if (id < 0) {
+            id = int32_t(solids.size());
+            Solid sd;
+            sd.lo = Vec3d(std::numeric_limits<double>::infinity());
+            sd.hi = -sd.lo;
+            solids.push_back(sd);
+            volume.push_back(0.0);
+        }
+        solid_of_face[size_t(f)] = id;
+        Solid& sd = solids[size_t(id)];
+        Vec3d p[3];
+        for (int c = 0; c < 3; ++c) {
+            p[c] = Vec3d(double(v[3 * t[c]]), double(v[3 * t[c] + 1]), double(v[3 * t[c] + 2]));
+            sd.lo = min(sd.lo, p[c]), sd.hi = max(sd.hi, p[c]);
+        }
+        volume[size_t(id) - base] += dot(p[0], cross(p[1], p[2]));
+    }
+    for (size_t k = 0; k < volume.size(); ++k) solids[base + k].side = volume[k] > 0.0 ? -1 : volume[k] < 0.0 ? 1 : 0;
     return true;
 }
 

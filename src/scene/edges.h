@@ -40,6 +40,10 @@ struct Edge {
     // vertex normals (a texture seam, a modelled crease). A crease that is not a seam (flat
     // shading) jumps only by the angle between its faces, however small.
     bool seam = false;
+    // A seam whose sides differ in their uvs alone (the same shading normals and colours: a uv
+    // seam of a smooth mesh, a pole's fan): where its mesh's material reads no texture (nor its
+    // emission), nothing steps across it, and it is a silhouette only, like a smooth edge.
+    bool uv_only = false;
     // Its two faces are within the coplanar bound, with the same shading (an edge a scene built
     // afresh drops): kept, marked, only in the list of a scene whose vertices move
     // (build_mesh_edges' keep_flat), so that the list does not change when a move of the order
@@ -84,6 +88,25 @@ private:
     // the same shading, uvs and colours on both sides).
     std::vector<uint8_t> flattenable_;
 };
+
+// A solid a closed mesh bounds: its box, and the side of its faces' planes it lies on (-1:
+// behind, against the normals of their winding, as for a mesh whose winding turns outwards;
+// +1: in front; 0: a part without volume, no side).
+struct Solid {
+    Vec3d lo, hi;
+    int side = 0;
+};
+
+// The solids of mesh `mesh_index` (its edges among `edges`, as build_mesh_edges lists them),
+// where it is closed: no edge of it is a boundary, and each edge's two faces run along it in
+// opposite directions. One per part of the mesh (its faces joined by their corners' positions),
+// on the side that makes the part's signed volume positive; appended to `solids`, and
+// `solid_of_face[f]` set to face f's (-1 for a degenerate face). False, with nothing added,
+// where the mesh is not closed. A ray leaving a face of a closed mesh into its solid meets the
+// mesh again before it leaves the solid's box: from there nothing outside the box is seen
+// directly (inside a glass ball, the rest of the scene).
+bool mesh_solids(const MeshDesc& mesh, int32_t mesh_index, const std::vector<Edge>& edges, std::vector<Solid>& solids,
+                 std::vector<int32_t>& solid_of_face);
 
 // Whether the edge is a silhouette seen from point `p`: a boundary always; otherwise when p is
 // in front of exactly one of the two faces (planes through the edge).

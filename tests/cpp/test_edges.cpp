@@ -233,6 +233,118 @@ TEST(Edges, UvSeamInsideAFlatQuadIsKept) {
     EXPECT_EQ(b[EdgeKind::Crease], 1);
 }
 
+TEST(Edges, AUvSeamOfASmoothMeshIsMarkedUvOnly) {
+    // The quad's two faces with one shading normal: a seam of uvs alone is uv_only; with
+    // vertex colours that differ across it too, or without shading normals, it is not.
+    MeshData quad = make_quad(Vec3f(0, 0, 0), Vec3f(1, 0, 0), Vec3f(0, 1, 0));
+    std::vector<float> uvs = {0, 0, 1, 0, 1, 1, 0, 1, 0.5f, 0, 0.5f, 1, 0.5f, 0.5f, 0.25f, 0.75f};
+    std::vector<int32_t> seam(quad.indices.begin(), quad.indices.end());
+    for (int k = 3; k < 6; ++k) seam[size_t(k)] = 4 + k - 3;
+    const std::vector<float> normals = {0, 0, 1, 0, 0, 1, 0, 0, 1, 0, 0, 1};
+    // The colours of vertex 2 (the diagonal's end the second face reaches through its own
+    // corner) told apart by duplicating it.
+    auto seams = [&](bool with_normals, bool colours_jump) {
+        MeshData m = quad;
+        std::vector<int32_t> indices = m.indices;
+        std::vector<float> colours(size_t(m.num_vertices()) * 3, 0.5f);
+        if (colours_jump) {
+            m.vertices.insert(m.vertices.end(), {m.vertices[6], m.vertices[7], m.vertices[8]});
+            colours.insert(colours.end(), {0.9f, 0.1f, 0.1f});
+            for (int k = 3; k < 6; ++k)
+                if (indices[size_t(k)] == 2) indices[size_t(k)] = int32_t(m.num_vertices() - 1);
+        }
+        std::vector<float> n = normals;
+        if (colours_jump) n.insert(n.end(), {0, 0, 1});
+        MeshDesc d = m.desc(0);
+        d.indices = indices.data();
+        d.uvs = uvs.data();
+        d.num_uvs = int64_t(uvs.size() / 2);
+        d.uv_indices = seam.data();
+        if (with_normals) {
+            d.normals = n.data();
+            d.num_normals = int64_t(n.size() / 3);
+            d.normal_indices = indices.data();
+        }
+        d.colors = colours.data();
+        std::vector<Edge> out;
+        build_mesh_edges(d, 0, out);
+        std::vector<int> kinds;
+        for (const Edge& e : out)
+            if (e.kind == EdgeKind::Crease) kinds.push_back(e.uv_only ? 1 : 0);
+        return kinds;
+    };
+    EXPECT_EQ(seams(true, false), std::vector<int>{1});
+    EXPECT_EQ(seams(true, true), std::vector<int>{0});
+    EXPECT_EQ(seams(false, false), std::vector<int>{0});
+}
+
+// A mesh's faces with their winding turned.
+MeshData turned(MeshData m) {
+    for (size_t k = 0; k < m.indices.size(); k += 3) std::swap(m.indices[k + 1], m.indices[k + 2]);
+    return m;
+}
+
+std::vector<Solid> solids_of(const MeshData& m, bool& closed, std::vector<int32_t>& of_face) {
+    std::vector<Solid> solids;
+    const MeshDesc d = m.desc(0);
+    std::vector<Edge> edges;
+    build_mesh_edges(d, 0, edges);
+    closed = mesh_solids(d, 0, edges, solids, of_face);
+    return solids;
+}
+
+TEST(Edges, ClosedMeshesBoundSolidsOnTheSideOfPositiveVolume) {
+    bool closed = false;
+    std::vector<int32_t> of;
+    // A box whose faces turn outwards: its solid behind them, its box the box.
+    const MeshData box = make_box(Vec3f(-1, 0, 2), Vec3f(1, 3, 5));
+    std::vector<Solid> s = solids_of(box, closed, of);
+    ASSERT_TRUE(closed);
+    ASSERT_EQ(s.size(), 1u);
+    EXPECT_EQ(s[0].side, -1);
+    EXPECT_EQ(s[0].lo.x, -1.0);
+    EXPECT_EQ(s[0].lo.y, 0.0);
+    EXPECT_EQ(s[0].lo.z, 2.0);
+    EXPECT_EQ(s[0].hi.x, 1.0);
+    EXPECT_EQ(s[0].hi.y, 3.0);
+    EXPECT_EQ(s[0].hi.z, 5.0);
+    EXPECT_EQ(of, std::vector<int32_t>(size_t(box.num_triangles()), 0));
+    // Turned inside out: in front of them.
+    s = solids_of(turned(box), closed, of);
+    ASSERT_TRUE(closed);
+    EXPECT_EQ(s[0].side, 1);
+    // A smooth sphere (welded poles, no seam), and a sphere with a box in one mesh: a solid
+    // each, the faces of each part on their own.
+    const MeshData sphere = make_sphere(Vec3f(0, 0, 0), 1.f, 8, 12);
+    s = solids_of(sphere, closed, of);
+    ASSERT_TRUE(closed);
+    ASSERT_EQ(s.size(), 1u);
+    EXPECT_EQ(s[0].side, -1);
+    MeshData both = make_box(Vec3f(3, 0, 0), Vec3f(4, 1, 1));
+    MeshData inner = turned(make_box(Vec3f(3.25f, 0.25f, 0.25f), Vec3f(3.75f, 0.75f, 0.75f)));
+    both.append(inner);  // a hollow box: its inner faces turn inwards, towards the hollow
+    s = solids_of(both, closed, of);
+    ASSERT_TRUE(closed);
+    ASSERT_EQ(s.size(), 2u);
+    EXPECT_EQ(s[0].side, -1);  // the outer faces: the solid behind them
+    EXPECT_EQ(s[1].side, 1);   // the hollow's faces: its part's volume is negative
+    EXPECT_EQ(s[1].lo.x, 3.25);
+    for (int64_t f = 0; f < both.num_triangles(); ++f) EXPECT_EQ(of[size_t(f)], f < 12 ? 0 : 1);
+}
+
+TEST(Edges, OpenOrInconsistentMeshesBoundNoSolid) {
+    bool closed = true;
+    std::vector<int32_t> of;
+    MeshData open = make_box(Vec3f(0, 0, 0), Vec3f(1, 1, 1));
+    open.indices.resize(open.indices.size() - 6);  // the +y face gone
+    EXPECT_TRUE(solids_of(open, closed, of).empty());
+    EXPECT_FALSE(closed);
+    MeshData flipped = make_box(Vec3f(0, 0, 0), Vec3f(1, 1, 1));
+    std::swap(flipped.indices[1], flipped.indices[2]);  // one face wound against the others
+    EXPECT_TRUE(solids_of(flipped, closed, of).empty());
+    EXPECT_FALSE(closed);
+}
+
 TEST(Edges, WeldedAndUnweldedMeshesGiveTheSameEdges) {
     // A folded strip, once with shared vertices and once with every face owning its vertices.
     const std::vector<float> p = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 0.5f, 0, 2, 0};
