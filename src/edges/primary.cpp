@@ -770,7 +770,7 @@ struct CurvedFace : Beam {
     int64_t prim = -1;
     bool refract = false;
     bool behind = false;  // the camera behind the face (by its winding)
-    int32_t solid = -1;    // the solid its closed mesh bounds (solids_of), or -1
+    int32_t solid = -1;    // the solid its closed mesh bounds (mesh_solids), or -1
     DeltaParams<double> delta;
     Vec3d v0, e1, e2, ng;  // its first vertex, edges from there, unit geometric normal
     Vec3d n[3];            // its vertices' shading normals, as given (interpolated, then normalised)
@@ -807,11 +807,6 @@ struct CurvedFace : Beam {
         delta = delta_turn(scene.materials[size_t(m.material)]);
     }
     Vec3d centre() const { return v0 + (e1 + e2) / 3.0; }
-    // The radius of its ball about its centre.
-    double radius() const {
-        const Vec3d c = centre();
-        return std::max({length(v0 - c), length(v0 + e1 - c), length(v0 + e2 - c)}) * (1.0 + 1e-6);
-    }
     // The barycentrics of its plane's point nearest x (least squares); false where not finite.
     bool barycentrics(const Vec3d& x, double& b1, double& b2) const {
         const Vec3d w = x - v0;
@@ -1109,7 +1104,8 @@ bool pair_point(const CurvedPair& cp, const Vec3d& eye, bool parallel, const Vec
 
 // The rays from the eye through a grid of a pair's first face's points (barycentrics in
 // eighths), followed through both faces: where each leaves the second face, its direction, and
-// whether that point lies in the second face (within 5%); of the pair `pair` (-1: none yet).
+// whether that point lies in the second face (within a quarter of it); of the pair `pair` (-1:
+// none yet).
 struct PairRays {
     static constexpr int kGrid = 8;
     int pair = -1;
@@ -1528,29 +1524,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // Every face of a mesh with shading normals and a smooth lobe (its lobe a reflection, its
         // side unset), and of its material whether only its front turns rays (a one-sided
         // mirror's or coating's) and whether it refracts (glass of one index).
+        // (Each with the solid its mesh bounds where the mesh is closed.)
         std::vector<CurvedFace> faces;
-        std::vector<bool> curved_mesh(scene.meshes.size(), false);
         for (size_t i = 0; i < scene.meshes.size(); ++i) {
             const Mesh& m = scene.meshes[i];
-            curved_mesh[i] = m.normals && smooth_lobe(scene.materials[size_t(m.material)]);
-        }
-        // The solids the closed curved meshes bound (faces' solids by mesh; empty: none).
-        std::vector<std::vector<int32_t>> solid_of(scene.meshes.size());
-        for (size_t i = 0; i < scene.meshes.size(); ++i) {
-            if (!curved_mesh[i]) continue;
-            const Mesh& m = scene.meshes[i];
+            if (!m.normals || !smooth_lobe(scene.materials[size_t(m.material)])) continue;
             MeshDesc desc;
             desc.vertices = m.vertices, desc.num_vertices = m.num_vertices;
             desc.indices = m.indices, desc.num_triangles = m.num_triangles;
-            if (!mesh_solids(desc, int32_t(i), all_edges, solids, solid_of[i])) solid_of[i].clear();
-        }
-        for (size_t i = 0; i < scene.meshes.size(); ++i) {
-            if (!curved_mesh[i]) continue;
-            const Mesh& m = scene.meshes[i];
+            std::vector<int32_t> solid_of;
+            if (!mesh_solids(desc, int32_t(i), all_edges, solids, solid_of)) solid_of.clear();
             for (int64_t f = 0; f < m.num_triangles; ++f)
                 if (!m.is_degenerate(f)) {
                     faces.emplace_back(scene, int(i), f);
-                    if (!solid_of[i].empty()) faces.back().solid = solid_of[i][size_t(f)];
+                    if (!solid_of.empty()) faces.back().solid = solid_of[size_t(f)];
                 }
         }
         auto material_of = [&](const CurvedFace& cf) -> const Material& {
@@ -1679,8 +1666,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         // Pairs of curved faces (CurvedPair), where the paths scatter at least twice, seen by a
         // pinhole or parallel rays (a thin lens's rays through a face spread, and through a
         // second no bound of them is known): each face above, taken in their order, with each
-        // curved face its beam may see (found in a tree of the curved faces' balls) that rays
-        // through it meet (below), with each of that face's lobes, until the faces tested reach
+        // curved face that rays through it meet (traced, with the faces beside those they meet
+        // first: below), with each of that face's lobes, until the faces tested reach
         // kPairTests. The pairs whose rank is highest first, each with the edges its beam may see
         // on the side its second lobe sends rays to, up to kPairSetups set-ups.
         if (opt.max_bounces >= 2 && !lens && !candidates.empty()) {
@@ -1762,7 +1749,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                 int32_t tests[4 * kRays];
                 int num_tests = 0;
                 auto test = [&](int32_t id) {
-                    if (id >= 0 && std::find(tests, tests + num_tests, id) == tests + num_tests) tests[num_tests++] = id;
+                    if (id >= 0 && std::find(tests, tests + num_tests, id) == tests + num_tests)
+                        tests[num_tests++] = id;
                 };
                 for (int k = 0; k < kRays; ++k) {
                     if (!turned[k]) continue;
@@ -1771,7 +1759,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     ray.dir = Vec3f(mid[k]);
                     ray.tmin = float(near_t);
                     Hit hit;
-                    if (scene.intersect_excluding(ray, first.mesh, first.prim, -1, hit)) test(face_index(hit.mesh, hit.prim));
+                    if (scene.intersect_excluding(ray, first.mesh, first.prim, -1, hit))
+                        test(face_index(hit.mesh, hit.prim));
                 }
                 for (int h = 0, hits = num_tests; h < hits; ++h)
                     for (int32_t n = first_neighbour[size_t(tests[h])]; n < first_neighbour[size_t(tests[h]) + 1] &&
@@ -2129,7 +2118,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         double us[kMaxPoints];
         const int num_even = std::min(points, kEven);
         int num_points = num_even;
-        for (int k = 0; k < num_points; ++k) points_at[k] = {u0 + (u1 - u0) * double(k) / double(num_points - 1), -1.0, -1.0};
+        for (int k = 0; k < num_points; ++k)
+            points_at[k] = {u0 + (u1 - u0) * double(k) / double(num_points - 1), -1.0, -1.0};
         if (crossings && !crossings->empty()) {
             // (Up to kCrossings of them, spread over the list, inside the part.)
             const size_t n = crossings->size(), take = std::min<size_t>(n, kCrossings);
@@ -2281,8 +2271,9 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             return false;
         fe.pair = int(&cp - pairs.data());
         // The rays from the eye through a grid of the first face's points, followed through both
-        // faces (those that meet the second face inside it, within 5%; found once for the pair's
-        // set-ups in a row): where two neighbours pass the edge's line on either side, the edge
+        // faces (those that meet the second face inside it, within a quarter; found once for the
+        // pair's set-ups in a row; within 5%, a part seen through a corner was often missed):
+        // where two neighbours pass the edge's line on either side, the edge
         // is seen between them. The edge's parameters nearest those rays (each with its grid
         // point) bound the part seen; its solves start from the grid point whose parameter is
         // nearest theirs. (The faces' normals are clamped beyond them, so a solve continued from
@@ -2300,8 +2291,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
                     const Vec3d x = f.v0 + f.e1 * b1 + f.e2 * b2;
                     double c1, c2;
                     const Vec3d d = parallel ? forward : normalize(x - from);
-                    rays.valid[i][j] = cp.follow(b1, b2, d, rays.at[i][j], c1, c2, rays.dir[i][j]) && c1 >= -0.05 &&
-                                       c2 >= -0.05 && c1 + c2 <= 1.05;
+                    rays.valid[i][j] = cp.follow(b1, b2, d, rays.at[i][j], c1, c2, rays.dir[i][j]) && c1 >= -0.25 &&
+                                       c2 >= -0.25 && c1 + c2 <= 1.25;
                 }
         }
         const Vec3d p0(m.vertex(e.v0)), p1(m.vertex(e.v1)), along = p1 - p0;

@@ -174,7 +174,8 @@ void pair_faces(const MeshDesc& m, int32_t mesh_index, const std::vector<int64_t
                 for (int32_t v : {h0.a, h0.b}) {
                     int32_t w = weld[size_t(v)] == weld[size_t(h1.a)] ? h1.a : h1.b;
                     for (int c = 0; c < 3; ++c)
-                        if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c]) value_jump = colour_jump = true;
+                        if (m.colors[3 * int64_t(v) + c] != m.colors[3 * int64_t(w) + c])
+                            value_jump = colour_jump = true;
                 }
             shading_jump = shading_jump || value_jump;
             // Two faces at an angle fold where the eye lies between their planes (a scan's nearly
