@@ -2207,15 +2207,20 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             while (hi < num_points - 1 && !(ok[hi] && !inside[hi] && hi > last_in)) ++hi;
         }
         auto at = [&](int k) { return us[k]; };
-        double len = 0.0;
+        double len = 0.0, len_inside = 0.0;
         int found = 0, middle = -1;
         for (int k = lo, prev = -1; k <= hi; ++k) {
             if (!ok[k]) continue;
             ++found;
             if (middle < 0 || (inside[k] && !inside[middle])) middle = k;
-            if (prev >= 0) len += std::hypot(fx[k] - fx[prev], fy[k] - fy[prev]);
+            if (prev >= 0) {
+                const double piece = std::hypot(fx[k] - fx[prev], fy[k] - fy[prev]);
+                len += piece;
+                if (inside[k] && inside[prev]) len_inside += piece;
+            }
             prev = k;
         }
+        if (through_pair && len_inside > 0.0) len = len_inside;
         if (found == 0) return false;
         if (found == 1) {
             // Seen near one point only: the film length there, per unit parameter, from a point
