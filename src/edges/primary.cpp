@@ -2220,6 +2220,8 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             prev = k;
         }
+        // (Through a pair the part's share of the samples is its film length between points found
+        // inside, where two are: the roots outside lie elsewhere on the film.)
         if (through_pair && len_inside > 0.0) len = len_inside;
         if (found == 0) return false;
         if (found == 1) {
