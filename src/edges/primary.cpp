@@ -2115,7 +2115,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         constexpr int kEven = 33, kCrossings = 32, kMaxPoints = kEven + kCrossings;
         // (Each point's parameter, and for a crossing its solve's start.)
         std::array<double, 3> points_at[kMaxPoints];
-        double us[kMaxPoints];
         const int num_even = std::min(points, kEven);
         int num_points = num_even;
         for (int k = 0; k < num_points; ++k)
@@ -2129,7 +2128,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             }
             std::sort(points_at, points_at + num_points);
         }
-        for (int k = 0; k < num_points; ++k) us[k] = points_at[k][0];
+        auto at = [&](int k) { return points_at[k][0]; };
         double fx[kMaxPoints], fy[kMaxPoints], bb1[kMaxPoints], bb2[kMaxPoints];
         bool ok[kMaxPoints], inside[kMaxPoints];
         double b1 = 0.0, b2 = 0.0;
@@ -2139,7 +2138,7 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
         double cc1[kMaxPoints], cc2[kMaxPoints];
         auto solve_point = [&](int k, bool from_guess, int restart) {
             if (!from_guess && points_at[k][1] >= 0.0) b1 = points_at[k][1], b2 = points_at[k][2], from_guess = true;
-            ok[k] = film(p0 + (p1 - p0) * us[k], from_guess, restart, b1, b2, fx[k], fy[k], cc1[k], cc2[k], inside[k]);
+            ok[k] = film(p0 + (p1 - p0) * at(k), from_guess, restart, b1, b2, fx[k], fy[k], cc1[k], cc2[k], inside[k]);
             if (!ok[k]) inside[k] = false;
             bb1[k] = b1, bb2[k] = b2;
             return ok[k];
@@ -2206,7 +2205,6 @@ void primary_edge_pass(const Scene& scene, const RenderOptions& opt, const Scene
             while (lo > 0 && !(ok[lo] && !inside[lo] && lo < first_in)) --lo;
             while (hi < num_points - 1 && !(ok[hi] && !inside[hi] && hi > last_in)) ++hi;
         }
-        auto at = [&](int k) { return us[k]; };
         double len = 0.0, len_inside = 0.0;
         int found = 0, middle = -1;
         for (int k = lo, prev = -1; k <= hi; ++k) {
